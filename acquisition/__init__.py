@@ -1,0 +1,1 @@
+"""Devices (driver interface, simulated stand, NI-DAQmx), the recorder, calibration."""

@@ -1,0 +1,75 @@
+"""The ``labtool`` command line: wires the layers, holds no physics.
+
+Every user error ends with one line ``labtool: error: ...`` on stderr and exit code 2
+(DESIGN.md, Conventions). Exit 1 means "ran fine, a check failed".
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+import typer
+
+from models.errors import LabtoolError
+
+app = typer.Typer(
+    name="labtool",
+    help="Cam-follower test stand: acquire, process, simulate, DOE, report.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+# One module per command group; each exposes ``register(app)``.
+COMMAND_MODULES = (
+    "labtool.commands.kinematics",
+    "labtool.commands.demo",
+)
+
+
+def _register_all() -> None:
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(app)
+
+
+_register_all()
+
+
+def fail(message: str, code: int = 2) -> "typer.Exit":
+    """Print the one-line error and return the Exit to raise."""
+    typer.echo(f"labtool: error: {message}", err=True)
+    return typer.Exit(code)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the process exit code."""
+    try:
+        rv = app(args=argv, standalone_mode=False, prog_name="labtool")
+        return int(rv) if isinstance(rv, int) else 0
+    except LabtoolError as exc:
+        typer.echo(f"labtool: error: {exc}", err=True)
+        code = 2
+    except click.exceptions.Exit as exc:
+        code = exc.exit_code
+    except click.exceptions.Abort:
+        typer.echo("labtool: interrupted", err=True)
+        code = 130
+    except click.UsageError as exc:
+        hint = f" (see 'labtool {exc.ctx.command_path.split(' ', 1)[-1]} --help')" if exc.ctx else ""
+        typer.echo(f"labtool: error: {exc.format_message()}{hint}", err=True)
+        code = 2
+    except click.ClickException as exc:
+        typer.echo(f"labtool: error: {exc.format_message()}", err=True)
+        code = 2
+    except KeyboardInterrupt:
+        typer.echo("labtool: interrupted", err=True)
+        code = 130
+    if argv is None:
+        sys.exit(code)
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

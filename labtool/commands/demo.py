@@ -1,0 +1,27 @@
+"""``labtool demo``: the whole pipeline on the simulated stand and sample_data/.
+
+Grows with the pipeline; today: kinematics of the paper's mechanism at 180 rpm, its summary
+table, a plot, and the 16 runs of Table 1 against the paper's Table 3 (kinematic MR13D).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    app.command("demo")(demo)
+
+
+def demo(
+    output: Path = typer.Option(Path("demo_out"), "-o", "--output", help="folder for the demo's files"),
+) -> None:
+    """Run the demo pipeline and print where its results are."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from labtool.demo_steps import run_demo
+
+    output.mkdir(parents=True, exist_ok=True)
+    run_demo(output)

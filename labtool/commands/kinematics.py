@@ -1,0 +1,75 @@
+"""``labtool kinematics``: kinematic analysis of the paper's mechanism at constant cam speed."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from labtool.output import check_output_path, write_netcdf
+
+
+def register(app: typer.Typer) -> None:
+    app.command("kinematics")(kinematics)
+
+
+def kinematics(
+    law: str = typer.Option("sine", help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine"),
+    rpm: float = typer.Option(180.0, help="cam speed n1 [rpm], constant (cam as input)"),
+    fu: float = typer.Option(0.0, "--fu", help="load Fu at point N [N], opposing the rod's sliding"),
+    jt_factor: float = typer.Option(1.0, help="inertia factor of the follower side Jt [-] (paper: 1 or 4)"),
+    rise_deg: float = typer.Option(58.0, help="cam angle of the rise phi_u [deg]"),
+    stroke_deg: float = typer.Option(15.0, help="follower stroke psi_a [deg]"),
+    points: int = typer.Option(1441, help="points per cam revolution [-]"),
+    mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
+    groove_csv: Optional[Path] = typer.Option(None, help="also write the pitch curve and both flanks [mm] as CSV"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
+    force: bool = typer.Option(False, help="overwrite existing output files"),
+) -> None:
+    """Kinematics over one cam revolution: phi2, omega2, epsilon2, points C/E/N, aE_t/aE_n,
+    reduced inertias, pressure angle, groove curvature and the kinetostatic MR13D."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from models.cam_profile import export_groove_csv, undercut
+    from models.kinematics import analyze, rise_summary
+    from models.mechanism import Mechanism
+    from models.motion_laws import CamProgram
+
+    for path in (output, groove_csv):
+        if path is not None:
+            check_output_path(path, force)
+    mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
+    mech = mech.replace(psi_a=math.radians(stroke_deg)) if stroke_deg != 15.0 else mech
+    program = CamProgram.for_mechanism(mech, law=law, rise=math.radians(rise_deg), stroke=mech.psi_a)
+    ds = analyze(mech, program, rpm, fu, jt_factor, n_points=points)
+    s = rise_summary(ds)
+    cut = undercut(mech, program)
+
+    table = Table(title=f"Kinematics: {program.segments[0].law.description}, {rpm:g} rpm, "
+                        f"Fu = {fu:g} N, Jt x{jt_factor:g}")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    rows = [
+        ("MR13D max over the rise", f"{s['MR13D_max_Nm']:.3f}", "N m"),
+        ("MR13D min over the rise", f"{s['MR13D_min_Nm']:.3f}", "N m"),
+        ("MR13D changes sign (follower may jump)", "yes" if s["sign_change"] else "no", ""),
+        ("omega2 max", f"{s['omega2_max_rad_s']:.3f}", "rad/s"),
+        ("epsilon2 max", f"{s['epsilon2_max_rad_s2']:.1f}", "rad/s^2"),
+        ("pressure angle max (rise)", f"{s['pressure_angle_max_deg']:.2f}", "deg"),
+        ("J''red (follower side) at rise start", f"{ds['J_red_follower'].values[0] * 1e6:.1f}", "1e-6 kg m^2"),
+        ("aE_t peak (ideal sensor)", f"{abs(ds['aE_t']).max().item():.1f}", "m/s^2"),
+        ("groove undercut", "yes" if cut["undercut"] else f"no (margin {1e3 * min(cut['inner_margin_m'], cut['outer_margin_m']):.2f} mm)", ""),
+    ]
+    for r in rows:
+        table.add_row(*r)
+    Console().print(table)
+    if groove_csv is not None:
+        n = export_groove_csv(groove_csv, mech, program)
+        typer.echo(f"wrote {groove_csv} ({n} points, mm)")
+    if output is not None:
+        ds.attrs["history"] = f"labtool kinematics --law {law} --rpm {rpm} --fu {fu} --jt-factor {jt_factor}"
+        write_netcdf(ds, output)
+        typer.echo(f"wrote {output}")

@@ -1,0 +1,22 @@
+"""Errors a user can cause and fix.
+
+Every layer raises these; the CLI turns them into one line
+``labtool: error: <what, where, what to do>`` and exit code 2.
+They live in ``models`` because it is the bottom layer every other layer may import.
+"""
+
+
+class LabtoolError(Exception):
+    """Base of all user-facing errors (bad file, bad option, impossible parameters, solver failure)."""
+
+
+class InputError(LabtoolError, ValueError):
+    """A parameter, option or file content that cannot be used as given."""
+
+
+class SolverError(LabtoolError, RuntimeError):
+    """A model could not be integrated to the requested accuracy; the message names the limit."""
+
+
+class FileFormatError(LabtoolError, ValueError):
+    """A file that is corrupt, truncated, of another format or missing required content."""

@@ -1,0 +1,211 @@
+"""The mechanism as data: parameters of the paper's sec. 2 and 2.2 in SI, loaded from TOML.
+
+``Mechanism.default()`` is the paper's STB-216 yarn-catcher drive (``models/data/stb216.toml``);
+``Mechanism.from_toml(path)`` loads a user's file with the same keys. Keys carry their unit
+(``_mm``, ``_deg``, ``_kg``, ``_kgm2``, ``_rpm``, ``_W``); values are converted to SI once, here.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from models.errors import InputError
+
+_UNIT_SCALE = {"_mm": 1e-3, "_deg": math.pi / 180.0, "_rpm": 2.0 * math.pi / 60.0}
+
+# (section, key in file, attribute, may be zero, may be negative)
+_FIELDS = [
+    ("frame", "xD_mm", "xD", True, True),
+    ("frame", "yD_mm", "yD", True, True),
+    ("frame", "xG_mm", "xG", True, True),
+    ("frame", "yG_mm", "yG", True, True),
+    ("frame", "phiD_deg", "phiD", True, True),
+    ("frame", "g_m_s2", "g", True, False),
+    ("cam", "m1_kg", "m1", False, False),
+    ("cam", "J1_kgm2", "J1", False, False),
+    ("cam", "AK1_mm", "AK1", True, False),
+    ("cam", "theta10_deg", "theta10", True, True),
+    ("follower", "l_DC_mm", "l", False, False),
+    ("follower", "DE_mm", "DE", False, False),
+    ("follower", "m2_kg", "m2", False, False),
+    ("follower", "J2_kgm2", "J2", False, False),
+    ("follower", "DK2_mm", "DK2", True, False),
+    ("follower", "theta20_deg", "theta20", True, True),
+    ("follower", "psi0_deg", "psi0", False, False),
+    ("follower", "psi_a_deg", "psi_a", False, True),
+    ("roller", "R_mm", "R", False, False),
+    ("roller", "m3_kg", "m3", True, False),
+    ("rod", "EH_mm", "EH", False, False),
+    ("rod", "m4_kg", "m4", True, False),
+    ("rod", "J4_kgm2", "J4", True, False),
+    ("rod", "EK4_mm", "EK4", True, False),
+    ("rod", "theta40_deg", "theta40", True, True),
+    ("rod", "EN_mm", "EN", True, False),
+    ("rod", "thetaN_deg", "thetaN", True, True),
+    ("slide_block", "FG_mm", "FG", True, True),
+    ("slide_block", "m5_kg", "m5", True, False),
+    ("slide_block", "J5_kgm2", "J5", True, False),
+    ("slide_block", "GK5_mm", "GK5", True, False),
+    ("slide_block", "theta50_deg", "theta50", True, True),
+    ("motor", "Pn_W", "Pn", False, False),
+    ("motor", "n_sync_rpm", "omega_sync_motor", False, False),
+    ("motor", "n_nominal_rpm", "omega_nominal_motor", False, False),
+    ("motor", "Jm_kgm2", "Jm", True, False),
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class Mechanism:
+    """Parameters of the cam-follower linkage in SI units (m, rad, kg, kg*m^2, W, rad/s).
+
+    Geometry (docs/mechanism.md): origin at the cam axis A, y up. The follower (2) pivots at D;
+    the roller centre C and the rod joint E lie on one line from D, at angle
+    ``phi2 = phiD + psi0 + psi`` from the x axis (psi the follower stroke, rise positive,
+    counter-clockwise). Rod 4 is pinned at E and slides through block 5 pivoted at G; its axis
+    passes at the signed distance ``FG`` from G (positive: G on the left of the rod axis E->H).
+    """
+
+    name: str
+    xD: float
+    yD: float
+    xG: float
+    yG: float
+    phiD: float
+    g: float
+    m1: float
+    J1: float
+    AK1: float
+    theta10: float
+    l: float
+    DE: float
+    m2: float
+    J2: float
+    DK2: float
+    theta20: float
+    psi0: float
+    psi_a: float
+    R: float
+    m3: float
+    EH: float
+    m4: float
+    J4: float
+    EK4: float
+    theta40: float
+    EN: float
+    thetaN: float
+    FG: float
+    m5: float
+    J5: float
+    GK5: float
+    theta50: float
+    Pn: float
+    omega_sync_motor: float
+    omega_nominal_motor: float
+    Jm: float
+    cam_diameter: float = 0.120
+    rr_min: float | None = None
+    rr_max: float | None = None
+    program: dict = dataclasses.field(default_factory=dict)
+    source: str = "built-in"
+
+    # --- derived -------------------------------------------------------------
+    @property
+    def d(self) -> float:
+        """Centre distance |AD| in m."""
+        return math.hypot(self.xD, self.yD)
+
+    @property
+    def D(self) -> np.ndarray:
+        return np.array([self.xD, self.yD])
+
+    @property
+    def G(self) -> np.ndarray:
+        return np.array([self.xG, self.yG])
+
+    @property
+    def M_nominal_motor(self) -> float:
+        """Nominal motor torque Pn / omega_n in N*m."""
+        return self.Pn / self.omega_nominal_motor
+
+    def replace(self, **changes) -> "Mechanism":
+        """A copy with some parameters changed (SI values), validated again."""
+        new = dataclasses.replace(self, **changes)
+        new.validate()
+        return new
+
+    # --- loading -------------------------------------------------------------
+    @classmethod
+    def default(cls) -> "Mechanism":
+        """The paper's mechanism (sec. 2, 2.2)."""
+        text = resources.files("models.data").joinpath("stb216.toml").read_text()
+        return cls.from_toml_text(text, source="models/data/stb216.toml")
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> "Mechanism":
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise InputError(f"cannot read mechanism file {path}: {exc.strerror}") from None
+        return cls.from_toml_text(text, source=str(path))
+
+    @classmethod
+    def from_toml_text(cls, text: str, source: str = "<text>") -> "Mechanism":
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"mechanism file {source} is not valid TOML: {exc}") from None
+        values: dict = {}
+        for section, key, attr, zero_ok, negative_ok in _FIELDS:
+            try:
+                raw = data[section][key]
+            except (KeyError, TypeError):
+                raise InputError(
+                    f"mechanism file {source}: missing parameter [{section}] {key}"
+                ) from None
+            if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
+                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw!r} is not a finite number")
+            if raw < 0 and not negative_ok:
+                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw} must not be negative")
+            if raw == 0 and not zero_ok:
+                raise InputError(f"mechanism file {source}: [{section}] {key} must be greater than zero")
+            scale = next((s for suffix, s in _UNIT_SCALE.items() if key.endswith(suffix)), 1.0)
+            values[attr] = float(raw) * scale
+        cam = data.get("cam", {})
+        values["cam_diameter"] = float(cam.get("diameter_mm", 120.0)) * 1e-3
+        values["rr_min"] = float(cam["rr_min_mm"]) * 1e-3 if "rr_min_mm" in cam else None
+        values["rr_max"] = float(cam["rr_max_mm"]) * 1e-3 if "rr_max_mm" in cam else None
+        values["program"] = dict(data.get("program", {}))
+        mech = cls(name=str(data.get("name", source)), source=source, **values)
+        mech.validate()
+        return mech
+
+    def validate(self) -> None:
+        """Raise InputError when the linkage cannot be assembled over the follower's stroke."""
+        if self.omega_nominal_motor >= self.omega_sync_motor:
+            raise InputError(
+                "motor: nominal speed must be below the synchronous speed (asynchronous motor slip > 0)"
+            )
+        if self.psi0 + self.psi_a >= math.pi or self.psi0 <= 0:
+            raise InputError("follower: psi0 + psi_a must lie in (0, 180) degrees")
+        psi = np.linspace(self.psi0, self.psi0 + max(self.psi_a, 0.0), 64)
+        phi2 = self.phiD + psi
+        C = self.D[:, None] + self.l * np.vstack([np.cos(phi2), np.sin(phi2)])
+        AC = np.hypot(C[0], C[1])
+        if np.any(AC <= self.R):
+            raise InputError(
+                f"impossible geometry: the roller (R = {self.R*1e3:.3g} mm) covers the cam axis; "
+                f"|AC| min = {AC.min()*1e3:.3g} mm"
+            )
+        E = self.D[:, None] + self.DE * np.vstack([np.cos(phi2), np.sin(phi2)])
+        EG = np.hypot(self.xG - E[0], self.yG - E[1])
+        if np.any(EG <= abs(self.FG)):
+            raise InputError(
+                f"impossible geometry: the rod cannot close through the slide block at G "
+                f"(|EG| = {EG.min()*1e3:.4g} mm <= offset FG = {abs(self.FG)*1e3:.4g} mm)"
+            )

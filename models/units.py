@@ -1,0 +1,16 @@
+"""Unit conversions used at the edges (CLI, tables, plots). SI everywhere inside."""
+import math
+
+DEG = math.pi / 180.0          # rad per degree
+MM = 1e-3                      # m per mm
+RPM = 2.0 * math.pi / 60.0     # rad/s per rpm
+
+
+def rpm_to_rad_s(n_rpm: float) -> float:
+    """Cam speed in rpm -> angular velocity in rad/s."""
+    return n_rpm * RPM
+
+
+def rad_s_to_rpm(omega_rad_s: float) -> float:
+    """Angular velocity in rad/s -> rpm."""
+    return omega_rad_s / RPM

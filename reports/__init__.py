@@ -1,0 +1,1 @@
+"""Comparison metrics, figures, HTML/PDF/JSON reports."""
