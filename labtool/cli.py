@@ -63,6 +63,13 @@ def main(argv: list[str] | None = None) -> int:
     except click.ClickException as exc:
         typer.echo(f"labtool: error: {exc.format_message()}", err=True)
         code = 2
+    except Exception as exc:  # typer >= 0.29 validates option values with pydantic
+        if type(exc).__name__ != "ValidationError" or not hasattr(exc, "errors"):
+            raise
+        first = exc.errors()[0]
+        where = ".".join(str(x) for x in first.get("loc", ()) if x != "value") or "an option"
+        typer.echo(f"labtool: error: invalid value {first.get('input')!r} for {where}: {first.get('msg')}", err=True)
+        code = 2
     except KeyboardInterrupt:
         typer.echo("labtool: interrupted", err=True)
         code = 130
