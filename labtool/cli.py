@@ -8,8 +8,12 @@ from __future__ import annotations
 import importlib
 import sys
 
-import click
 import typer
+
+try:  # typer >= 0.29 vendors click; older typer uses the click package
+    from typer._click import exceptions as click_exc
+except ImportError:  # pragma: no cover
+    from click import exceptions as click_exc
 
 from models.errors import LabtoolError
 
@@ -51,24 +55,17 @@ def main(argv: list[str] | None = None) -> int:
     except LabtoolError as exc:
         typer.echo(f"labtool: error: {exc}", err=True)
         code = 2
-    except click.exceptions.Exit as exc:
+    except typer.Exit as exc:
         code = exc.exit_code
-    except click.exceptions.Abort:
+    except typer.Abort:
         typer.echo("labtool: interrupted", err=True)
         code = 130
-    except click.UsageError as exc:
+    except click_exc.UsageError as exc:
         hint = f" (see 'labtool {exc.ctx.command_path.split(' ', 1)[-1]} --help')" if exc.ctx else ""
         typer.echo(f"labtool: error: {exc.format_message()}{hint}", err=True)
         code = 2
-    except click.ClickException as exc:
+    except click_exc.ClickException as exc:
         typer.echo(f"labtool: error: {exc.format_message()}", err=True)
-        code = 2
-    except Exception as exc:  # typer >= 0.29 validates option values with pydantic
-        if type(exc).__name__ != "ValidationError" or not hasattr(exc, "errors"):
-            raise
-        first = exc.errors()[0]
-        where = ".".join(str(x) for x in first.get("loc", ()) if x != "value") or "an option"
-        typer.echo(f"labtool: error: invalid value {first.get('input')!r} for {where}: {first.get('msg')}", err=True)
         code = 2
     except KeyboardInterrupt:
         typer.echo("labtool: interrupted", err=True)
