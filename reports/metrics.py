@@ -1,0 +1,278 @@
+"""Comparison metrics between a measured and a simulated signal sampled on the same grid.
+
+Pure functions on 1-D numpy arrays; ``measured`` is the reference (the paper's experiment, ISO's
+"test" T), ``simulated`` the computed signal (ISO's "CAE" C). Both must have the same length and be
+sampled on the same uniform grid (here the cam angle phi1; see reports/align.py). The metrics are
+dimensionless unless a unit is named.
+
+- Sprague & Geers (2004): magnitude M, phase P, comprehensive C.
+- ISO/TS 18571:2014: corridor, phase, magnitude (after dynamic time warping), slope scores and the
+  weighted overall rating with its grade. Simplifications are listed in docs/reports.md.
+- NRMSE normalised by the measured signal's range (max - min).
+- Peak errors and the timing (grid position) errors of the peaks.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models.errors import InputError
+
+# ISO/TS 18571:2014 default parameters (section 6; docs/reports.md)
+ISO_DEFAULTS = {
+    "a0": 0.05,          # inner corridor half width, fraction of max |T|
+    "b0": 0.5,           # outer corridor half width, fraction of max |T|
+    "kz": 2.0,           # exponent of the corridor score between the corridors
+    "max_shift": 0.2,    # eps_P*: largest allowed time shift, fraction of the signal length
+    "kp": 1.0,
+    "eps_mag": 0.5,      # eps_M*: magnitude error giving score 0
+    "km": 1.0,
+    "eps_slope": 2.0,    # eps_S*: slope error giving score 0
+    "ks": 1.0,
+    "dtw_window": 0.1,   # Sakoe-Chiba band of the DTW, fraction of the signal length
+    "weights": (0.4, 0.2, 0.2, 0.2),  # corridor, phase, magnitude, slope
+}
+
+# ISO/TS 18571 grades of the overall rating R
+ISO_GRADES = ((0.94, "excellent"), (0.8, "good"), (0.58, "fair"), (-math.inf, "poor"))
+
+
+def _pair(measured, simulated, min_len: int = 2):
+    m = np.asarray(measured, dtype=float)
+    c = np.asarray(simulated, dtype=float)
+    if m.ndim != 1 or c.ndim != 1:
+        raise InputError("metrics need 1-D signals")
+    if m.shape != c.shape:
+        raise InputError(f"signals differ in length ({m.size} measured, {c.size} simulated); align them on one grid first")
+    if m.size < min_len:
+        raise InputError(f"signals too short for the metrics ({m.size} samples, at least {min_len} needed)")
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
+        raise InputError("signals contain NaN or Inf samples")
+    return m, c
+
+
+# --------------------------------------------------------------------------- Sprague & Geers
+
+def sprague_geers(measured, simulated) -> dict:
+    """Sprague & Geers magnitude ``M``, phase ``P`` and comprehensive ``C`` error.
+
+    With psi_mm = sum m^2, psi_cc = sum c^2, psi_mc = sum m c (uniform grid, so the integrals'
+    common factor cancels):  M = sqrt(psi_cc/psi_mm) - 1,  P = arccos(psi_mc/sqrt(psi_mm psi_cc))/pi,
+    C = sqrt(M^2 + P^2).  M > 0: the simulation is larger than the measurement.
+    For sin(x) against a*sin(x + theta) over whole periods: M = |a| - 1 and P = |theta|/pi exactly.
+    """
+    m, c = _pair(measured, simulated)
+    mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
+    if mm == 0.0 or cc == 0.0:
+        raise InputError("Sprague & Geers errors are undefined for an all-zero signal")
+    M = math.sqrt(cc / mm) - 1.0
+    P = math.acos(max(-1.0, min(1.0, mc / math.sqrt(mm * cc)))) / math.pi
+    return {"sg_magnitude": M, "sg_phase": P, "sg_comprehensive": math.hypot(M, P)}
+
+
+# --------------------------------------------------------------------------- NRMSE, peaks
+
+def nrmse(measured, simulated) -> float:
+    """RMS of (simulated - measured) divided by the measured range max(m) - min(m)."""
+    m, c = _pair(measured, simulated)
+    span = float(m.max() - m.min())
+    if span == 0.0:
+        raise InputError("NRMSE is undefined for a constant measured signal (zero range)")
+    return float(np.sqrt(np.mean((c - m) ** 2)) / span)
+
+
+def peak_errors(measured, simulated, grid) -> dict:
+    """Errors of the largest and smallest values and of their positions on ``grid``.
+
+    ``peak_max_error`` = (max c - max m)/max|m|, ``peak_min_error`` = (min c - min m)/max|m|
+    (signed, relative to the measured peak magnitude); ``peak_max_shift``/``peak_min_shift`` =
+    grid(argmax c) - grid(argmax m), in the grid's unit (rad of cam angle here).
+    """
+    m, c = _pair(measured, simulated)
+    x = np.asarray(grid, dtype=float)
+    if x.shape != m.shape:
+        raise InputError("grid and signals differ in length")
+    scale = float(np.max(np.abs(m)))
+    if scale == 0.0:
+        raise InputError("peak errors are undefined for an all-zero measured signal")
+    return {
+        "measured_max": float(m.max()), "simulated_max": float(c.max()),
+        "measured_min": float(m.min()), "simulated_min": float(c.min()),
+        "peak_max_error": float((c.max() - m.max()) / scale),
+        "peak_min_error": float((c.min() - m.min()) / scale),
+        "peak_max_shift": float(x[np.argmax(c)] - x[np.argmax(m)]),
+        "peak_min_shift": float(x[np.argmin(c)] - x[np.argmin(m)]),
+    }
+
+
+# --------------------------------------------------------------------------- ISO/TS 18571
+
+def iso_corridor(measured, simulated, a0: float = 0.05, b0: float = 0.5, kz: float = 2.0) -> float:
+    """Corridor score Z in [0, 1]: inner/outer corridors of half width a0, b0 times max|T| around T;
+    a point scores 1 inside the inner corridor, 0 outside the outer, ((d_o - |C-T|)/(d_o - d_i))^kz
+    between them; Z is the mean over the points."""
+    m, c = _pair(measured, simulated)
+    tnorm = float(np.max(np.abs(m)))
+    if tnorm == 0.0:
+        raise InputError("the ISO corridor score is undefined for an all-zero measured signal")
+    di, do = a0 * tnorm, b0 * tnorm
+    d = np.abs(c - m)
+    s = np.clip((do - d) / (do - di), 0.0, 1.0) ** kz
+    return float(np.mean(s))
+
+
+def _pearson(a, b) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = math.sqrt(float(a @ a) * float(b @ b))
+    return float(a @ b) / den if den > 0 else 0.0
+
+
+def best_shift(measured, simulated, max_shift: float = 0.2) -> tuple[int, float]:
+    """The shift n (samples) of the simulation that maximises the Pearson correlation of the
+    overlapping parts, |n| <= floor(max_shift*N); n > 0 means the simulation lags (it is late).
+    Returns (n, rho). Ties go to the smallest |n|."""
+    m, c = _pair(measured, simulated)
+    n_max = int(math.floor(max_shift * m.size))
+    best = (0, _pearson(m, c))
+    for n in range(1, n_max + 1):
+        for k in (n, -n):
+            r = _pearson(m[:-k], c[k:]) if k > 0 else _pearson(m[-k:], c[:k])
+            if r > best[1] + 1e-12:
+                best = (k, r)
+    return best
+
+
+def _shifted(m, c, n):
+    """Overlapping parts of T and C after removing the simulation's lag n."""
+    if n > 0:
+        return m[:-n], c[n:]
+    if n < 0:
+        return m[-n:], c[:n]
+    return m, c
+
+
+def dtw_path(x, y, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Dynamic time warping of x against y (squared-difference cost, steps (1,0), (0,1), (1,1)
+    with weight 1, Sakoe-Chiba band |i - j| <= window). Returns the index arrays of the warping
+    path. The cost matrix is filled one anti-diagonal at a time (vectorised)."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n, m = x.size, y.size
+    window = max(int(window), abs(n - m))
+    D = np.full((n + 1, m + 1), np.inf)
+    D[0, 0] = 0.0
+    for k in range(2, n + m + 1):   # i + j = k with 1-based i, j
+        i = np.arange(max(1, k - m), min(n, k - 1) + 1)
+        j = k - i
+        ok = np.abs(i - j) <= window
+        i, j = i[ok], j[ok]
+        if i.size == 0:
+            continue
+        prev = np.minimum(np.minimum(D[i - 1, j], D[i, j - 1]), D[i - 1, j - 1])
+        D[i, j] = (x[i - 1] - y[j - 1]) ** 2 + prev
+    # backtrack
+    i, j = n, m
+    pi, pj = [i - 1], [j - 1]
+    while i > 1 or j > 1:
+        steps = ((D[i - 1, j - 1], i - 1, j - 1), (D[i - 1, j], i - 1, j), (D[i, j - 1], i, j - 1))
+        _, i, j = min(steps, key=lambda s: s[0])
+        pi.append(i - 1)
+        pj.append(j - 1)
+    return np.array(pi[::-1]), np.array(pj[::-1])
+
+
+def _moving_average_9(d):
+    """ISO's smoothing of the derivative: centred 9-point mean, shrinking windows (1, 3, 5, 7) at the ends."""
+    out = np.empty_like(d)
+    n = d.size
+    for k in range(n):
+        h = min(4, k, n - 1 - k)
+        out[k] = d[k - h:k + h + 1].mean()
+    return out
+
+
+def iso18571(measured, simulated, **params) -> dict:
+    """ISO/TS 18571 scores of ``simulated`` against the reference ``measured`` (same uniform grid).
+
+    Returns corridor, phase, magnitude and slope scores, the overall rating R (weights
+    0.4/0.2/0.2/0.2), its grade, and the intermediate errors (shift in samples, magnitude and slope
+    errors). Parameters: see ``ISO_DEFAULTS``.
+    """
+    p = {**ISO_DEFAULTS, **params}
+    unknown = set(params) - set(ISO_DEFAULTS)
+    if unknown:
+        raise InputError(f"unknown ISO/TS 18571 parameter(s): {', '.join(sorted(unknown))}")
+    m, c = _pair(measured, simulated, min_len=10)
+    N = m.size
+    Z = iso_corridor(m, c, p["a0"], p["b0"], p["kz"])
+
+    n_eps, rho = best_shift(m, c, p["max_shift"])
+    limit = p["max_shift"] * N
+    E_P = 1.0 if n_eps == 0 else max(0.0, (limit - abs(n_eps)) / limit) ** p["kp"]
+
+    ms, cs = _shifted(m, c, n_eps)
+    pi, pj = dtw_path(ms, cs, int(math.ceil(p["dtw_window"] * ms.size)))
+    mw, cw = ms[pi], cs[pj]
+    den = float(np.sum(np.abs(mw)))
+    e_mag = float(np.sum(np.abs(cw - mw)) / den) if den > 0 else math.inf
+    E_M = max(0.0, (p["eps_mag"] - e_mag) / p["eps_mag"]) ** p["km"]
+
+    # slope: forward differences (the grid step cancels in the ratio), smoothed, on the shifted signals
+    dm = _moving_average_9(np.diff(ms))
+    dc = _moving_average_9(np.diff(cs))
+    den = float(np.sum(np.abs(dm)))
+    e_slope = float(np.sum(np.abs(dc - dm)) / den) if den > 0 else math.inf
+    E_S = max(0.0, (p["eps_slope"] - e_slope) / p["eps_slope"]) ** p["ks"]
+
+    wz, wp, wm, ws = p["weights"]
+    R = wz * Z + wp * E_P + wm * E_M + ws * E_S
+    return {
+        "iso_corridor": Z, "iso_phase": E_P, "iso_magnitude": E_M, "iso_slope": E_S,
+        "iso_rating": R, "iso_grade": iso_grade(R),
+        "iso_shift_samples": int(n_eps), "iso_rho": rho,
+        "iso_magnitude_error": e_mag, "iso_slope_error": e_slope,
+    }
+
+
+def iso_grade(rating: float) -> str:
+    """ISO/TS 18571 grade: excellent (R > 0.94), good (> 0.8), fair (> 0.58), poor."""
+    for bound, name in ISO_GRADES:
+        if rating > bound:
+            return name
+    return "poor"
+
+
+# --------------------------------------------------------------------------- all together
+
+# metric name -> (better when, signed); thresholds (reports/thresholds.py) use this table
+METRICS = {
+    "sg_magnitude": ("low", True),
+    "sg_phase": ("low", False),
+    "sg_comprehensive": ("low", False),
+    "iso_corridor": ("high", False),
+    "iso_phase": ("high", False),
+    "iso_magnitude": ("high", False),
+    "iso_slope": ("high", False),
+    "iso_rating": ("high", False),
+    "nrmse": ("low", False),
+    "peak_max_error": ("low", True),
+    "peak_min_error": ("low", True),
+    "peak_max_shift_deg": ("low", True),
+    "peak_min_shift_deg": ("low", True),
+}
+
+
+def compare(measured, simulated, grid_rad, iso_params: dict | None = None) -> dict:
+    """Every metric of this module for one pair of signals on the cam-angle grid ``grid_rad`` (rad).
+    Peak shifts are reported in degrees of cam angle (``*_shift_deg``)."""
+    out = {}
+    out.update(sprague_geers(measured, simulated))
+    out.update(iso18571(measured, simulated, **(iso_params or {})))
+    out["nrmse"] = nrmse(measured, simulated)
+    pk = peak_errors(measured, simulated, grid_rad)
+    out.update({k: v for k, v in pk.items() if not k.endswith("_shift")})
+    out["peak_max_shift_deg"] = math.degrees(pk["peak_max_shift"])
+    out["peak_min_shift_deg"] = math.degrees(pk["peak_min_shift"])
+    return out
