@@ -1,0 +1,416 @@
+"""Factorial designs of simulated experiments (paper sec. 2.2): factors, levels, runs, coding.
+
+A design is a list of :class:`Factor` (letter name ``A``, ``B``, ...; symbol ``Fu``, ``j``, ``n1``,
+``Jt`` ...; unit; two or more levels) and the full factorial of their levels in the paper's run
+order: run 1 has every factor at level 1 and the last factor changes fastest (Table 2's order).
+
+Factor values are kept in the units of the factor file (the table edge: N, mm, rpm, ...); they are
+converted to the SI fields of :class:`models.scene.Scene` once, in :func:`scene_for_run`, through
+the table :data:`SCENE_FACTORS` (symbol -> Scene field, accepted units and their scale to the
+field's unit).
+
+Factor files:
+
+* CSV with columns ``factor,symbol,unit,level_1,level_2[,level_3 ...]`` (as
+  ``models/data/table1_factors.csv``); a factor with fewer levels leaves its later cells empty.
+* TOML with one ``[[factor]]`` table per factor: ``name = "A"``, ``symbol = "Fu"``, ``unit = "N"``,
+  ``levels = [0, 65]``.
+
+Result tables (CSV shaped like the paper's Tables 2 and 3) name the level columns
+``<name>_<symbol>_level`` (``A_Fu_level``) holding level indices 1, 2, ...
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from models.errors import FileFormatError, InputError
+
+# symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
+SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
+    "Fu": ("Fu", {"N": 1.0}, "load force at point N"),
+    "j": ("backlash", {"mm": 1e-3, "m": 1.0, "um": 1e-6}, "cam-follower groove backlash"),
+    "n1": ("cam_speed_rpm", {"rpm": 1.0}, "nominal cam speed"),
+    "Jt": ("jt_factor", {"factor_of_nominal": 1.0, "-": 1.0, "": 1.0},
+           "inertia factor of the follower side"),
+    "k": ("restitution", {"-": 1.0, "": 1.0}, "Newton's restitution coefficient"),
+    "lw": ("contact_length", {"mm": 1e-3, "m": 1.0}, "roller-groove contact length"),
+    "Kc": ("kc_factor", {"factor_of_nominal": 1.0, "-": 1.0, "": 1.0}, "contact stiffness factor"),
+}
+
+_NAME_RE = re.compile(r"^[A-Z]$")
+_LEVEL_COL_RE = re.compile(r"^([A-Z])_([A-Za-z][A-Za-z0-9]*)_level$")
+
+
+@dataclasses.dataclass(frozen=True)
+class Factor:
+    """One factor of a design.
+
+    name    one capital letter (A, B, ...), the paper's factor label and the ANOVA term letter
+    symbol  the physical quantity (a key of SCENE_FACTORS to drive a simulation)
+    unit    unit of the level values (edge units: N, mm, rpm, factor_of_nominal ...)
+    levels  level values, level 1 first (at least two, all different)
+    """
+
+    name: str
+    symbol: str
+    unit: str
+    levels: tuple[float, ...]
+
+    def __post_init__(self):
+        if not _NAME_RE.match(self.name):
+            raise InputError(f"factor name must be one capital letter A-Z, got '{self.name}'")
+        if not re.match(r"^[A-Za-z][A-Za-z0-9]*$", self.symbol):
+            raise InputError(f"factor {self.name}: symbol must be letters and digits, got '{self.symbol}'")
+        if len(self.levels) < 2:
+            raise InputError(f"factor {self.name} ({self.symbol}) has {len(self.levels)} level; "
+                             "a factor needs at least two levels")
+        if any(not math.isfinite(v) for v in self.levels):
+            raise InputError(f"factor {self.name} ({self.symbol}): levels must be finite numbers, got {list(self.levels)}")
+        if len(set(self.levels)) != len(self.levels):
+            raise InputError(f"factor {self.name} ({self.symbol}): levels repeat a value: {list(self.levels)}")
+
+    @property
+    def column(self) -> str:
+        """Name of the level column in a result table (``A_Fu_level``)."""
+        return f"{self.name}_{self.symbol}_level"
+
+
+def table1_factors() -> list[Factor]:
+    """The paper's Table 1: A = Fu [N], B = j [mm], C = n1 [rpm], D = Jt [factor of nominal]."""
+    from importlib import resources
+    with resources.files("models.data").joinpath("table1_factors.csv").open() as fh:
+        return _factors_from_frame(pd.read_csv(fh), "table1_factors.csv")
+
+
+def read_factors(path: str | Path) -> list[Factor]:
+    """Factors from a CSV or TOML file (see the module docstring for both layouts)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"factor file {path} does not exist")
+    if path.suffix.lower() == ".toml":
+        try:
+            data = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise FileFormatError(f"{path}: not a valid TOML file ({exc})") from None
+        entries = data.get("factor")
+        if not isinstance(entries, list) or not entries:
+            raise FileFormatError(f"{path}: expected one [[factor]] table per factor")
+        factors = []
+        for i, e in enumerate(entries, 1):
+            missing = [k for k in ("name", "symbol", "levels") if k not in e]
+            if missing:
+                raise FileFormatError(f"{path}: factor #{i} lacks {', '.join(missing)}")
+            unknown = sorted(set(e) - {"name", "symbol", "unit", "levels"})
+            if unknown:
+                raise FileFormatError(f"{path}: factor #{i} has unknown key(s) {', '.join(unknown)}")
+            levels = e["levels"]
+            if not isinstance(levels, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in levels):
+                raise FileFormatError(f"{path}: factor {e['name']}: levels must be a list of numbers")
+            factors.append(Factor(str(e["name"]), str(e["symbol"]), str(e.get("unit", "")),
+                                  tuple(float(v) for v in levels)))
+        return _check_factor_set(factors, path)
+    try:
+        frame = pd.read_csv(path, dtype={"unit": str}, keep_default_na=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{path}: not a readable CSV file ({exc})") from None
+    return _factors_from_frame(frame, path)
+
+
+def _factors_from_frame(frame: pd.DataFrame, source) -> list[Factor]:
+    required = ["factor", "symbol", "unit"]
+    missing = [c for c in required if c not in frame.columns]
+    level_cols = [c for c in frame.columns if re.match(r"^level_\d+$", str(c))]
+    if missing or not level_cols:
+        raise FileFormatError(f"{source}: factor CSV needs columns factor,symbol,unit,level_1,level_2[,...]"
+                              + (f"; missing {', '.join(missing)}" if missing else "; no level_N columns"))
+    unknown = [c for c in frame.columns if c not in required and c not in level_cols]
+    if unknown:
+        raise FileFormatError(f"{source}: unknown column(s) {', '.join(map(str, unknown))} in the factor CSV")
+    level_cols.sort(key=lambda c: int(c.split("_")[1]))
+    factors = []
+    for _, row in frame.iterrows():
+        values = []
+        for c in level_cols:
+            v = row[c]
+            if pd.isna(v):
+                continue
+            try:
+                values.append(float(v))
+            except (TypeError, ValueError):
+                raise FileFormatError(f"{source}: factor {row['factor']}: level '{v}' is not a number") from None
+        unit = "" if pd.isna(row["unit"]) else str(row["unit"])
+        factors.append(Factor(str(row["factor"]), str(row["symbol"]), unit, tuple(values)))
+    return _check_factor_set(factors, source)
+
+
+def _check_factor_set(factors: list[Factor], source) -> list[Factor]:
+    if not factors:
+        raise InputError(f"{source}: no factors")
+    for attr in ("name", "symbol"):
+        seen = [getattr(f, attr) for f in factors]
+        dup = sorted({s for s in seen if seen.count(s) > 1})
+        if dup:
+            raise InputError(f"{source}: factor {attr} repeated: {', '.join(dup)}")
+    return factors
+
+
+def full_factorial(factors: list[Factor]) -> pd.DataFrame:
+    """All level combinations, the paper's run order (first factor slowest, last fastest).
+
+    Columns: ``run`` (1-based), one level-index column per factor (``A_Fu_level``, values 1..L)
+    and one value column per factor named by its symbol (in the factor's unit).
+    """
+    rows = []
+    for run, idx in enumerate(itertools.product(*[range(len(f.levels)) for f in factors]), 1):
+        row = {"run": run}
+        for f, i in zip(factors, idx):
+            row[f.column] = i + 1
+        for f, i in zip(factors, idx):
+            row[f.symbol] = f.levels[i]
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def coded(levels: np.ndarray) -> np.ndarray:
+    """The paper's +-1 coding of a two-level column of level indices: level 1 -> +1, level 2 -> -1.
+
+    With this sign, an OLS coefficient is the effect *at level 1* (mean at level 1 minus the grand
+    mean), the number the paper prints first in each row vector of eqs (20)-(28).
+    """
+    levels = np.asarray(levels)
+    if set(np.unique(levels)) - {1, 2}:
+        raise InputError("+-1 coding needs level indices 1 and 2")
+    return np.where(levels == 1, 1.0, -1.0)
+
+
+def scene_for_run(base, factors: list[Factor], values: dict[str, float]):
+    """The Scene of one run: ``base`` with each factor's field set to its value, converted to SI.
+
+    ``values`` maps factor symbols to values in the factor's unit.
+    """
+    changes = {}
+    for f in factors:
+        field, scale, _ = scene_field(f)
+        changes[field] = values[f.symbol] * scale
+    return base.replace(**changes)
+
+
+def scene_field(f: Factor) -> tuple[str, float, str]:
+    """(Scene field, scale of the factor's unit to the field, description) or InputError."""
+    try:
+        field, units, text = SCENE_FACTORS[f.symbol]
+    except KeyError:
+        raise InputError(f"factor {f.name}: no simulation parameter '{f.symbol}'; "
+                         f"known symbols: {', '.join(SCENE_FACTORS)}") from None
+    if f.unit not in units:
+        raise InputError(f"factor {f.name} ({f.symbol}): unit '{f.unit}' not understood; "
+                         f"use one of {', '.join(repr(u) for u in units if u)}")
+    return field, units[f.unit], text
+
+
+def parse_level_column(column: str) -> tuple[str, str] | None:
+    """``A_Fu_level`` -> ("A", "Fu"); None for any other column name."""
+    m = _LEVEL_COL_RE.match(column)
+    return (m.group(1), m.group(2)) if m else None
+
+
+# --------------------------------------------------------------------------------------------
+# running a design: one simulation per run, on local processes or a Dask cluster
+
+# response columns of the result table per model level, in the paper's order (Tables 2 and 3)
+RESPONSES_BY_MODEL = {
+    "rigid": ("MR13D_max_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s",
+              "percussion_max_Ns", "jumps"),
+    "elastic": ("MR13D_max_Nm", "MR13D_min_Nm", "xel_max_mm", "xel_min_mm", "jumps", "impacts"),
+    "kinematic": ("MR13D_max_Nm", "MR13D_min_Nm"),
+}
+
+_RESPONSE_ATTRS = {  # units and long names of the NetCDF variables (paper's indicator names)
+    "MR13D_max_Nm": ("N m", "(MR13D)max, moment about D of the cam-on-follower reaction, max over the rise"),
+    "MR13D_min_Nm": ("N m", "(MR13D)min, moment about D of the cam-on-follower reaction, min over the rise"),
+    "dphi2_max_deg": ("deg", "(phi2rcj - phi2rfj)max, follower angle deviation due to the backlash"),
+    "domega2_max_rad_s": ("rad/s", "(omega2rcj - omega2rfj)max, follower angular velocity deviation"),
+    "domega1_max_rad_s": ("rad/s", "(omega1rcj - omega1rfj)max, cam angular velocity deviation"),
+    "percussion_max_Ns": ("N s", "(Percussion_int)max, largest cam-follower impact percussion"),
+    "jumps": ("1", "number of follower jumps on the rise"),
+    "impacts": ("1", "number of cam-follower impacts on the rise"),
+    "xel_max_mm": ("mm", "(xel)max, largest relative cam-follower displacement along the normal"),
+    "xel_min_mm": ("mm", "(xel)min, smallest relative cam-follower displacement along the normal"),
+}
+
+
+@dataclasses.dataclass
+class DesignRun:
+    """Outcome of running a design: the design table with responses, failures and timing."""
+
+    factors: list[Factor]
+    model: str
+    responses: tuple[str, ...]
+    frame: pd.DataFrame            # full_factorial columns + one column per response (NaN if failed)
+    failures: dict[int, str]       # run number -> one-line reason
+    wall_s: float
+    where: str                     # "in-process", "N local processes", "Dask cluster at ..."
+
+    def table(self) -> pd.DataFrame:
+        """The CSV shaped like Tables 2/3: run, level columns, responses."""
+        cols = ["run"] + [f.column for f in self.factors] + list(self.responses)
+        return self.frame[cols].copy()
+
+    def dataset(self):
+        """xarray Dataset: one dimension per factor (symbol, level values as coordinates)."""
+        import xarray as xr
+        dims = [f.symbol for f in self.factors]
+        shape = tuple(len(f.levels) for f in self.factors)
+        coords = {}
+        for f in self.factors:
+            _field, _scale, text = SCENE_FACTORS.get(f.symbol, (None, None, f.symbol))
+            coords[f.symbol] = xr.DataArray(np.asarray(f.levels, dtype=float), dims=[f.symbol], attrs={
+                "units": f.unit or "1", "long_name": f"factor {f.name}: {text}",
+                "level_column": f.column})
+        # full_factorial's order is C order over the factors' level indices
+        ordered = self.frame.sort_values([f.column for f in self.factors])
+        data = {}
+        for r in self.responses:
+            units, long_name = _RESPONSE_ATTRS.get(r, ("1", r))
+            data[r] = xr.DataArray(ordered[r].to_numpy(dtype=float).reshape(shape), dims=dims,
+                                   attrs={"units": units, "long_name": long_name})
+        data["run"] = xr.DataArray(ordered["run"].to_numpy().reshape(shape), dims=dims,
+                                   attrs={"units": "1", "long_name": "run number in the paper's order"})
+        data["wall_s"] = xr.DataArray(ordered["wall_s"].to_numpy(dtype=float).reshape(shape), dims=dims,
+                                      attrs={"units": "s", "long_name": "wall time of the run's simulation"})
+        ds = xr.Dataset(data, coords=coords)
+        ds.attrs.update(model=self.model, failed_runs=",".join(map(str, sorted(self.failures))) or "none",
+                        title="labtool doe run: full factorial simulated experiment")
+        return ds
+
+
+def simulate_run(scene, model: str) -> dict:
+    """Run one simulation; never raises for a user-side failure (it is reported per run).
+
+    Returns ``{"ok": True, "indicators": {...}, "wall_s": s}`` or ``{"ok": False, "error": msg}``.
+    Top-level so that process pools and Dask workers can pickle it by reference.
+    """
+    import time
+
+    from models.errors import LabtoolError
+    from models.simulate import simulate
+    t0 = time.perf_counter()
+    try:
+        res = simulate(scene, model)
+    except LabtoolError as exc:
+        return {"ok": False, "error": str(exc)}
+    except Exception as exc:  # a bug in a model must not lose the other runs
+        return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+    ind = {k: (None if v is None else float(v)) for k, v in res.indicators.items()
+           if isinstance(v, (int, float, np.floating, np.integer, type(None))) and not isinstance(v, bool)}
+    return {"ok": True, "indicators": ind, "wall_s": time.perf_counter() - t0}
+
+
+def responses_for(model: str) -> tuple[str, ...]:
+    try:
+        return RESPONSES_BY_MODEL[model]
+    except KeyError:
+        raise InputError(f"doe run needs --model one of {', '.join(RESPONSES_BY_MODEL)}, got '{model}'") from None
+
+
+def run_design(factors: list[Factor], base_scene, model: str, workers: int | None = None,
+               scheduler: str | None = None, progress=None, connect_timeout_s: float = 10.0) -> DesignRun:
+    """Simulate every run of the full factorial of ``factors`` with ``model``.
+
+    base_scene  Scene holding every non-factor setting (law, omega1 mode, accuracy ...)
+    workers     local processes (default: the number of cores); 1 = in this process
+    scheduler   address of a Dask distributed scheduler (``tcp://host:8786``); then the runs go
+                there and ``workers`` is ignored (the cluster decides)
+    progress    callable(done, total) called after each finished run
+    """
+    import os
+    import time
+
+    responses = responses_for(model)
+    design = full_factorial(factors)
+    # build every Scene first: a bad factor value fails here, before anything runs
+    scenes = [scene_for_run(base_scene, factors, {f.symbol: row[f.symbol] for f in factors})
+              for _, row in design.iterrows()]
+    total = len(scenes)
+    outcomes: dict[int, dict] = {}
+    t0 = time.perf_counter()
+
+    def done(i, out):
+        outcomes[i] = out
+        if progress is not None:
+            progress(len(outcomes), total)
+
+    if scheduler:
+        where = f"Dask cluster at {scheduler}"
+        _run_on_dask(scenes, model, scheduler, done, connect_timeout_s)
+    else:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        if n < 1:
+            raise InputError(f"--workers must be >= 1, got {n}")
+        n = min(n, total)
+        if n == 1:
+            where = "in-process"
+            for i, sc in enumerate(scenes):
+                done(i, simulate_run(sc, model))
+        else:
+            import concurrent.futures as cf
+            import multiprocessing as mp
+            where = f"{n} local processes"
+            # spawn: a forked child could inherit a lock held by the progress bar's thread
+            with cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn")) as pool:
+                futs = {pool.submit(simulate_run, sc, model): i for i, sc in enumerate(scenes)}
+                for fut in cf.as_completed(futs):
+                    done(futs[fut], fut.result())
+    frame = design.copy()
+    failures = {}
+    for r in responses:
+        frame[r] = np.nan
+    frame["wall_s"] = np.nan
+    for i, out in outcomes.items():
+        run = int(design.loc[i, "run"])
+        if not out["ok"]:
+            failures[run] = out["error"]
+            continue
+        frame.loc[i, "wall_s"] = out["wall_s"]
+        for r in responses:
+            v = out["indicators"].get(r)
+            frame.loc[i, r] = np.nan if v is None else v
+    missing = [r for r in responses if frame[r].isna().all() and len(failures) < total]
+    if missing:
+        raise InputError(f"model '{model}' does not compute {', '.join(missing)}; "
+                         "is it the level you meant?")
+    return DesignRun(factors, model, responses, frame, failures, time.perf_counter() - t0, where)
+
+
+def _run_on_dask(scenes, model, address, done, timeout_s) -> None:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:  # pragma: no cover - distributed is a dependency
+        raise InputError("--scheduler needs the 'distributed' package") from None
+    try:
+        client = Client(address, timeout=timeout_s, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address} ({exc}); "
+                         "check the address (tcp://host:port) and that the scheduler runs") from None
+    try:
+        import uuid
+        batch = uuid.uuid4().hex[:12]
+        futures = [client.submit(simulate_run, sc, model, pure=False, key=f"labtool-doe-{batch}-run-{i + 1}")
+                   for i, sc in enumerate(scenes)]
+        index = {f.key: i for i, f in enumerate(futures)}
+        for fut in as_completed(futures):
+            try:
+                out = fut.result()
+            except Exception as exc:  # the worker died or could not import labtool's models
+                out = {"ok": False, "error": f"Dask worker failed: {type(exc).__name__}: {exc}"}
+            done(index[fut.key], out)
+    finally:
+        client.close()
