@@ -406,7 +406,7 @@ def _run_on_dask(scenes, model, address, done, timeout_s) -> None:
         futures = [client.submit(simulate_run, sc, model, pure=False, key=f"labtool-doe-{batch}-run-{i + 1}")
                    for i, sc in enumerate(scenes)]
         index = {f.key: i for i, f in enumerate(futures)}
-        for fut in as_completed(futures):
+        for fut in as_completed(futures, loop=client.loop):
             try:
                 out = fut.result()
             except Exception as exc:  # the worker died or could not import labtool's models

@@ -1,0 +1,251 @@
+"""Factorial designs and ``labtool doe run``: factor files, run order, Scene mapping, local and Dask runs."""
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import xarray as xr
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from labtool.cli import main
+from models import doe
+from models.errors import FileFormatError, InputError
+from models.paper import read_reference, table1_runs
+from models.scene import Scene
+
+TOML_2x3 = """
+[[factor]]
+name = "A"
+symbol = "Fu"
+unit = "N"
+levels = [0, 30, 65]
+
+[[factor]]
+name = "B"
+symbol = "n1"
+unit = "rpm"
+levels = [180, 300]
+"""
+
+
+def test_table1_full_factorial_is_the_papers_run_order():
+    design = doe.full_factorial(doe.table1_factors())
+    t2 = read_reference("table2_rigid")
+    for col in ("A_Fu_level", "B_j_level", "C_n1_level", "D_Jt_level"):
+        assert (design[col].to_numpy() == t2[col].to_numpy()).all()
+    runs = table1_runs()
+    for sym, col in (("Fu", "Fu_N"), ("j", "j_mm"), ("n1", "n1_rpm"), ("Jt", "Jt_factor")):
+        assert design[sym].to_numpy() == pytest.approx(runs[col].to_numpy())
+
+
+def test_scene_for_run_converts_edge_units_to_si_once():
+    f = doe.table1_factors()
+    sc = doe.scene_for_run(Scene(), f, {"Fu": 65.0, "j": 0.128, "n1": 300.0, "Jt": 4.0})
+    assert (sc.Fu, sc.backlash, sc.cam_speed_rpm, sc.jt_factor) == pytest.approx((65.0, 0.128e-3, 300.0, 4.0))
+    lw = doe.Factor("E", "lw", "mm", (5.0, 10.0))
+    assert doe.scene_for_run(Scene(), [lw], {"lw": 5.0}).contact_length == pytest.approx(5e-3)
+
+
+def test_factor_files_csv_and_toml_agree(tmp_path):
+    toml = tmp_path / "f.toml"
+    toml.write_text(TOML_2x3)
+    csv = tmp_path / "f.csv"
+    csv.write_text("factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,30,65\nB,n1,rpm,180,300,\n")
+    assert doe.read_factors(toml) == doe.read_factors(csv)
+    design = doe.full_factorial(doe.read_factors(toml))
+    assert len(design) == 6 and list(design["A_Fu_level"]) == [1, 1, 2, 2, 3, 3]
+
+
+@pytest.mark.parametrize("text,suffix,fragment", [
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,\n", ".csv", "has 1 level"),
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,0\n", ".csv", "repeat a value"),
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,x\n", ".csv", "is not a number"),
+    ("factor,symbol,unit,level_1,level_2,colour\nA,Fu,N,0,1,red\n", ".csv", "unknown column(s) colour"),
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,1\nA,j,mm,0,1\n", ".csv", "factor name repeated: A"),
+    ("factor,symbol,level_1,level_2\nA,Fu,0,1\n", ".csv", "missing unit"),
+    ('[[factor]]\nname = "A"\nsymbol = "Fu"\nunit = "N"\nlevels = [1]\n', ".toml", "has 1 level"),
+    ('[[factor]]\nname = "A"\nsymbol = "Fu"\nlevels = "0, 65"\n', ".toml", "levels must be a list of numbers"),
+    ('[[factor]]\nname = "A"\nsymbol = "Fu"\nunit = "N"\nlevels = [0, 65]\ncolor = 1\n', ".toml", "unknown key(s) color"),
+    ("[[factor]\n", ".toml", "not a valid TOML file"),
+    ('[[factor]]\nname = "AA"\nsymbol = "Fu"\nunit = "N"\nlevels = [0, 65]\n', ".toml", "one capital letter"),
+])
+def test_bad_factor_files_are_user_errors(tmp_path, text, suffix, fragment, capsys):
+    p = tmp_path / f"f{suffix}"
+    p.write_text(text)
+    with pytest.raises((InputError, FileFormatError)) as exc:
+        doe.read_factors(p)
+    assert fragment in str(exc.value)
+    assert main(["doe", "run", "--model", "kinematic", "--factors", str(p), "-o", str(tmp_path / "r.csv")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(levels=st.lists(st.floats(-1e6, 1e6, allow_nan=False), min_size=0, max_size=4))
+def test_factor_levels_accepted_iff_two_or_more_distinct(levels):
+    ok = len(levels) >= 2 and len(set(levels)) == len(levels)
+    if ok:
+        assert doe.Factor("A", "Fu", "N", tuple(levels)).levels == tuple(levels)
+    else:
+        with pytest.raises(InputError):
+            doe.Factor("A", "Fu", "N", tuple(levels))
+
+
+def test_unknown_symbol_or_unit_is_refused_before_running():
+    base = Scene()
+    with pytest.raises(InputError, match="no simulation parameter 'colour'"):
+        doe.run_design([doe.Factor("A", "colour", "", (1.0, 2.0))], base, "kinematic", workers=1)
+    with pytest.raises(InputError, match="unit 'km' not understood"):
+        doe.run_design([doe.Factor("A", "j", "km", (1.0, 2.0))], base, "kinematic", workers=1)
+    with pytest.raises(InputError, match="load Fu must be >= 0"):  # Scene's own validation, per run
+        doe.run_design([doe.Factor("A", "Fu", "N", (-5.0, 2.0))], base, "kinematic", workers=1)
+
+
+@pytest.fixture(scope="module")
+def kinematic_2x3(tmp_path_factory):
+    d = tmp_path_factory.mktemp("doe")
+    (d / "f.toml").write_text(TOML_2x3)
+    rc = main(["doe", "run", "--model", "kinematic", "--factors", str(d / "f.toml"), "--workers", "2",
+               "-o", str(d / "r.csv")])
+    return rc, d
+
+
+def test_doe_run_local_processes_writes_table_and_netcdf(kinematic_2x3, capsys):
+    rc, d = kinematic_2x3
+    assert rc == 0
+    table = pd.read_csv(d / "r.csv")
+    assert list(table.columns) == ["run", "A_Fu_level", "B_n1_level", "MR13D_max_Nm", "MR13D_min_Nm"]
+    assert list(table.run) == [1, 2, 3, 4, 5, 6]
+    # each row equals a direct simulation of that operating point (independent of the runner)
+    from models.simulate import simulate
+    direct = simulate(Scene(Fu=30.0, cam_speed_rpm=300.0), "kinematic").indicators
+    row = table[(table.A_Fu_level == 2) & (table.B_n1_level == 2)].iloc[0]
+    assert row.MR13D_max_Nm == pytest.approx(direct["MR13D_max_Nm"], rel=1e-9)
+    ds = xr.open_dataset(d / "r.nc", engine="h5netcdf")
+    assert ds["MR13D_max_Nm"].dims == ("Fu", "n1")
+    assert list(ds.Fu.values) == [0, 30, 65] and ds.Fu.attrs["units"] == "N" and ds.n1.attrs["units"] == "rpm"
+    assert float(ds.MR13D_max_Nm.sel(Fu=30, n1=300)) == pytest.approx(row.MR13D_max_Nm)
+    for v in ds.variables.values():
+        assert "units" in v.attrs and "long_name" in v.attrs
+    ds.close()
+    # more than two levels: the analysis reads it back and prints per-level effects
+    assert main(["doe", "analyze", str(d / "r.csv"), "--json"]) == 0
+
+
+def test_doe_run_in_process_equals_process_pool(kinematic_2x3):
+    _, d = kinematic_2x3
+    res = doe.run_design(doe.read_factors(d / "f.toml"), Scene(), "kinematic", workers=1)
+    assert res.where == "in-process" and not res.failures
+    pooled = pd.read_csv(d / "r.csv")
+    assert res.table()["MR13D_min_Nm"].to_numpy() == pytest.approx(pooled["MR13D_min_Nm"].to_numpy(), rel=1e-9)
+
+
+def test_doe_run_on_a_local_dask_cluster(tmp_path):
+    """A Dask distributed cluster on loopback (one in-process worker thread), closed by the test."""
+    distributed = pytest.importorskip("distributed")
+    (tmp_path / "f.toml").write_text(TOML_2x3)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        rc = main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"),
+                   "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "d.csv")])
+    assert rc == 0
+    local = doe.run_design(doe.read_factors(tmp_path / "f.toml"), Scene(), "kinematic", workers=1).table()
+    remote = pd.read_csv(tmp_path / "d.csv")
+    assert remote.MR13D_max_Nm.to_numpy() == pytest.approx(local.MR13D_max_Nm.to_numpy(), rel=1e-9)
+
+
+def test_unreachable_scheduler_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="cannot reach the Dask scheduler"):
+        doe.run_design([doe.Factor("A", "Fu", "N", (0.0, 65.0))], Scene(), "kinematic",
+                       scheduler="tcp://127.0.0.1:1", connect_timeout_s=0.5)
+
+
+def test_failed_runs_are_reported_and_left_empty(tmp_path, monkeypatch, capsys):
+    """A run whose model raises keeps the other runs, leaves its row empty and ends in exit 2."""
+    from models import simulate as sim
+
+    real = sim.simulate
+
+    def flaky(scene, model="auto"):
+        if scene.Fu > 50:
+            raise sim.InputError("solver gave up (test)")
+        return real(scene, model)
+
+    monkeypatch.setattr(sim, "simulate", flaky)
+    (tmp_path / "f.toml").write_text(TOML_2x3)
+    rc = main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"), "--workers", "1",
+               "-o", str(tmp_path / "r.csv")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1
+    assert "2 of 6 runs failed and are left empty" in err[0] and "run 5: solver gave up (test)" in err[0]
+    table = pd.read_csv(tmp_path / "r.csv")
+    assert table.MR13D_max_Nm.isna().sum() == 2 and table.MR13D_max_Nm.notna().sum() == 4
+    # and the analysis refuses the incomplete table, naming the runs
+    assert main(["doe", "analyze", str(tmp_path / "r.csv")]) == 2
+    assert "missing or not a number in run(s) 5, 6" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv,fragment", [
+    (["--model", "quantum"], "doe run needs --model one of rigid, elastic, kinematic"),
+    (["--model", "kinematic", "--law", "parabolic"], "unknown motion law 'parabolic'"),
+    (["--model", "kinematic", "--omega1", "fast"], "omega1 mode must be 'const' or 'var'"),
+    (["--model", "kinematic", "--workers", "0"], "must be >= 1"),
+    (["--model", "kinematic", "--factors", "nofile.toml"], "factor file nofile.toml does not exist"),
+])
+def test_doe_run_bad_options_are_one_line_exit_2(capsys, tmp_path, argv, fragment):
+    assert main(["doe", "run", *argv, "-o", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("labtool: error:") and fragment in err[0], err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_doe_run_refuses_to_overwrite(capsys, tmp_path):
+    (tmp_path / "x.csv").write_text("keep me")
+    assert main(["doe", "run", "--model", "kinematic", "-o", str(tmp_path / "x.csv")]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert (tmp_path / "x.csv").read_text() == "keep me"
+
+
+# ---------------------------------------------------------------------------------------------
+# the paper's 16-run tables from the dynamic models (issues 3 and 4 define their accuracy)
+
+def _paper_end_to_end(model: str, table: str, tmp_path):
+    if importlib.util.find_spec(f"models.{model}") is None:
+        pytest.skip(f"models/{model}.py does not exist yet (issue {3 if model == 'rigid' else 4})")
+    out = tmp_path / f"{model}.csv"
+    rc = main(["doe", "run", "--model", model, "--accuracy", "fast", "-o", str(out)])
+    assert rc == 0
+    ours, paper = pd.read_csv(out), read_reference(table)
+    assert list(ours.columns) == list(paper.columns)
+    assert (ours[paper.columns[:5]].to_numpy() == paper[paper.columns[:5]].to_numpy()).all()
+    # the runner adds nothing: run 10 (Fu 65 N, j 0.016 mm, 180 rpm, Jt x4) equals a direct simulation
+    from models.simulate import simulate
+    direct = simulate(Scene(Fu=65.0, backlash=0.016e-3, cam_speed_rpm=180.0, jt_factor=4.0,
+                            accuracy="fast"), model).indicators
+    for col in paper.columns[5:]:
+        assert ours[col][9] == pytest.approx(direct[col], rel=1e-6, abs=1e-9), col
+    return ours, paper
+
+
+def _common_issue_accuracy(ours, paper):
+    """What issues 3 and 4 both require: (MR13D)max within 10 % on every run; no jump in runs 9
+    and 13 (Fu = 65 N, 180 rpm, Jt x1: MR13D keeps its sign), at least one in every other run."""
+    assert np.max(np.abs(ours.MR13D_max_Nm / paper.MR13D_max_Nm - 1)) < 0.10
+    assert (ours.jumps[[8, 12]] == 0).all() and (ours.jumps.drop([8, 12]) > 0).all()
+
+
+@pytest.mark.slow
+def test_doe_run_rigid_gives_table2(tmp_path):
+    _common_issue_accuracy(*_paper_end_to_end("rigid", "table2_rigid", tmp_path))
+
+
+@pytest.mark.slow
+def test_doe_run_elastic_gives_table3(tmp_path):
+    ours, paper = _paper_end_to_end("elastic", "table3_elastic", tmp_path)
+    _common_issue_accuracy(ours, paper)
+    # issue 4: (MR13D)min within 10 % as well (exact jump and impact counts are tested in issue 4's
+    # own tests; docs/doe.md records this table's counts against Table 3)
+    assert np.max(np.abs(ours.MR13D_min_Nm / paper.MR13D_min_Nm - 1)) < 0.10
