@@ -405,7 +405,7 @@ def to_json(results: dict[str, ResponseAnova]) -> dict:
         if v is None:
             return None
         v = float(v)
-        return v if math.isfinite(v) else (None if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+        return v if math.isfinite(v) else None  # JSON has no inf: an exact fit's F is null, its p 0
 
     out = {}
     for r, res in results.items():

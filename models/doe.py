@@ -363,12 +363,23 @@ def run_design(factors: list[Factor], base_scene, model: str, workers: int | Non
         else:
             import concurrent.futures as cf
             import multiprocessing as mp
+            from concurrent.futures.process import BrokenProcessPool
             where = f"{n} local processes"
             # spawn: a forked child could inherit a lock held by the progress bar's thread
-            with cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn")) as pool:
+            pool = cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"))
+            try:
                 futs = {pool.submit(simulate_run, sc, model): i for i, sc in enumerate(scenes)}
                 for fut in cf.as_completed(futs):
-                    done(futs[fut], fut.result())
+                    try:
+                        out = fut.result()
+                    except BrokenProcessPool as exc:  # a worker died (memory, signal)
+                        out = {"ok": False, "error": f"worker process died: {exc}"}
+                    done(futs[fut], out)
+            except BaseException:
+                # Ctrl-C or an error here: do not wait for the runs still queued
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown(wait=True)
     frame = design.copy()
     failures = {}
     for r in responses:
