@@ -31,6 +31,8 @@ COMMAND_MODULES = (
     "labtool.commands.kinematics",
     "labtool.commands.demo",
     "labtool.commands.doe",
+    "labtool.commands.acquire",
+    "labtool.commands.calibrate",
 )
 
 

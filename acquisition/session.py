@@ -1,0 +1,98 @@
+"""One acquisition run: device -> recorder, with clean stops on Ctrl-C, disconnect and a full disk.
+
+``run(device, path, ...)`` configures and starts the device, writes every block, and always
+leaves a readable file: a clean end (duration reached, Ctrl-C, device disconnected) closes it with
+``complete = True`` and a ``stop`` event saying why; a full disk stops the run, keeps every sample
+that reached the file and leaves ``complete = False``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+from acquisition.device import Device, DeviceDisconnected, Event
+from acquisition.recorder import DiskFull, Recorder
+from models.errors import InputError
+
+
+@dataclasses.dataclass
+class RunResult:
+    """How the run ended. outcome: done | interrupted | disconnected | disk_full."""
+
+    path: str
+    outcome: str
+    message: str
+    n_samples: int
+    rate_hz: float
+    wall_s: float
+    overruns: int
+    gaps: int
+    samples_lost: int
+    clipped: tuple
+    peak_v: tuple
+    complete: bool
+
+
+def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: dict | None = None,
+        ka_m_s2_per_v=None, progress=None, recorder_factory=Recorder, flush_interval_s: float = 0.5,
+        on_flush=None) -> RunResult:
+    """Acquire ``duration_s`` seconds (None: until Ctrl-C or the device ends) into ``path``.
+
+    progress(recorder, elapsed_wall_s) is called after every block (the CLI's live display).
+    """
+    actual = device.configure(rate_hz)
+    meta = dict(getattr(device, "metadata", {}) or {})
+    meta.update(attrs or {})
+    meta["requested_rate_hz"] = float(rate_hz)
+    if duration_s is not None:
+        meta["requested_duration_s"] = float(duration_s)
+    try:
+        rec = recorder_factory(path, device.channel_names, actual, attrs=meta, ka_m_s2_per_v=ka_m_s2_per_v,
+                               flush_interval_s=flush_interval_s, on_flush=on_flush)
+    except OSError as exc:
+        _try(device.stop)
+        reason = os.strerror(exc.errno) if exc.errno else " ".join(str(exc).split())
+        raise InputError(f"cannot write the recording {path}: {reason}") from None
+    target = None if duration_s is None else int(round(duration_s * actual))
+    outcome, message, complete = "done", "duration reached", True
+    t0 = time.perf_counter()
+    try:
+        device.start()
+        while target is None or rec.device_index < target:
+            block = device.read_block()
+            if block is None:
+                outcome, message = "done", "device finished"
+                break
+            if target is not None and block.end_index > target:
+                block.data = block.data[: max(0, target - block.first_index)]
+            rec.write_block(block)
+            if progress is not None:
+                progress(rec, time.perf_counter() - t0)
+    except KeyboardInterrupt:
+        outcome, message = "interrupted", "stopped by the user (Ctrl-C)"
+    except DeviceDisconnected as exc:
+        outcome, message = "disconnected", f"device disconnected: {exc}"
+        _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message)))
+    except DiskFull:
+        outcome, message, complete = "disk_full", "disk full (ENOSPC): recording stopped, samples written so far kept", False
+    finally:
+        _try(device.stop)
+        if outcome == "disk_full":
+            rec.abandon(message)
+        else:
+            try:
+                rec.close(complete=complete, reason=message)
+            except DiskFull:
+                rec.abandon("disk full while closing")
+                outcome, message, complete = "disk_full", "disk full (ENOSPC) while closing: samples written so far kept", False
+    wall = time.perf_counter() - t0
+    return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
+                     rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)
+
+
+def _try(fn):
+    try:
+        fn()
+    except Exception:
+        pass

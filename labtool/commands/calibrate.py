@@ -1,0 +1,56 @@
+"""``labtool calibrate``: Ka (m/s^2/V) per channel from a recording of a reference sine excitation."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List
+
+import typer
+
+from labtool.output import atomic_write, check_output_path
+from models.errors import InputError
+
+PAPER_KA = 86.43
+
+
+def register(app: typer.Typer) -> None:
+    app.command("calibrate")(calibrate)
+
+
+def calibrate(
+    recording: Path = typer.Argument(..., help="recording (HDF5 v1) of the reference excitation"),
+    channel: List[str] = typer.Option(["aE_t"], help="channel on the exciter (repeatable)"),
+    reference_accel: float = typer.Option(9.81, help="reference acceleration [m/s^2] (B&K 4291: 9.81)"),
+    reference_freq: float = typer.Option(79.6, help="reference frequency [Hz], refined by the fit"),
+    convention: str = typer.Option("peak", help="peak | rms: what --reference-accel means"),
+    reference_uncertainty: float = typer.Option(0.0, help="relative standard uncertainty of the exciter (e.g. 0.01)"),
+    output: Path = typer.Option(..., "-o", "--output", help="calibration file to write (TOML)"),
+    force: bool = typer.Option(False, help="overwrite an existing output file"),
+) -> None:
+    """Fit a sine at the reference frequency (least squares, frequency refined) and write Ka with its uncertainty."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from acquisition.calibration import calibrate_recording, calibration_toml
+
+    if convention not in ("peak", "rms"):
+        raise InputError(f"--convention must be peak or rms, got '{convention}'")
+    check_output_path(output, force)
+    cals = calibrate_recording(recording, channel, reference_accel, reference_freq, convention, reference_uncertainty)
+    text = calibration_toml(cals, recording, reference_accel, reference_freq, convention, reference_uncertainty)
+
+    def _write(tmp: Path):
+        try:
+            tmp.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise InputError(f"cannot write {output}: {exc.strerror}") from None
+    atomic_write(output, _write)
+
+    table = Table(title=f"Calibration from {recording.name}: {reference_accel:g} m/s^2 {convention} at {reference_freq:g} Hz")
+    for col in ("channel", "Ka [m/s^2/V]", "u(Ka) [m/s^2/V]", "vs paper 86.43", "fitted f [Hz]", "amplitude [V peak]", "residual rms [V]"):
+        table.add_column(col, justify="right")
+    for c in cals:
+        table.add_row(c.channel, f"{c.ka_m_s2_per_v:.4f}", f"{c.ka_std_m_s2_per_v:.4f}",
+                      f"{100 * (c.ka_m_s2_per_v / PAPER_KA - 1):+.2f} %", f"{c.fit.freq_hz:.4f}",
+                      f"{c.fit.amplitude:.5f}", f"{c.fit.residual_rms:.2e}")
+    Console().print(table)
+    typer.echo(f"wrote {output}")

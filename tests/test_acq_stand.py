@@ -1,0 +1,208 @@
+"""Simulated stand and measuring chain: truth vs independent facts, chain behaviour, determinism, faults."""
+import math
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from acquisition import signal_chain as sc
+from acquisition.device import Event, parse_device
+from acquisition.sim_stand import Fault, SimStand, board_rate, parse_fault
+from models.errors import InputError
+from models.kinematics import analyze
+from models.linkage import linkage_state
+from models.mechanism import Mechanism
+from models.motion_laws import CamProgram
+
+
+def record(scene=None, params=None, seed=1, duration=2.0, rate=10000.0, faults=()):
+    dev = SimStand(scene or sc.StandScene(), params, seed=seed, duration_s=duration, realtime=False, faults=faults)
+    dev.configure(rate)
+    dev.start()
+    blocks = []
+    while (b := dev.read_block()) is not None:
+        blocks.append(b)
+    dev.stop()
+    return dev, blocks
+
+
+def test_truth_without_ripple_is_the_kinematic_analysis():
+    scene = sc.StandScene(cam_speed_rpm=300, ripple=0.0)
+    W = scene.omega1_nominal
+    phi1 = np.linspace(0, 2 * math.pi, 721)[:-1]
+    ds = analyze(scene.mechanism, scene.program, 300.0, phi1=phi1)
+    tr = sc.truth(scene, phi1 / W)
+    for name in ("omega2", "epsilon2", "aE_t", "aE_n", "phi2"):
+        np.testing.assert_allclose(tr[name], ds[name].values, rtol=1e-9, atol=1e-9)
+
+
+def test_truth_with_ripple_is_consistent_by_finite_differences():
+    scene = sc.StandScene(cam_speed_rpm=180, ripple=0.02)
+    t = np.linspace(0.0, 0.4, 400001)
+    tr = sc.truth(scene, t)
+    dt = t[1] - t[0]
+    # omega1 = dphi1/dt, omega2 = dphi2/dt, epsilon2 = domega2/dt (central differences, smooth law)
+    np.testing.assert_allclose(np.gradient(tr["phi1"], dt)[1:-1], tr["omega1"][1:-1], rtol=1e-6)
+    np.testing.assert_allclose(np.gradient(tr["phi2"], dt)[1:-1], tr["omega2"][1:-1], atol=1e-4 * np.abs(tr["omega2"]).max())
+    np.testing.assert_allclose(np.gradient(tr["omega2"], dt)[1:-1], tr["epsilon2"][1:-1], atol=2e-3 * np.abs(tr["epsilon2"]).max())
+    # the tacho angle phi1 = 2 pi k exactly at t = k T
+    T = 2 * math.pi / scene.omega1_nominal
+    ph, _, _ = sc.cam_angle(scene, np.arange(5) * T)
+    np.testing.assert_allclose(ph, 2 * math.pi * np.arange(5), atol=1e-12)
+
+
+def test_gravity_component_matches_the_sensor_axes_from_the_linkage():
+    mech = Mechanism.default()
+    phi2 = np.linspace(1.4, 1.9, 11)
+    h = 1e-6
+    E0 = linkage_state(mech, phi2, 0.0, 0.0).E
+    E1 = linkage_state(mech, phi2 + h, 0.0, 0.0).E
+    t_hat = (E1 - E0) / np.linalg.norm(E1 - E0, axis=0)  # direction of increasing psi at E
+    n_hat = (mech.D[:, None] - E0) / np.linalg.norm(mech.D[:, None] - E0, axis=0)  # towards D
+    f_grav = np.array([0.0, mech.g])  # a resting accelerometer reads -g
+    scene = sc.StandScene()
+    z = np.zeros_like(phi2)
+    f = sc.sensed_acceleration(scene, {"aE_t": z, "aE_n": z, "phi2": phi2})
+    np.testing.assert_allclose(f[:, 0], f_grav @ t_hat, atol=1e-4)
+    np.testing.assert_allclose(f[:, 1], f_grav @ n_hat, atol=1e-4)
+
+
+def test_recorded_volts_times_ka_follow_the_truth_in_the_cam_band():
+    scene = sc.StandScene(cam_speed_rpm=180)
+    dev, blocks = record(scene, duration=2.0)
+    v = np.concatenate([b.data for b in blocks]).astype(float)
+    t = np.arange(v.shape[0]) / dev.actual_rate_hz
+    tr = sc.truth(scene, t)
+    f = sc.sensed_acceleration(scene, tr)
+    dc = sc.dc_level(scene, dev.params) * sc.PAPER_KA
+    sos = signal.butter(4, 300.0, fs=dev.actual_rate_hz, output="sos")
+    for c in range(2):
+        meas = signal.sosfiltfilt(sos, v[:, c] * sc.PAPER_KA)
+        ref = signal.sosfiltfilt(sos, f[:, c] - dc[c])
+        err = np.sqrt(np.mean((meas - ref) ** 2)) / np.sqrt(np.mean(ref**2))
+        assert err < 0.03, (c, err)
+
+
+def test_tacho_rises_once_per_revolution_at_phi1_zero():
+    scene = sc.StandScene(cam_speed_rpm=300)
+    dev, blocks = record(scene, duration=1.0)
+    tach = np.concatenate([b.data for b in blocks])[:, 2]
+    rises = np.flatnonzero((tach[1:] > 2.5) & (tach[:-1] <= 2.5)) + 1
+    T = 60.0 / 300.0
+    expected = np.round(np.arange(1, 5) * T * dev.actual_rate_hz)
+    # the anti-alias filter delays every channel alike by a couple of samples
+    assert len(rises) == 4
+    assert np.all((rises - expected >= 0) & (rises - expected <= 3)), rises - expected
+    assert tach[0] > 2.5  # phi1 = 0 at the first sample
+
+
+def test_chain_passes_the_calibration_frequency_at_unity_and_resonates():
+    p = sc.ChainParams()
+    h = sc.chain_frequency_response(p, 10000.0, [79.6, p.resonance_hz, 4900.0], resonant=True) * p.ka_m_s2_per_v[0]
+    assert abs(abs(h[0]) - 1.0) < 1e-2  # below the mode: transmissibility 1 + (f/f_r)^2
+    assert abs(h[1]) > 5.0  # a lightly damped mode (zeta 0.04) amplifies ~1/(2 zeta)
+    assert abs(h[2]) < 0.05  # anti-alias near Nyquist
+    h_cal = sc.chain_frequency_response(p, 10000.0, [79.6], resonant=False) * p.ka_m_s2_per_v[0]
+    assert abs(abs(h_cal[0]) - 1.0) < 1e-4
+
+
+def test_adc_quantizes_and_flags_clipping():
+    p = sc.ChainParams(adc_range_v=10.0, adc_bits=16)
+    v = np.array([[0.0, 1.2345678, -20.0], [9.9, 10.5, 3.0]])
+    q, clipped = sc.adc(v, p)
+    lsb = 20.0 / 2**16
+    assert np.allclose(q / lsb, np.round(q / lsb), atol=1e-3)
+    assert clipped.tolist() == [[False, False, True], [False, True, False]]
+    assert q.max() <= 10.0 - lsb + 1e-6 and q.min() >= -10.0
+
+
+def test_same_seed_same_data_other_seed_other_noise():
+    a = np.concatenate([b.data for b in record(seed=7, duration=0.5)[1]])
+    b = np.concatenate([b.data for b in record(seed=7, duration=0.5)[1]])
+    c = np.concatenate([b.data for b in record(seed=8, duration=0.5)[1]])
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+    assert np.abs(a - c).max() < 0.1  # same truth, different noise
+
+
+def test_faults_lose_samples_but_keep_the_rest_identical():
+    ref = np.concatenate([b.data for b in record(seed=2, duration=3.0)[1]])
+    _, blocks = record(seed=2, duration=3.0, faults=[Fault("overrun", 1.0, 0.2), Fault("drop", 2.05)])
+    events = [e for b in blocks for e in b.events]
+    assert [e.kind for e in events] == ["overrun"]
+    assert events[0].index == 10000
+    firsts = [b.first_index for b in blocks]
+    covered = np.zeros(ref.shape[0], bool)
+    for b in blocks:
+        covered[b.first_index:b.end_index] = True
+        np.testing.assert_array_equal(b.data, ref[b.first_index:b.end_index])
+    assert (~covered).sum() == 2000 + 1000  # 0.2 s overrun + one dropped 0.1 s block
+    assert firsts == sorted(firsts)
+
+
+def test_clip_fault_and_disconnect():
+    _, blocks = record(duration=1.0, faults=[Fault("clip", 0.5)])
+    clips = [e for b in blocks for e in b.events if e.kind == "clip"]
+    assert clips and clips[0].detail.startswith("aE_t") and 5000 <= clips[0].index < 5100
+    from acquisition.device import DeviceDisconnected
+    with pytest.raises(DeviceDisconnected):
+        record(duration=1.0, faults=[Fault("disconnect", 0.3)])
+
+
+def test_calibration_mode_is_a_sine_on_one_channel():
+    scene = sc.StandScene(mode="calibration", cal_channel="aE_n", cal_freq=100.0)
+    dev, blocks = record(scene, duration=0.5)
+    v = np.concatenate([b.data for b in blocks]).astype(float)
+    assert np.std(v[:, 1]) * sc.PAPER_KA == pytest.approx(9.81 / math.sqrt(2), rel=0.01)
+    assert np.std(v[:, 0]) * sc.PAPER_KA < 0.2
+    assert np.all(v[:, 2] == 0.0)
+
+
+def test_realtime_pacing_with_a_fake_clock_and_overrun_when_the_reader_is_late():
+    now = [0.0]
+    dev = SimStand(seed=1, duration_s=5.0, realtime=True, buffer_s=1.0, clock=lambda: now[0],
+                   sleep=lambda s: now.__setitem__(0, now[0] + s))
+    dev.configure(10000)
+    dev.start()
+    b = dev.read_block()
+    assert now[0] == pytest.approx(0.1)  # waited for the block's last sample
+    now[0] += 2.5  # the reader stalls 2.5 s: more than the 1 s buffer
+    b = dev.read_block()
+    assert [e.kind for e in b.events] == ["overrun"]
+    assert b.first_index > 1000
+    dev.stop()
+
+
+@pytest.mark.parametrize("rate,expected", [(10000, 10000.0), (9999, 10000.0), (25600, 25600.0)])
+def test_board_rate(rate, expected):
+    assert board_rate(rate) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("bad", [0, 999, 60000, float("nan"), -5])
+def test_board_rate_refuses_what_the_board_cannot_do(bad):
+    with pytest.raises(InputError):
+        board_rate(bad)
+
+
+@pytest.mark.parametrize("spec", ["", "foo", "nidaqmx", "nidaqmx:", "SIM", "sim2", "daq:Dev1/ai0"])
+def test_parse_device_bad(spec):
+    with pytest.raises(InputError):
+        parse_device(spec)
+
+
+def test_parse_device_and_faults_good():
+    assert parse_device("sim") == ("sim", "")
+    assert parse_device("nidaqmx:Dev1/ai0:2") == ("nidaqmx", "Dev1/ai0:2")
+    assert parse_fault("overrun@1.5") == Fault("overrun", 1.5)
+    for bad in ("overrun", "melt@2", "drop@x"):
+        with pytest.raises(InputError):
+            parse_fault(bad)
+    with pytest.raises(ValueError):
+        Event(0, "boom")
+
+
+@pytest.mark.parametrize("kw", [dict(mode="x"), dict(cam_speed_rpm=0), dict(Fu=-1), dict(backlash=-1e-3),
+                                dict(law="nope"), dict(ripple=0.7), dict(cal_freq=0), dict(cal_channel="tacho")])
+def test_stand_scene_bad_input(kw):
+    with pytest.raises(InputError):
+        sc.StandScene(**kw)
