@@ -268,7 +268,11 @@ def analyze_response(data: FactorialData, response: str, alpha: float = 0.05,
     means = cell_means(data, response)
     y = data.frame[response].to_numpy(dtype=float)
     grand = float(y.mean())
-    ss_total = float(((y - grand) ** 2).sum())
+    with np.errstate(over="ignore", invalid="ignore"):
+        ss_total = float(((y - grand) ** 2).sum())
+    if not math.isfinite(ss_total):
+        raise InputError(f"{data.source}: response {response} has values too large to square "
+                         f"(max |value| {np.abs(y).max():.3g}); rescale the column")
 
     frame = _model_frame(data, response)
     fit = smf.ols(_formula(tested), data=frame).fit()

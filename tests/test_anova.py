@@ -291,3 +291,24 @@ def test_constant_response_has_no_significant_term():
     res = anova.analyze(_data(3), responses=["impacts"])["impacts"]
     assert res.significant == [] and "constant" in res.note
     assert all(math.isfinite(t.p) for t in res.terms.values() if not t.pooled)
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(row=st.integers(0, 15), col=st.integers(0, 10),
+       value=st.one_of(st.text(max_size=6), st.floats(allow_nan=True, allow_infinity=True), st.just("")))
+def test_any_corrupted_cell_ends_in_success_or_one_line_exit_2(tmp_path_factory, capsys, row, col, value):
+    """Whatever one cell of Table 2 is replaced by, the analysis either runs or fails in one line."""
+    t = read_reference("table2_rigid").astype(object)
+    t.iloc[row, col] = value
+    path = tmp_path_factory.mktemp("fuzz") / "t.csv"
+    t.to_csv(path, index=False)
+    capsys.readouterr()
+    rc = main(["doe", "analyze", str(path), "--json"])
+    captured = capsys.readouterr()
+    assert rc in (0, 2)
+    if rc == 2:
+        lines = captured.err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("labtool: error:"), lines
+    else:
+        json.loads(captured.out)

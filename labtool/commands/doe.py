@@ -75,12 +75,26 @@ def run(
     ds.attrs["history"] = (f"labtool doe run --model {model} --law {law} --omega1 {omega1} "
                            f"--accuracy {accuracy}" + (f" --factors {factors}" if factors else ""))
     write_netcdf(ds, nc_path)
+    if len(table) <= 64:  # the table itself, as in the paper; large designs only get the summary line
+        _print_results(table, f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}")
     typer.echo(f"wrote {output} and {nc_path}: {n_runs} runs of the {model} model "
                f"({result.where}, {result.wall_s:.1f} s)")
     if result.failures:
         first = min(result.failures)
         raise SolverError(f"{len(result.failures)} of {n_runs} runs failed and are left empty in {output} "
                           f"(run {first}: {result.failures[first]})")
+
+
+def _print_results(table, title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title, title_justify="left")
+    for c in table.columns:
+        t.add_column(c, justify="right")
+    for row in table.itertuples(index=False):
+        t.add_row(*["" if v != v else (f"{v:.5g}" if isinstance(v, float) else str(v)) for v in row])
+    Console().print(t)
 
 
 @doe_app.command("analyze")
