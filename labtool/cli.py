@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "labtool.commands.doe",
     "labtool.commands.acquire",
     "labtool.commands.calibrate",
+    "labtool.commands.process",
 )
 
 

@@ -1,0 +1,66 @@
+"""``labtool process``: a recording (labtool HDF5 v1, TDMS or CSV) -> measured.nc (omega2, epsilon2, ...)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from labtool.output import check_output_path
+
+
+def register(app: typer.Typer) -> None:
+    app.command("process")(process)
+
+
+def process(
+    recording: Path = typer.Argument(..., help="recording to process: labtool HDF5 (v1), LabVIEW TDMS or CSV"),
+    output: Path = typer.Option(..., "-o", "--output", help="NetCDF file to write (measured.nc)"),
+    calibration: Optional[Path] = typer.Option(None, help="calibration TOML from 'labtool calibrate' (Ka per channel)"),
+    sample_rate: Optional[float] = typer.Option(None, help="sample rate [Hz] for TDMS/CSV files that state none"),
+    law: Optional[str] = typer.Option(None, help="motion law of the cam (default: the recording's, else sine)"),
+    rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
+    lowpass_hz: Optional[float] = typer.Option(None, help="low-pass corner [Hz] (default: 100 x cam frequency)"),
+    ac_tau: Optional[float] = typer.Option(None, help="AC-coupling time constant of the sensor chain [s], undone if given"),
+    chunk_samples: int = typer.Option(1 << 18, help="samples per processing chunk (memory bound)"),
+    force: bool = typer.Option(False, help="overwrite an existing output file"),
+) -> None:
+    """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
+    averages and spikes, with every step in the processing history (docs/processing.md)."""
+    from models.errors import InputError
+    from processing.calibration_file import read_calibration
+    from processing.pipeline import ProcessOptions, process_recording
+    from processing.readers import open_recording
+
+    check_output_path(output, force)
+    if output.resolve() == recording.resolve():
+        raise InputError("the output file must not be the recording itself")
+    if chunk_samples < 1024:
+        raise InputError("--chunk-samples must be at least 1024")
+    for name, v in (("--rpm", rpm), ("--lowpass-hz", lowpass_hz), ("--sample-rate", sample_rate), ("--ac-tau", ac_tau)):
+        if v is not None and not (v > 0 and v < float("inf")):
+            raise InputError(f"{name} must be a positive number, got {v}")
+    cal = read_calibration(calibration) if calibration is not None else None
+    rec = open_recording(recording, sample_rate_hz=sample_rate)
+
+    def warn(msg: str) -> None:
+        typer.echo(f"labtool: warning: {msg}", err=True)
+
+    opts = ProcessOptions(calibration=cal, calibration_source=str(calibration or ""), law=law, cam_speed_rpm=rpm,
+                          lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples)
+    try:
+        if sys.stderr.isatty():
+            from rich.progress import Progress
+            with Progress(transient=True) as bar:
+                task = bar.add_task(f"processing {recording.name}", total=2 * rec.n_samples)
+                summary = process_recording(rec, output, opts, progress=lambda k: bar.advance(task, k), warn=warn)
+        else:
+            summary = process_recording(rec, output, opts, warn=warn)
+    finally:
+        rec.close()
+    check = summary["normal_check_rel_rms"]
+    typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm']:.2f} rpm (phi1 by {summary['phi1_method']}), "
+               f"{summary['revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
+               f"{summary['spikes']} spikes, {summary['clipped']} clipped samples, "
+               f"|omega2| vs sqrt(aE_n/DE): {100 * check:.1f} % rms of peak")

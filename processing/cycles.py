@@ -1,0 +1,53 @@
+"""Cycle statistics: every complete cam revolution resampled on a phi1 grid; mean and scatter.
+
+A revolution is one mark-to-mark interval (cam_angle.py); it enters the statistics only when it
+is complete, within one segment, and free of clipped samples and NaN. Sums and sums of squares are
+accumulated, so memory does not grow with the recording's length.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def phi1_grid(n: int = 720) -> np.ndarray:
+    """Cam angles (rad) of the cycle-average grid, 2 pi k / n."""
+    return 2.0 * math.pi * np.arange(n) / n
+
+
+class CycleAccumulator:
+    def __init__(self, names: list[str], n_grid: int = 720):
+        self.grid = phi1_grid(n_grid)
+        self.names = list(names)
+        self.sum = {k: np.zeros(n_grid) for k in names}
+        self.sumsq = {k: np.zeros(n_grid) for k in names}
+        self.count = 0
+        self.rejected = 0
+
+    def add(self, frac_pos: np.ndarray, values: dict[str, np.ndarray]) -> bool:
+        """Add one revolution: ``frac_pos`` = phi1 (rad, increasing from ~0 to ~2 pi) of its samples."""
+        if any(not np.all(np.isfinite(values[k])) for k in self.names):
+            self.rejected += 1
+            return False
+        for k in self.names:
+            v = np.interp(self.grid, frac_pos, values[k])
+            self.sum[k] += v
+            self.sumsq[k] += v * v
+        self.count += 1
+        return True
+
+    def result(self) -> dict[str, np.ndarray]:
+        """{name_mean, name_std} (std with n - 1; NaN if fewer than two revolutions)."""
+        out = {}
+        n = self.count
+        for k in self.names:
+            mean = self.sum[k] / n if n else np.full_like(self.grid, np.nan)
+            if n >= 2:
+                var = np.maximum(self.sumsq[k] - n * mean**2, 0.0) / (n - 1)
+                std = np.sqrt(var)
+            else:
+                std = np.full_like(self.grid, np.nan)
+            out[f"{k}_mean"] = mean
+            out[f"{k}_std"] = std
+        return out

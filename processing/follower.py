@@ -1,0 +1,95 @@
+"""From the accelerations at E to the follower's epsilon2 and omega2 (pure functions).
+
+Sign conventions (DESIGN.md): aE_t positive along increasing psi (rise), aE_n positive towards D,
+epsilon2 = aE_t / DE (rad/s^2), omega2 positive in the rise.
+
+Gravity: an accelerometer reads the specific force a - g. With y up, g = (0, -g) and the follower
+angle phi2 (rad, CCW from x), the tangential axis (increasing phi2) is (-sin phi2, cos phi2) and the
+normal axis (towards D) is (-cos phi2, -sin phi2), so the sensor reads
+    tangential: aE_t + g cos(phi2),      normal: aE_n - g sin(phi2).
+These terms change by about 2.5 and 0.25 m/s^2 over the 15 deg stroke (2-3 % of the aE_t peak at
+180 rpm); they are removed with phi2 from the kinematics at the measured cam angle.
+
+Offset and drift: the sensor chain is AC-coupled and the conditioner has an offset, so the zero of
+the acceleration is unknown. The follower rests in the dwells (omega2 = 0, epsilon2 = 0, aE_n = 0
+there), so each channel is referenced to the median of the middle of every dwell, interpolated
+linearly between dwells. omega2 is the integral of epsilon2 over each motion interval (rise or
+return, plus a margin into the dwells), started at 0 and corrected by a linear ramp so that it
+ends at 0 in the next dwell: the integration drift cannot accumulate beyond one motion interval.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def gravity_reading(phi2: np.ndarray, g: float):
+    """(tangential, normal) specific-force components (m/s^2) that gravity adds to the sensor at E."""
+    return g * np.cos(phi2), -g * np.sin(phi2)
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of every run of True in a boolean array."""
+    m = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    d = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return list(zip(d[0::2].tolist(), d[1::2].tolist()))
+
+
+def dwell_baseline(x: np.ndarray, dwell: np.ndarray, middle: float = 0.6, min_len: int = 8) -> np.ndarray:
+    """Baseline (same unit as x) through the median of the middle part of every complete dwell.
+
+    x: (n,) or (n, nch); dwell: (n,) bool. Dwells touching the ends of the array are incomplete
+    (their centre is unknown) and are used only when no complete dwell exists. Constant
+    extrapolation beyond the first and last dwell centre.
+    """
+    x2 = x[:, None] if x.ndim == 1 else x
+    n = len(x2)
+    rr = runs(dwell)
+    full = [(a, b) for a, b in rr if a > 0 and b < n and b - a >= min_len]
+    use = full or [(a, b) for a, b in rr if b - a >= min_len]
+    if not use:
+        out = np.repeat(np.median(x2, axis=0, keepdims=True), n, axis=0)
+        return out[:, 0] if x.ndim == 1 else out
+    centres, levels = [], []
+    for a, b in use:
+        cut = int((b - a) * (1 - middle) / 2)
+        levels.append(np.median(x2[a + cut:b - cut], axis=0))
+        centres.append(0.5 * (a + b - 1))
+    levels = np.asarray(levels)
+    idx = np.arange(n, dtype=float)
+    out = np.column_stack([np.interp(idx, centres, levels[:, j]) for j in range(x2.shape[1])])
+    return out[:, 0] if x.ndim == 1 else out
+
+
+def integrate_motion(epsilon2: np.ndarray, moving: np.ndarray, fs: float, margin: int,
+                     bad: np.ndarray | None = None) -> np.ndarray:
+    """omega2 (rad/s) from epsilon2 (rad/s^2) sampled at fs (Hz), zero in the dwells.
+
+    Each motion run (``moving`` True) widened by ``margin`` samples into the dwells on both sides is
+    integrated with the trapezoidal rule from 0, and a linear ramp is subtracted so it ends at 0.
+    Runs that touch an end of the array are incomplete (NaN), as are runs holding a ``bad``
+    (clipped) sample: their drift cannot be controlled.
+    """
+    n = len(epsilon2)
+    out = np.zeros(n)
+    dt = 1.0 / fs
+    bad_cum = np.concatenate([[0], np.cumsum(bad)]) if bad is not None else None
+    for a, b in runs(moving):
+        a0, b0 = max(a - margin, 0), min(b + margin, n)
+        if a == 0 or b == n or a0 == 0 or b0 == n:
+            out[a0:b0] = np.nan
+            continue
+        if bad_cum is not None and bad_cum[b0] - bad_cum[a0] > 0:
+            out[a0:b0] = np.nan
+            continue
+        e = epsilon2[a0:b0]
+        w = np.empty(len(e))
+        w[0] = 0.0
+        np.cumsum(0.5 * (e[1:] + e[:-1]) * dt, out=w[1:])
+        w -= w[-1] * np.linspace(0.0, 1.0, len(w))
+        out[a0:b0] = w
+    return out
+
+
+def omega2_from_normal(aE_n: np.ndarray, DE: float) -> np.ndarray:
+    """|omega2| (rad/s) = sqrt(aE_n / DE), aE_n (m/s^2) clipped at 0 (noise below zero in the dwells)."""
+    return np.sqrt(np.maximum(aE_n, 0.0) / DE)

@@ -1,0 +1,452 @@
+"""The processing chain, recording -> measured.nc, in bounded memory.
+
+Two passes over the recording, chunk by chunk (``chunk_samples`` at a time, default 2^18):
+
+1. revolution marks (tacho edges, or matched filter with the kinematics) and each channel's
+   extreme values (for clip detection);
+2. per chunk, on a window widened by a margin of > 1 revolution on each side (so every motion
+   interval and dwell that touches the chunk is whole, and the zero-phase filter has settled):
+   Ka -> low-pass (zero-phase) -> gravity removal -> dwell reference -> epsilon2 -> omega2 with
+   drift control; spikes; cycle statistics; spectra; the chunk's core is written to the output.
+
+Segments (split by gap/overrun events) are processed independently: nothing is filtered,
+integrated or interpolated across a gap. Clipped samples (recorder 'clip' events, or runs of >= 3
+samples at a channel's extreme value) are flagged, set to NaN in the outputs, and the motion
+intervals, revolutions and spectral segments holding them are left out of the estimates.
+
+The output is written to a temporary file and renamed at the end (labtool.output.atomic_write):
+an interrupted or failed run leaves nothing that looks complete.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import xarray as xr
+
+from models.errors import InputError
+from processing import cam_angle, cycles, events, filters, follower, spectra
+from processing.calibration_file import PAPER_KA_M_S2_PER_V, ChannelCalibration
+from processing.history import History
+from processing.readers import Recording
+
+REQUIRED = ("aE_t", "aE_n")
+TIME_VARS = {
+    # name: (dtype, units, long_name)
+    "aE_t": ("f4", "m/s^2", "tangential acceleration of E, + along increasing psi (filtered, gravity and offset removed)"),
+    "aE_n": ("f4", "m/s^2", "normal acceleration of E, + towards D (filtered, gravity and offset removed)"),
+    "epsilon2": ("f4", "rad/s^2", "follower angular acceleration, aE_t / DE"),
+    "omega2": ("f4", "rad/s", "follower angular velocity, integral of epsilon2 with dwell drift control"),
+    "omega2_abs_from_aE_n": ("f4", "rad/s", "|omega2| from the normal acceleration, sqrt(aE_n / DE)"),
+    "phi1": ("f4", "rad", "cam angle from the start of the rise"),
+    "revolution": ("i4", "1", "cam revolution index (-1 before the first revolution mark of a segment)"),
+    "segment": ("i2", "1", "contiguous segment index (gaps and overruns start a new segment)"),
+    "clipped": ("i1", "1", "1 where a sample is clipped (kept out of the estimates)"),
+}
+
+
+class ProcessingWarning(UserWarning):
+    """Something the user should know about the data, processing continued."""
+
+
+@dataclasses.dataclass
+class ProcessOptions:
+    """Processing parameters (SI, except rpm); None means: from the file or the default."""
+    calibration: dict[str, ChannelCalibration] | None = None
+    calibration_source: str = ""
+    law: str | None = None
+    cam_speed_rpm: float | None = None
+    lowpass_hz: float | None = None
+    harmonics: float = filters.DEFAULT_HARMONICS
+    filter_order: int = filters.DEFAULT_ORDER
+    chunk_samples: int = 1 << 18
+    grid_points: int = 720
+    dwell_margin_deg: float = 10.0
+    spike_k_sigma: float = events.DEFAULT_K_SIGMA
+    tacho_channel: str = "tacho"
+    ac_tau_s: float | None = None       # sensor chain's AC-coupling time constant (s), undone if given
+
+
+def process_recording(rec: Recording, output: Path, options: ProcessOptions | None = None,
+                      progress: Callable[[int], None] | None = None,
+                      warn: Callable[[str], None] | None = None) -> dict:
+    """Process ``rec`` into the NetCDF file ``output`` (written atomically); returns a summary dict."""
+    from labtool.output import atomic_write
+
+    opts = options or ProcessOptions()
+    warn = warn or (lambda msg: warnings.warn(msg, ProcessingWarning, stacklevel=3))
+    summary: dict = {}
+
+    def writer(tmp: Path):
+        summary.update(_run(rec, tmp, opts, progress or (lambda n: None), warn))
+
+    atomic_write(Path(output), writer)
+    return summary
+
+
+def _calibration(rec: Recording, opts: ProcessOptions, warn, hist: History) -> dict[str, tuple[float, float, str]]:
+    out = {}
+    for name in REQUIRED:
+        j = rec.channel_index(name)
+        cal = None
+        if opts.calibration is not None:
+            cal = opts.calibration.get(name) or next(
+                (v for k, v in opts.calibration.items() if k.lower() == name.lower()), None)
+            if cal is None:
+                warn(f"calibration file {opts.calibration_source} has no entry for channel {name}")
+        if cal is not None:
+            out[name] = (cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, f"calibration file {opts.calibration_source}")
+        elif math.isfinite(rec.ka_m_s2_per_v[j]) and rec.ka_m_s2_per_v[j] != 0:
+            out[name] = (float(rec.ka_m_s2_per_v[j]), math.nan, "recording attribute ka_m_s2_per_v")
+        else:
+            out[name] = (PAPER_KA_M_S2_PER_V, math.nan, "paper default (Ka = 86.43 m/s^2/V)")
+    hist.add("apply_ka", **{f"{k}_ka_m_s2_per_v": v[0] for k, v in out.items()},
+             **{f"{k}_uncertainty_m_s2_per_v": v[1] for k, v in out.items()},
+             **{f"{k}_source": v[2] for k, v in out.items()})
+    return out
+
+
+def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dict:
+    import h5netcdf
+
+    from models.mechanism import Mechanism
+    from models.motion_laws import CamProgram
+
+    hist = History()
+    for w in rec.warnings:
+        warn(w)
+    fs = rec.sample_rate_hz
+    n = rec.n_samples
+    segs = rec.segments()
+    hist.add("read", source=rec.source, format=rec.format, sample_rate_hz=fs, n_samples=n,
+             channels=rec.channel_names, complete=rec.complete, start_time_utc=rec.start_time_utc,
+             segments=[[a, b] for a, b in segs])
+    it, inn = rec.channel_index("aE_t"), rec.channel_index("aE_n")
+    cal = _calibration(rec, opts, warn, hist)
+    ka = np.array([cal["aE_t"][0], cal["aE_n"][0]])
+    itacho = rec.channel_index(opts.tacho_channel) if rec.has_channel(opts.tacho_channel) else None
+
+    mech = Mechanism.default()
+    law = opts.law or (rec.attrs.get("law") if isinstance(rec.attrs.get("law"), str) else None)
+    program = CamProgram.for_mechanism(mech, law=law)
+    law_name = program.segments[0].law.name
+
+    # ---- pass 1: revolution marks and channel extremes -------------------------------------------
+    vmin = np.full(rec.n_channels, np.inf)
+    vmax = np.full(rec.n_channels, -np.inf)
+    chunk = int(opts.chunk_samples)
+    rpm_hint = opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
+    marks_by_seg: list[np.ndarray] = []
+    method = "tacho" if itacho is not None else "correlation"
+    period_est = None
+    if itacho is None:
+        a0, b0 = max(segs, key=lambda s: s[1] - s[0])
+        probe = rec.read(a0, min(b0, a0 + int(20 * fs)))[:, it]
+        period_est = cam_angle.estimate_period(probe, fs)
+        if rpm_hint and math.isfinite(rpm_hint):
+            hinted = fs * 60.0 / rpm_hint
+            if abs(period_est / hinted - 1) > 0.2:
+                warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
+                     f"{rpm_hint:g} rpm by more than 20 %; using the data")
+    for a_seg, b_seg in segs:
+        marks = []
+        if itacho is not None:
+            det = cam_angle.TachoEdges()
+            for a, block in rec.chunks(chunk, a_seg, b_seg):
+                vmin = np.minimum(vmin, block.min(axis=0))
+                vmax = np.maximum(vmax, block.max(axis=0))
+                marks.extend(det.feed(a, block[:, itacho]))
+                progress(len(block))
+        else:
+            corr = cam_angle.CorrelationEdges(mech, program, period_est)
+            over = corr.n + 2
+            for a in range(a_seg, b_seg, chunk):
+                b = min(a + chunk, b_seg)
+                block = rec.read(a, min(b + over, b_seg))
+                core = block[: b - a]
+                vmin = np.minimum(vmin, core.min(axis=0))
+                vmax = np.maximum(vmax, core.max(axis=0))
+                marks.extend(corr.feed(a, block[:, it] * ka[0], a, b))
+                progress(b - a)
+        marks_by_seg.append(np.asarray(marks, dtype=float))
+    if itacho is not None and sum(len(m) for m in marks_by_seg) < 2:
+        raise InputError(f"{rec.source}: tacho channel '{rec.channel_names[itacho]}' shows fewer than two pulses")
+    all_periods = np.concatenate([np.diff(m) for m in marks_by_seg if len(m) >= 2] or [np.empty(0)])
+    if len(all_periods) == 0:
+        raise InputError(f"{rec.source}: fewer than two cam revolutions found; cannot process "
+                         "(is the cam turning, are aE_t and the tacho connected?)")
+    period = float(np.median(all_periods))
+    rpm_measured = 60.0 * fs / float(np.mean(all_periods))
+    hist.add("cam_angle", method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
+             cam_speed_rpm_mean=rpm_measured, period_median_s=period / fs,
+             period_min_s=float(all_periods.min()) / fs, period_max_s=float(all_periods.max()) / fs,
+             law=law_name, **({"autocorrelation_period_s": period_est / fs} if period_est else {}))
+
+    # ---- filter design, margins ------------------------------------------------------------------
+    cutoff = opts.lowpass_hz or filters.lowpass_cutoff_hz(rpm_measured, fs, opts.harmonics)
+    sos = filters.lowpass_sos(fs, cutoff, opts.filter_order)
+    settle = filters.settle_samples(sos)
+    margin = int(math.ceil(1.3 * float(all_periods.max()))) + settle + 8
+    margin_int = max(1, int(round(opts.dwell_margin_deg / 360.0 * period)))
+    hist.add("lowpass", kind="butterworth", order=opts.filter_order, cutoff_hz=cutoff, zero_phase=True,
+             rule=f"{opts.harmonics:g} x cam frequency, at most 0.4 fs" if not opts.lowpass_hz else "given",
+             chunk_samples=chunk, overlap_samples=margin)
+    tau = opts.ac_tau_s if opts.ac_tau_s is not None else _float_attr(rec.attrs.get("ac_coupling_tau_s"))
+    if tau is not None and not (math.isfinite(tau) and tau > 0):
+        raise InputError(f"AC-coupling time constant {tau!r} s must be a positive number")
+    if tau:
+        hist.add("undo_ac_coupling", tau_s=tau, formula="x = y + (1/tau) * integral(y dt), first-order high-pass inverted")
+    hist.add("remove_gravity", g_m_s2=mech.g, tangential="g cos(phi2)", normal="-g sin(phi2)",
+             phi2="phiD + psi0 + psi(phi1) from the kinematics")
+    hist.add("dwell_reference", statistic="median of the middle 60 % of each dwell",
+             between_dwells="linear interpolation")
+    hist.add("epsilon2", formula="aE_t / DE", DE_m=mech.DE)
+    hist.add("omega2", method="trapezoidal integral of epsilon2 over each motion interval",
+             drift_control="starts at 0 and a linear ramp brings it to 0 in the next dwell",
+             dwell_margin_deg=opts.dwell_margin_deg)
+
+    # ---- outputs ---------------------------------------------------------------------------------
+    nper = spectra.default_nperseg(fs, max(b - a for a, b in segs))
+    welch = spectra.WelchAccumulator(fs, nper, 2)
+    cyc = cycles.CycleAccumulator(["aE_t", "aE_n", "epsilon2", "omega2"], opts.grid_points)
+    spikes = {"index": [], "channel": [], "amplitude": [], "threshold": []}
+    check_sq, check_n, omega_peak = 0.0, 0, 0.0
+    n_clipped = 0
+    clip_events = rec.clip_indices()
+    rev_offset = 0
+    rev_marks_global: list[np.ndarray] = []
+
+    f = h5netcdf.File(tmp, "w")
+    try:
+        f.dimensions["time"] = n
+        tchunk = min(n, 1 << 16)
+        tv = f.create_variable("time", ("time",), "f8", chunks=(tchunk,))
+        tv.attrs["units"] = "s"
+        tv.attrs["long_name"] = "time from the first sample (sample clock; gaps are not closed)"
+        outv = {}
+        for name, (dt, units, long_name) in TIME_VARS.items():
+            v = f.create_variable(name, ("time",), dt, chunks=(tchunk,))
+            v.attrs["units"] = units
+            v.attrs["long_name"] = long_name
+            outv[name] = v
+
+        for iseg, ((a_seg, b_seg), marks) in enumerate(zip(segs, marks_by_seg)):
+            welch.reset_continuity()
+            usable = len(marks) >= 2
+            if not usable:
+                warn(f"segment {iseg} (samples {a_seg}..{b_seg}) holds fewer than two revolution marks; "
+                     "its outputs are NaN")
+            rev_marks_global.append(marks)
+            for a in range(a_seg, b_seg, chunk):
+                b = min(a + chunk, b_seg)
+                wa, wb = max(a_seg, a - margin), min(b_seg, b + margin)
+                block = rec.read(wa, wb)
+                idx = np.arange(wa, wb)
+                c0, c1 = a - wa, b - wa
+                tv[a:b] = idx[c0:c1] / fs
+                outv["segment"][a:b] = np.full(b - a, iseg, dtype=np.int16)
+                volts = block[:, [it, inn]]
+                phys = volts * ka[None, :]
+                clipped = _clipped(volts, vmin[[it, inn]], vmax[[it, inn]], clip_events, wa, wb)
+                n_clipped += int(clipped[c0:c1].sum())
+                outv["clipped"][a:b] = clipped[c0:c1].astype(np.int8)
+                welch.feed(phys[c0:c1], clipped[c0:c1])
+                if not usable:
+                    for name in ("aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n", "phi1"):
+                        outv[name][a:b] = np.full(b - a, np.nan, dtype=np.float32)
+                    outv["revolution"][a:b] = np.full(b - a, -1, dtype=np.int32)
+                    progress(b - a)
+                    continue
+                res = _process_window(phys, clipped, idx, marks, period, fs, sos, mech, program, margin_int, tau)
+                rev = res["revolution"]
+                rev_g = np.where(rev >= 0, rev + rev_offset, -1)
+                for name in ("aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n", "phi1"):
+                    outv[name][a:b] = res[name][c0:c1].astype(np.float32)
+                outv["revolution"][a:b] = rev_g[c0:c1].astype(np.int32)
+                # |omega2| = sqrt(aE_n / DE) check over the motion samples of the core
+                mv = res["moving"][c0:c1] & np.isfinite(res["omega2"][c0:c1])
+                if mv.any():
+                    d = np.abs(res["omega2"][c0:c1][mv]) - res["omega2_abs_from_aE_n"][c0:c1][mv]
+                    check_sq += float(np.sum(d * d))
+                    check_n += int(mv.sum())
+                    omega_peak = max(omega_peak, float(np.max(np.abs(res["omega2"][c0:c1][mv]))))
+                # spikes
+                for j, name in enumerate(("aE_t", "aE_n")):
+                    pk, amp, thr = events.detect_spikes(phys[:, j] - res["lowpassed"][:, j], res["lowpassed"][:, j],
+                                                        fs, opts.spike_k_sigma, valid=~clipped)
+                    keep = (pk >= c0) & (pk < c1)
+                    spikes["index"].extend((pk[keep] + wa).tolist())
+                    spikes["channel"].extend([name] * int(keep.sum()))
+                    spikes["amplitude"].extend(amp[keep].tolist())
+                    spikes["threshold"].extend([thr] * int(keep.sum()))
+                # cycle statistics: revolutions whose start mark lies in this core
+                for k in np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b)):
+                    m0, m1 = marks[k], marks[k + 1]
+                    s0, s1 = int(math.ceil(m0)) - wa, int(math.floor(m1)) - wa + 1
+                    if s0 < 0 or s1 > len(idx) or s1 - s0 < 8:
+                        continue
+                    if clipped[s0:s1].any():
+                        cyc.rejected += 1
+                        continue
+                    pos = 2.0 * math.pi * (idx[s0:s1] - m0) / (m1 - m0)
+                    cyc.add(pos, {v: res[v][s0:s1] for v in cyc.names})
+                progress(b - a)
+            rev_offset += len(marks)
+
+        # ---- small outputs ---------------------------------------------------------------------
+        f.attrs["title"] = "labtool measured follower motion"
+    finally:
+        f.close()
+
+    if n_clipped:
+        warn(f"{n_clipped} clipped samples flagged and kept out of the estimates")
+    hist.add("clipping", flagged_samples=n_clipped, recorder_clip_events=int(len(clip_events)),
+             rule="recorder 'clip' events, or runs of >= 3 samples at the channel's extreme value")
+    check = math.sqrt(check_sq / check_n) / omega_peak if check_n and omega_peak > 0 else math.nan
+    hist.add("check_normal", quantity="rms(|omega2| - sqrt(aE_n/DE)) / max|omega2| over the motion",
+             value=check)
+    stats = cyc.result()
+    hist.add("cycle_average", grid_points=opts.grid_points, revolutions_used=cyc.count,
+             revolutions_rejected=cyc.rejected)
+    hist.add("spectra", window="hann", nperseg=nper, overlap=0.5, segments=welch.count,
+             segments_skipped_clipped=welch.skipped, signal="Ka-scaled, mean removed per segment, unfiltered")
+    hist.add("spikes", k_sigma=opts.spike_k_sigma, floor_fraction=events.DEFAULT_FLOOR_FRACTION,
+             refractory_s=events.DEFAULT_REFRACTORY_S, count=len(spikes["index"]))
+    small = _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks_global, mech, program, rpm_measured)
+    small.attrs.update({
+        "title": "labtool measured follower motion",
+        "source_file": rec.source,
+        "source_format": rec.format,
+        "start_time_utc": rec.start_time_utc,
+        "recording_complete": int(rec.complete),
+        "sample_rate_hz": fs,
+        "cam_speed_rpm": rpm_measured,
+        "cam_speed_rpm_stated": float(rec.cam_speed_rpm) if math.isfinite(rec.cam_speed_rpm) else "unknown",
+        "law": law_name,
+        "phi1_method": method,
+        "lowpass_hz": cutoff,
+        "DE_m": mech.DE,
+        "ka_aE_t_m_s2_per_v": cal["aE_t"][0],
+        "ka_aE_n_m_s2_per_v": cal["aE_n"][0],
+        "ka_aE_t_uncertainty_m_s2_per_v": cal["aE_t"][1] if math.isfinite(cal["aE_t"][1]) else "unknown",
+        "ka_aE_n_uncertainty_m_s2_per_v": cal["aE_n"][1] if math.isfinite(cal["aE_n"][1]) else "unknown",
+        "ka_source_aE_t": cal["aE_t"][2],
+        "ka_source_aE_n": cal["aE_n"][2],
+        "omega2_normal_check_rel_rms": check if math.isfinite(check) else "n/a",
+        "n_revolutions_averaged": cyc.count,
+        "n_clipped_samples": n_clipped,
+        "n_segments": len(segs),
+        "processing_history": hist.to_json(),
+    })
+    try:
+        small.to_netcdf(tmp, mode="a", engine="h5netcdf")
+    except OSError as exc:
+        raise InputError(f"cannot write the output: {exc}") from None
+    return {"cam_speed_rpm": rpm_measured, "revolutions_averaged": cyc.count, "spikes": len(spikes["index"]),
+            "clipped": n_clipped, "normal_check_rel_rms": check, "lowpass_hz": cutoff, "phi1_method": method,
+            "segments": len(segs), "history": hist.steps}
+
+
+def _clipped(volts, lo, hi, clip_events, wa, wb) -> np.ndarray:
+    """Samples at a channel's extreme value for >= 3 samples in a row, or named by a clip event."""
+    out = np.zeros(len(volts), dtype=bool)
+    for j in range(volts.shape[1]):
+        if not hi[j] > lo[j]:
+            continue
+        at = (volts[:, j] == hi[j]) | (volts[:, j] == lo[j])
+        if at.sum() >= 3:
+            for a, b in follower.runs(at):
+                if b - a >= 3:
+                    out[a:b] = True
+    sel = clip_events[(clip_events >= wa) & (clip_events < wb)]
+    out[sel - wa] = True
+    return out
+
+
+def _float_attr(v):
+    try:
+        return float(np.asarray(v).reshape(-1)[0]) if v is not None else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _process_window(phys, clipped, idx, marks, period, fs, sos, mech, program, margin_int, tau=None) -> dict:
+    """The chain on one window of one segment (arrays over the window's samples)."""
+    lp = filters.zero_phase(sos, phys, axis=0)
+    if tau:
+        # inverse of the first-order high-pass; the integration constant and the ramp an offset
+        # makes are constant/linear, and the dwell reference below removes both
+        lp = lp + np.cumsum(lp - lp[0], axis=0) / (fs * tau)
+    phi1, rev = cam_angle.phi1_from_marks(idx, marks, period)
+    psi = program(phi1)[0]
+    phi2 = mech.phiD + mech.psi0 + psi
+    gt, gn = follower.gravity_reading(phi2, mech.g)
+    acc = lp - np.column_stack([gt, gn])
+    direction = program.direction(phi1)
+    moving = direction != 0
+    acc -= follower.dwell_baseline(acc, ~moving)
+    acc[clipped] = np.nan
+    eps = acc[:, 0] / mech.DE
+    omega = follower.integrate_motion(np.nan_to_num(eps), moving, fs, margin_int, bad=clipped)
+    return {"aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega,
+            "omega2_abs_from_aE_n": follower.omega2_from_normal(np.nan_to_num(acc[:, 1], nan=0.0), mech.DE)
+            if not clipped.any() else np.where(clipped, np.nan, follower.omega2_from_normal(np.nan_to_num(acc[:, 1]), mech.DE)),
+            "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
+
+
+def _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks, mech, program, rpm) -> xr.Dataset:
+    def var(dims, data, units, long_name):
+        return (dims, np.asarray(data), {"units": units, "long_name": long_name})
+
+    amp, psd = welch.amplitude(), welch.psd()
+    ds = xr.Dataset()
+    ds["frequency"] = var("frequency", welch.frequency, "Hz", "frequency")
+    ds["aE_t_amplitude"] = var("frequency", amp[:, 0], "m/s^2", "amplitude spectrum of aE_t (Ka applied, offset removed)")
+    ds["aE_n_amplitude"] = var("frequency", amp[:, 1], "m/s^2", "amplitude spectrum of aE_n (Ka applied, offset removed)")
+    ds["aE_t_psd"] = var("frequency", psd[:, 0], "(m/s^2)^2/Hz", "Welch power spectral density of aE_t")
+    ds["aE_n_psd"] = var("frequency", psd[:, 1], "(m/s^2)^2/Hz", "Welch power spectral density of aE_n")
+    ds["phi1_grid"] = var("phi1_grid", cyc.grid, "rad", "cam angle of the cycle-average grid")
+    units = {"aE_t": "m/s^2", "aE_n": "m/s^2", "epsilon2": "rad/s^2", "omega2": "rad/s"}
+    for k, v in stats.items():
+        base, what = k.rsplit("_", 1)
+        label = "mean over revolutions" if what == "mean" else "standard deviation over revolutions"
+        ds[k] = var("phi1_grid", v, units[base], f"{base}, {label}")
+    omega1 = rpm * 2 * math.pi / 60.0
+    _, dpsi, ddpsi, _ = program(cyc.grid)
+    ds["omega2_kinematic"] = var("phi1_grid", dpsi * omega1, "rad/s", "omega2 of the ideal kinematics at the measured mean cam speed")
+    ds["epsilon2_kinematic"] = var("phi1_grid", ddpsi * omega1**2, "rad/s^2", "epsilon2 of the ideal kinematics at the measured mean cam speed")
+    si = np.asarray(spikes["index"], dtype=np.int64)
+    order = np.argsort(si, kind="stable")
+    si = si[order]
+    all_marks = np.concatenate(rev_marks) if rev_marks else np.empty(0)
+    ds["spike_time"] = var("spike", si / fs, "s", "time of the spike peak")
+    ds["spike_sample"] = var("spike", si, "1", "sample index of the spike peak")
+    ds["spike_channel"] = var("spike", np.asarray(spikes["channel"], dtype=str)[order] if len(si) else np.array([], dtype=str),
+                              "1", "channel of the spike")
+    ds["spike_amplitude"] = var("spike", np.asarray(spikes["amplitude"], dtype=float)[order], "m/s^2",
+                                "peak of the acceleration above the processing band")
+    ds["spike_threshold"] = var("spike", np.asarray(spikes["threshold"], dtype=float)[order], "m/s^2",
+                                "detection threshold in force at the spike")
+    if len(all_marks) and len(si):
+        k = np.searchsorted(all_marks, si, side="right") - 1
+        nxt = np.clip(k + 1, 0, len(all_marks) - 1)
+        ok = (k >= 0) & (nxt > k)
+        ph = np.full(len(si), np.nan)
+        ph[ok] = np.mod(2 * math.pi * (si[ok] - all_marks[k[ok]]) / (all_marks[nxt[ok]] - all_marks[k[ok]]), 2 * math.pi)
+    else:
+        ph = np.full(len(si), np.nan)
+    phase = np.array(["rise" if d > 0 else "return" if d < 0 else "dwell" for d in program.direction(np.nan_to_num(ph))],
+                     dtype=str) if len(si) else np.array([], dtype=str)
+    phase = np.where(np.isfinite(ph), phase, "unknown") if len(si) else phase
+    ds["spike_phi1"] = var("spike", ph, "rad", "cam angle at the spike")
+    ds["spike_phase"] = var("spike", phase, "1", "cam phase at the spike: rise, return, dwell")
+    ds["revolution_start_time"] = var("revolution_mark", all_marks / fs, "s", "time of the revolution mark (phi1 = 0)")
+    per = np.concatenate([np.append(np.diff(m), np.nan) for m in rev_marks if len(m)] or [np.empty(0)])
+    ds["revolution_omega1"] = var("revolution_mark", 2 * math.pi * fs / per if len(per) else per, "rad/s",
+                                  "mean cam angular velocity over the revolution (NaN for the last of a segment)")
+    return ds

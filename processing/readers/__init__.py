@@ -1,0 +1,64 @@
+"""Readers of recordings into one lazily read :class:`Recording`, dispatched by content.
+
+``open_recording(path)`` looks at the first bytes, not the file name: HDF5 signature -> labtool
+recording v1; ``TDSm`` -> LabVIEW TDMS; printable text -> CSV; anything else -> FileFormatError.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from models.errors import FileFormatError, InputError
+from processing.readers.base import Event, Recording
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+TDMS_SIGNATURE = b"TDSm"
+
+__all__ = ["open_recording", "Recording", "Event", "sniff"]
+
+
+def sniff(path) -> str:
+    """'hdf5', 'tdms' or 'csv' from the file's content; FileFormatError otherwise."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"recording {p} does not exist")
+    if not p.is_file():
+        raise InputError(f"recording {p} is not a file")
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(4096)
+    except OSError as exc:
+        raise InputError(f"cannot read {p}: {exc.strerror}") from None
+    if not head:
+        raise FileFormatError(f"{p}: file is empty")
+    if head.startswith(HDF5_SIGNATURE):
+        return "hdf5"
+    if head.startswith(TDMS_SIGNATURE):
+        return "tdms"
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        # a multi-byte character cut at the 4096-byte boundary is still text
+        if exc.start < len(head) - 4:
+            raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)") from None
+        text = head[:exc.start].decode("utf-8")
+    if "\x00" in text or not any(ch in text for ch in ",\n"):
+        raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)")
+    return "csv"
+
+
+def open_recording(path, sample_rate_hz: float | None = None) -> Recording:
+    """Open any supported recording; ``sample_rate_hz`` (Hz) is used only when the file states none."""
+    kind = sniff(path)
+    if kind == "hdf5":
+        from processing.readers.hdf5_v1 import open_hdf5_v1
+        rec = open_hdf5_v1(path)
+    elif kind == "tdms":
+        from processing.readers.tdms import open_tdms
+        rec = open_tdms(path, sample_rate_hz)
+    else:
+        from processing.readers.csv import open_csv
+        rec = open_csv(path, sample_rate_hz)
+    if rec.n_samples == 0:
+        rec.close()
+        raise FileFormatError(f"{path}: the recording holds no samples")
+    return rec

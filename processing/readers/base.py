@@ -1,0 +1,126 @@
+"""The common shape of every reader: a lazily read recording in volts plus its metadata.
+
+A reader validates everything it can cheaply (format, sample rate, channel names, shape) when the
+file is opened, and reads the samples chunk by chunk so that a recording of any length is
+processed in bounded memory. Samples are volts as recorded (no calibration applied).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable, Iterator
+
+import numpy as np
+
+from models.errors import FileFormatError, InputError
+
+EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
+# events that mean the samples before and after the index are not contiguous in time
+SPLITTING_KINDS = ("overrun", "gap")
+
+
+@dataclasses.dataclass
+class Event:
+    """One recorder event: ``index`` (sample index, 0-based), ``kind``, free-text ``detail``."""
+    index: int
+    kind: str
+    detail: str = ""
+
+
+@dataclasses.dataclass
+class Recording:
+    """A recording opened for chunked reading.
+
+    sample_rate_hz: the rate the device really ran at (Hz); channel_names: one per column;
+    ka_m_s2_per_v: per-channel calibration (m/s^2/V, NaN where none); complete: False for a
+    recording whose writer did not close cleanly; cam_speed_rpm: nominal, NaN when unknown.
+    ``read(start, stop)`` returns float64 volts of shape (stop - start, n_channels).
+    """
+    source: str
+    format: str
+    sample_rate_hz: float
+    channel_names: list[str]
+    n_samples: int
+    read: Callable[[int, int], np.ndarray]
+    ka_m_s2_per_v: np.ndarray
+    start_time_utc: str = ""
+    complete: bool = True
+    cam_speed_rpm: float = math.nan
+    events: list[Event] = dataclasses.field(default_factory=list)
+    attrs: dict = dataclasses.field(default_factory=dict)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    close: Callable[[], None] = lambda: None
+
+    def __enter__(self) -> "Recording":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channel_names)
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_samples / self.sample_rate_hz
+
+    def channel_index(self, name: str) -> int:
+        """Column of channel ``name`` (exact, then case-insensitive); FileFormatError if absent."""
+        if name in self.channel_names:
+            return self.channel_names.index(name)
+        low = [c.lower() for c in self.channel_names]
+        if name.lower() in low:
+            return low.index(name.lower())
+        raise FileFormatError(
+            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'})")
+
+    def has_channel(self, name: str) -> bool:
+        return name.lower() in [c.lower() for c in self.channel_names]
+
+    def chunks(self, chunk_samples: int, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """Yield (first sample index, volts[n, n_channels]) over [start, stop)."""
+        stop = self.n_samples if stop is None else stop
+        for a in range(start, stop, chunk_samples):
+            b = min(a + chunk_samples, stop)
+            yield a, self.read(a, b)
+
+    def segments(self) -> list[tuple[int, int]]:
+        """Contiguous sample ranges [a, b): gaps and overruns split the data, never interpolated."""
+        cuts = sorted({e.index for e in self.events if e.kind in SPLITTING_KINDS and 0 < e.index < self.n_samples})
+        bounds = [0, *cuts, self.n_samples]
+        return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+    def clip_indices(self) -> np.ndarray:
+        """Sample indices the recorder reported as clipped."""
+        return np.array(sorted(e.index for e in self.events if e.kind == "clip" and 0 <= e.index < self.n_samples),
+                        dtype=np.int64)
+
+
+def check_sample_rate(value, source: str) -> float:
+    """A usable sample rate (Hz): finite, positive, not absurd; otherwise InputError."""
+    try:
+        fs = float(np.asarray(value).reshape(-1)[0]) if np.ndim(value) else float(value)
+    except (TypeError, ValueError, IndexError):
+        raise InputError(f"{source}: sample rate {value!r} is not a number; give it in Hz") from None
+    if not (math.isfinite(fs) and 1.0 <= fs <= 10e6):
+        raise InputError(f"{source}: sample rate {fs!r} Hz is not usable (expected 1 Hz .. 10 MHz)")
+    return fs
+
+
+def check_finite(block: np.ndarray, start: int, names: list[str], source: str) -> None:
+    """NaN or Inf volts are not a measurement: InputError naming the first bad sample."""
+    bad = ~np.isfinite(block)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise InputError(f"{source}: sample {start + i} of channel '{names[j]}' is {block[i, j]} (NaN/Inf); "
+                         "the recording is damaged")
+
+
+def as_text(value) -> str:
+    """Decode bytes/numpy strings leniently (attributes and event fields come in many encodings)."""
+    if isinstance(value, (bytes, np.bytes_)):
+        return bytes(value).decode("utf-8", errors="replace").rstrip("\x00")
+    if isinstance(value, np.ndarray) and value.shape == ():
+        return as_text(value.item())
+    return str(value)

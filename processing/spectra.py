@@ -1,0 +1,113 @@
+"""Amplitude spectrum and Welch PSD, accumulated block by block (bounded memory).
+
+Both use Hann-windowed segments of ``nperseg`` samples with 50 % overlap, each detrended by its
+mean ("translated" data), one-sided. The amplitude spectrum is the mean over segments of
+2|X(f)|/sum(w): a sinusoid of amplitude A (m/s^2) shows as A at its frequency (Figure 11a-b).
+The PSD is Welch's estimate in (m/s^2)^2/Hz (scipy's 'density' scaling), so that
+sum(psd) * df equals the signal's variance. Segments that touch a flagged (clipped) sample are
+left out of both.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def default_nperseg(fs: float, n_samples: int, seconds: float = 4.0) -> int:
+    """Power of two nearest ``seconds`` of signal, at most the recording's length, at least 16."""
+    target = max(16, int(2 ** round(np.log2(max(fs * seconds, 16)))))
+    while target > n_samples and target > 16:
+        target //= 2
+    return int(target)
+
+
+class WelchAccumulator:
+    """Feed (n, n_channels) blocks in order; read ``frequency``, ``amplitude``, ``psd`` at the end."""
+
+    def __init__(self, fs: float, nperseg: int, n_channels: int):
+        self.fs = float(fs)
+        self.nperseg = int(nperseg)
+        self.hop = self.nperseg // 2
+        self.window = np.hanning(self.nperseg + 1)[:-1]  # periodic Hann, as scipy's 'hann'
+        self.nch = n_channels
+        self.sum_amp = np.zeros((self.nperseg // 2 + 1, n_channels))
+        self.sum_pow = np.zeros_like(self.sum_amp)
+        self.count = 0
+        self.skipped = 0
+        self._buf = np.empty((0, n_channels))
+        self._bad = np.empty(0, dtype=bool)
+
+    def reset_continuity(self) -> None:
+        """Drop the carried-over samples (a gap: segments must not straddle it)."""
+        self._buf = np.empty((0, self.nch))
+        self._bad = np.empty(0, dtype=bool)
+
+    def feed(self, x: np.ndarray, bad: np.ndarray | None = None) -> None:
+        x = np.asarray(x, dtype=float).reshape(len(x), self.nch)
+        bad = np.zeros(len(x), dtype=bool) if bad is None else np.asarray(bad, dtype=bool)
+        buf = np.concatenate([self._buf, x])
+        badbuf = np.concatenate([self._bad, bad])
+        nseg = 0 if len(buf) < self.nperseg else 1 + (len(buf) - self.nperseg) // self.hop
+        if nseg:
+            starts = np.arange(nseg) * self.hop
+            badcum = np.concatenate([[0], np.cumsum(badbuf)])
+            ok = (badcum[starts + self.nperseg] - badcum[starts]) == 0
+            self.skipped += int((~ok).sum())
+            starts = starts[ok]
+            for k in range(0, len(starts), 64):  # bounded temporaries
+                idx = starts[k:k + 64, None] + np.arange(self.nperseg)[None, :]
+                seg = buf[idx]  # (m, nperseg, nch)
+                seg = seg - seg.mean(axis=1, keepdims=True)
+                spec = np.fft.rfft(seg * self.window[None, :, None], axis=1)
+                mag = np.abs(spec)
+                self.sum_amp += mag.sum(axis=0)
+                self.sum_pow += (mag**2).sum(axis=0)
+                self.count += len(idx)
+            keep_from = nseg * self.hop
+        else:
+            keep_from = 0
+        self._buf = buf[keep_from:].copy()
+        self._bad = badbuf[keep_from:].copy()
+
+    @property
+    def frequency(self) -> np.ndarray:
+        return np.fft.rfftfreq(self.nperseg, 1.0 / self.fs)
+
+    def amplitude(self) -> np.ndarray:
+        """Mean amplitude spectrum (same unit as the input), shape (n_freq, n_channels)."""
+        scale = np.full(self.nperseg // 2 + 1, 2.0 / self.window.sum())
+        scale[0] /= 2.0
+        if self.nperseg % 2 == 0:
+            scale[-1] /= 2.0
+        return self.sum_amp / max(self.count, 1) * scale[:, None] if self.count else np.full_like(self.sum_amp, np.nan)
+
+    def psd(self) -> np.ndarray:
+        """Welch PSD (unit^2/Hz), one-sided, shape (n_freq, n_channels)."""
+        if not self.count:
+            return np.full_like(self.sum_pow, np.nan)
+        scale = np.full(self.nperseg // 2 + 1, 2.0 / (self.fs * (self.window**2).sum()))
+        scale[0] /= 2.0
+        if self.nperseg % 2 == 0:
+            scale[-1] /= 2.0
+        return self.sum_pow / self.count * scale[:, None]
+
+
+def amplitude_spectrum(x: np.ndarray, fs: float, nperseg: int | None = None):
+    """(frequency Hz, amplitude) of a 1-D or (n, nch) array, whole-array convenience."""
+    x = np.asarray(x, dtype=float)
+    x2 = x[:, None] if x.ndim == 1 else x
+    nper = nperseg or default_nperseg(fs, len(x2))
+    acc = WelchAccumulator(fs, nper, x2.shape[1])
+    acc.feed(x2)
+    amp = acc.amplitude()
+    return acc.frequency, (amp[:, 0] if x.ndim == 1 else amp)
+
+
+def welch_psd(x: np.ndarray, fs: float, nperseg: int | None = None):
+    """(frequency Hz, PSD unit^2/Hz) of a 1-D or (n, nch) array."""
+    x = np.asarray(x, dtype=float)
+    x2 = x[:, None] if x.ndim == 1 else x
+    nper = nperseg or default_nperseg(fs, len(x2))
+    acc = WelchAccumulator(fs, nper, x2.shape[1])
+    acc.feed(x2)
+    p = acc.psd()
+    return acc.frequency, (p[:, 0] if x.ndim == 1 else p)
