@@ -30,6 +30,7 @@ app = typer.Typer(
 COMMAND_MODULES = (
     "labtool.commands.kinematics",
     "labtool.commands.demo",
+    "labtool.commands.report",
     "labtool.commands.doe",
     "labtool.commands.acquire",
     "labtool.commands.calibrate",

@@ -82,12 +82,15 @@ def nrmse(measured, simulated) -> float:
     return float(np.sqrt(np.mean((c - m) ** 2)) / span)
 
 
-def peak_errors(measured, simulated, grid) -> dict:
+def peak_errors(measured, simulated, grid, window: float | None = None) -> dict:
     """Errors of the largest and smallest values and of their positions on ``grid``.
 
     ``peak_max_error`` = (max c - max m)/max|m|, ``peak_min_error`` = (min c - min m)/max|m|
-    (signed, relative to the measured peak magnitude); ``peak_max_shift``/``peak_min_shift`` =
-    grid(argmax c) - grid(argmax m), in the grid's unit (rad of cam angle here).
+    (signed, relative to the measured peak magnitude). ``peak_max_shift``/``peak_min_shift`` =
+    position of the simulated extreme minus that of the measured one, in the grid's unit (rad of cam
+    angle here); the simulated extreme is searched within +-``window`` (grid units; default a tenth
+    of the grid's span) of the measured one, so that a signal with several near-equal peaks (rise
+    and return) pairs each peak with its own counterpart.
     """
     m, c = _pair(measured, simulated)
     x = np.asarray(grid, dtype=float)
@@ -96,13 +99,22 @@ def peak_errors(measured, simulated, grid) -> dict:
     scale = float(np.max(np.abs(m)))
     if scale == 0.0:
         raise InputError("peak errors are undefined for an all-zero measured signal")
+    if window is None:
+        window = 0.1 * float(x[-1] - x[0])
+
+    def shift(sign):
+        i = int(np.argmax(sign * m))
+        near = np.flatnonzero(np.abs(x - x[i]) <= window)
+        j = int(near[np.argmax(sign * c[near])])
+        return float(x[j] - x[i])
+
     return {
         "measured_max": float(m.max()), "simulated_max": float(c.max()),
         "measured_min": float(m.min()), "simulated_min": float(c.min()),
         "peak_max_error": float((c.max() - m.max()) / scale),
         "peak_min_error": float((c.min() - m.min()) / scale),
-        "peak_max_shift": float(x[np.argmax(c)] - x[np.argmax(m)]),
-        "peak_min_shift": float(x[np.argmin(c)] - x[np.argmin(m)]),
+        "peak_max_shift": shift(1.0),
+        "peak_min_shift": shift(-1.0),
     }
 
 
@@ -261,6 +273,7 @@ METRICS = {
     "peak_min_error": ("low", True),
     "peak_max_shift_deg": ("low", True),
     "peak_min_shift_deg": ("low", True),
+    "lag_deg": ("low", True),
 }
 
 
@@ -275,4 +288,7 @@ def compare(measured, simulated, grid_rad, iso_params: dict | None = None) -> di
     out.update({k: v for k, v in pk.items() if not k.endswith("_shift")})
     out["peak_max_shift_deg"] = math.degrees(pk["peak_max_shift"])
     out["peak_min_shift_deg"] = math.degrees(pk["peak_min_shift"])
+    # the lag of best correlation (ISO phase step) as a cam angle: the timing error of the whole curve
+    step = float(np.mean(np.diff(np.asarray(grid_rad, dtype=float))))
+    out["lag_deg"] = math.degrees(out["iso_shift_samples"] * step)
     return out

@@ -145,3 +145,19 @@ def test_scores_stay_in_their_ranges(scale, offset, shift):
     assert 0.0 <= out["sg_phase"] <= 1.0
     assert out["sg_magnitude"] >= -1.0
     assert out["nrmse"] >= 0.0
+
+
+def test_peak_shift_pairs_each_peak_with_its_own_counterpart():
+    """Two near-equal peaks (rise and return): the global argmax of the simulation may be the other
+    peak; the shift must still be the local one."""
+    two = np.exp(-((X - 1.0) ** 2) * 20) + 0.999 * np.exp(-((X - 4.0) ** 2) * 20)
+    sim = 0.999 * np.exp(-((X - 1.05) ** 2) * 20) + np.exp(-((X - 4.05) ** 2) * 20)
+    pk = metrics.peak_errors(two, sim, X)
+    assert pk["peak_max_shift"] == pytest.approx(0.05, abs=X[1])
+
+
+def test_lag_deg_is_the_correlation_lag_as_cam_angle():
+    sig = np.sin(3 * X) * np.exp(-((X - 3.0) ** 2))
+    lag = 20
+    delayed = np.concatenate([np.zeros(lag), sig[: N - lag]])
+    assert metrics.compare(sig, delayed, X)["lag_deg"] == pytest.approx(lag * 360.0 / N)

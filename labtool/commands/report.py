@@ -1,0 +1,106 @@
+"""``labtool report``: model vs measurement, as one self-contained HTML file (+ PDF, + JSON summary).
+
+Exit 0: report written and every threshold holds (or none given); exit 1: report written and a
+threshold failed; exit 2: bad input (one line on stderr), nothing written.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from labtool.output import atomic_write, check_output_path
+
+
+def register(app: typer.Typer) -> None:
+    app.command("report")(report)
+
+
+class _Quiet:
+    """Stands in for rich's status spinner when stderr is not a terminal."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def update(self, *args, **kwargs):
+        pass
+
+
+def _split(value: str) -> list[str]:
+    return [v.strip() for v in value.split(",") if v.strip()]
+
+
+def report(
+    measured: Path = typer.Argument(..., help="measured.nc written by 'labtool process'"),
+    output: Path = typer.Option(..., "-o", "--output", help="HTML report to write (self-contained)"),
+    models: str = typer.Option("rigid,elastic", help="models to compare, comma-separated: rigid, elastic, kinematic"),
+    omega1: str = typer.Option("const,var", "--omega1", help="cam speed modes, comma-separated: const, var"),
+    thresholds: Optional[Path] = typer.Option(None, help="TOML file of limits on the metrics (exit 1 if one fails)"),
+    pdf: Optional[Path] = typer.Option(None, "--pdf", help="also write the report as PDF"),
+    json_path: Optional[Path] = typer.Option(None, "--json", help="also write the JSON summary to this file ('-' = stdout)"),
+    rpm: Optional[float] = typer.Option(None, help="cam speed n1 to simulate [rpm] (default: the file's cam_speed_rpm)"),
+    law: Optional[str] = typer.Option(None, help="motion law (default: the file's, else sine)"),
+    fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0, the paper's experiment)"),
+    backlash_mm: Optional[float] = typer.Option(None, help="groove backlash j [mm] (default: the file's, else 0.128)"),
+    jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt [-] (default: the file's, else 1)"),
+    accuracy: str = typer.Option("standard", help="solver preset of the models: fast, standard, reference"),
+    revolutions: float = typer.Option(2.0, help="cam revolutions to simulate; the last one is compared [-]"),
+    harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
+    grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
+    force: bool = typer.Option(False, help="overwrite existing output files"),
+) -> None:
+    """Compare a measurement with the rigid and elastic models (omega1 constant and variable):
+    Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
+    from rich.console import Console
+
+    from models.errors import InputError
+    from reports.align import Conditioning
+    from reports.pipeline import build_report, headline
+    from reports.thresholds import load_thresholds
+
+    outputs = [p for p in (output, pdf, json_path) if p is not None and str(p) != "-"]
+    if len({p.resolve() for p in outputs}) != len(outputs):
+        raise InputError("the HTML, PDF and JSON outputs must be different files")
+    for p in outputs:
+        check_output_path(p, force)
+    th = load_thresholds(thresholds) if thresholds else None
+    cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
+    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor}
+    err = Console(stderr=True)
+    quiet = json_path is not None and str(json_path) == "-"
+    with (err.status("report") if err.is_terminal else _Quiet()) as status:
+        rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
+                           progress=lambda msg: status.update(msg))
+        status.update("drawing the figures")
+        from reports.figures import all_figures
+        from reports.html import render_html
+        from reports.summary import to_json
+        figs = all_figures(rep)
+        html = render_html(rep, figs)
+        atomic_write(output, lambda tmp: tmp.write_text(html, encoding="utf-8"))
+        if pdf is not None:
+            from reports.pdf import write_pdf
+            atomic_write(pdf, lambda tmp: write_pdf(rep, tmp, figs))
+        if json_path is not None:
+            text = to_json(rep)
+            if str(json_path) == "-":
+                typer.echo(text)
+            else:
+                atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+    if not quiet:
+        for row in headline(rep):
+            typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
+                       f"epsilon2 ISO {row['epsilon2_iso_rating']:.3f} ({row['epsilon2_iso_grade']})")
+        for n in rep.notes:
+            typer.echo(f"note: {n}")
+        typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else ""))
+    failed = [r for r in rep.threshold_rows if not r["passed"]]
+    if failed:
+        typer.echo(f"labtool: {len(failed)} of {len(rep.threshold_rows)} threshold checks failed "
+                   f"(first: {failed[0]['requested_model']} {failed[0]['omega1']}: {failed[0]['limit']}, "
+                   f"value {failed[0]['value']:.4g})", err=True)
+        raise typer.Exit(1)

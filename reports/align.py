@@ -1,0 +1,243 @@
+"""Measured and simulated signals on one cam-angle grid, over whole revolutions, filtered alike.
+
+Both sides go through the same three steps (``condition``):
+1. linear interpolation onto a fine uniform grid of ``FINE_FACTOR * n_grid`` points per revolution
+   of the cam angle phi1 (rad, 0 at the start of the rise);
+2. a zero-phase periodic low-pass: the revolution's Fourier series truncated after ``n_harmonics``
+   harmonics of the cam frequency (the revolution is a period of the steady motion; phi1 = 0 lies in
+   the dwell, where the follower rests, so the periodic extension is smooth);
+3. decimation to the report grid of ``n_grid`` points (exact, the signal is band-limited).
+
+A measured revolution is *whole* when its samples cover [2 pi k, 2 pi (k+1)] without a time gap;
+partial revolutions at the ends of a recording, or around a gap, are left out and counted.
+Simulations are compared on their last whole revolution (the steady state); a simulation that covers
+only part of a revolution (for instance the rise only) is compared over that part only.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import xarray as xr
+
+from models.errors import InputError
+
+TWO_PI = 2.0 * math.pi
+FINE_FACTOR = 4
+DEFAULT_GRID = 720          # 0.5 deg of cam angle
+DEFAULT_HARMONICS = 60      # 180 Hz at 180 rpm; about 10 harmonics of the 58 deg rise
+
+
+@dataclasses.dataclass
+class Conditioning:
+    """The processing applied to both sides before any metric (recorded in the report)."""
+
+    n_grid: int = DEFAULT_GRID
+    n_harmonics: int = DEFAULT_HARMONICS
+
+    def __post_init__(self):
+        if not (isinstance(self.n_grid, int) and 16 <= self.n_grid <= 20000):
+            raise InputError(f"grid points per revolution must be an integer in [16, 20000], got {self.n_grid}")
+        if not (isinstance(self.n_harmonics, int) and 1 <= self.n_harmonics < self.n_grid // 2):
+            raise InputError(f"harmonics must be an integer in [1, {self.n_grid // 2 - 1}], got {self.n_harmonics}")
+
+    @property
+    def grid(self) -> np.ndarray:
+        """Report grid of cam angle phi1 (rad), [0, 2 pi) without the end point."""
+        return np.arange(self.n_grid) * (TWO_PI / self.n_grid)
+
+    @property
+    def fine_grid(self) -> np.ndarray:
+        n = self.n_grid * FINE_FACTOR
+        return np.arange(n) * (TWO_PI / n)
+
+    def describe(self) -> str:
+        return (f"linear interpolation onto {self.n_grid * FINE_FACTOR} points per revolution, periodic zero-phase "
+                f"low-pass keeping harmonics 0..{self.n_harmonics} of the cam frequency, decimation to "
+                f"{self.n_grid} points ({360.0 / self.n_grid:g} deg)")
+
+
+def harmonic_lowpass(y: np.ndarray, n_harmonics: int) -> np.ndarray:
+    """Keep harmonics 0..n_harmonics of a periodic sample (last axis = one period)."""
+    spec = np.fft.rfft(y, axis=-1)
+    spec[..., n_harmonics + 1:] = 0.0
+    return np.fft.irfft(spec, n=y.shape[-1], axis=-1)
+
+
+def condition(fine: np.ndarray, cond: Conditioning) -> np.ndarray:
+    """Steps 2-3 on signals already on ``cond.fine_grid`` (last axis)."""
+    return harmonic_lowpass(fine, cond.n_harmonics)[..., ::FINE_FACTOR]
+
+
+@dataclasses.dataclass
+class MeasuredCycles:
+    """Whole measured revolutions on the report grid."""
+
+    grid: np.ndarray                       # phi1 (rad), (n_grid,)
+    revolutions: np.ndarray                # revolution numbers k (phi1 in [2 pi k, 2 pi (k+1)])
+    signals: dict                          # name -> (n_rev, n_grid), SI
+    time: np.ndarray                       # (n_rev, n_grid) time of each grid point (s)
+    partial: int                           # revolutions left out (partial or with a gap)
+    cam_speed_rpm: float                   # mean measured cam speed over the whole revolutions
+
+    def mean(self, name: str) -> np.ndarray:
+        return self.signals[name].mean(axis=0)
+
+    def std(self, name: str) -> np.ndarray:
+        return self.signals[name].std(axis=0)
+
+
+def _unwrapped_angle(phi1: np.ndarray) -> np.ndarray:
+    """Cam angle that keeps growing over the recording (rad); accepts wrapped or unwrapped phi1."""
+    return np.unwrap(phi1)
+
+
+def measured_cycles(ds: xr.Dataset, names, cond: Conditioning) -> MeasuredCycles:
+    """Whole revolutions of the measured signals ``names`` (variables over ``time``) on the grid."""
+    if "phi1" not in ds or "time" not in ds["phi1"].dims:
+        raise InputError("the measured file has no cam angle phi1 over time; run 'labtool process' on a "
+                         "recording with a tacho channel (or with the kinematics' correlation)")
+    t = np.asarray(ds["time"].values, dtype=float)
+    if np.issubdtype(ds["time"].dtype, np.datetime64) or np.issubdtype(ds["time"].dtype, np.timedelta64):
+        t = (ds["time"].values - ds["time"].values[0]) / np.timedelta64(1, "s")
+    phi = np.asarray(ds["phi1"].values, dtype=float)
+    data = {n: np.asarray(ds[n].values, dtype=float) for n in names}
+    ok = np.isfinite(phi) & np.isfinite(t)
+    for y in data.values():
+        ok &= np.isfinite(y)
+    if ok.sum() < 16:
+        raise InputError("the measured file has fewer than 16 usable samples of phi1 and the signals")
+    t, phi = t[ok], phi[ok]
+    data = {n: y[ok] for n, y in data.items()}
+    theta = _unwrapped_angle(phi)
+    if theta[-1] < theta[0]:
+        raise InputError("the measured cam angle phi1 decreases over the recording; expected the cam to turn forwards")
+    dt = np.diff(t)
+    step = float(np.median(dt)) if dt.size else 0.0
+    gap_at = np.flatnonzero(dt > 1.5 * step) if step > 0 else np.array([], int)
+    gap_times = t[gap_at]
+    # samples dropped as non-finite also make a gap
+    k_first = int(math.ceil(theta[0] / TWO_PI - 1e-9))
+    k_last = int(math.floor(theta[-1] / TWO_PI + 1e-9)) - 1
+    fine = cond.fine_grid
+    revs, out, times = [], {n: [] for n in names}, []
+    partial = 0
+    tol = 2.0 * float(np.median(np.abs(np.diff(theta)))) if theta.size > 1 else 0.0
+    for k in range(k_first, k_last + 1):
+        a, b = TWO_PI * k, TWO_PI * (k + 1)
+        i0 = int(np.searchsorted(theta, a - tol, side="left"))
+        i1 = int(np.searchsorted(theta, b + tol, side="right"))
+        seg = slice(max(i0 - 1, 0), min(i1 + 1, theta.size))
+        th, tt = theta[seg], t[seg]
+        if th.size < 8 or th[0] > a + tol or th[-1] < b - tol or np.any((gap_times >= tt[0]) & (gap_times < tt[-1])):
+            partial += 1
+            continue
+        if np.any(np.diff(th) <= 0):       # jitter in phi1: keep it monotonic for interpolation
+            order = np.argsort(th, kind="stable")
+            th, tt = th[order], tt[order]
+            sel = {n: y[seg][order] for n, y in data.items()}
+        else:
+            sel = {n: y[seg] for n, y in data.items()}
+        revs.append(k)
+        times.append(np.interp(a + cond.grid, th, tt))
+        for n in names:
+            out[n].append(np.interp(a + fine, th, sel[n]))
+    # the partial revolutions before the first and after the last whole one
+    partial += int(theta[0] < TWO_PI * k_first - tol) + int(theta[-1] > TWO_PI * (k_last + 1) + tol)
+    if not revs:
+        raise InputError("the measured file holds no whole cam revolution (need phi1 to cover 0..360 deg without gaps)")
+    signals = {n: condition(np.array(v), cond) for n, v in out.items()}
+    times = np.array(times)
+    period = float(np.mean(times[:, -1] - times[:, 0])) * cond.n_grid / (cond.n_grid - 1)
+    return MeasuredCycles(cond.grid, np.array(revs), signals, times, partial, 60.0 / period)
+
+
+@dataclasses.dataclass
+class SimulatedCycle:
+    """One simulated revolution on the report grid; ``covered`` marks the grid points the
+    simulation reached (False outside a partial simulation)."""
+
+    grid: np.ndarray
+    signals: dict
+    covered: np.ndarray
+    note: str
+
+
+def _sim_angle(sim: xr.Dataset, names) -> tuple[np.ndarray, dict]:
+    if "phi1" not in sim.variables:
+        raise InputError("the simulation has no cam angle phi1")
+    phi = np.asarray(sim["phi1"].values, dtype=float)
+    data = {}
+    for n in names:
+        if n not in sim:
+            raise InputError(f"the simulation ({sim.attrs.get('model', '?')}) has no {n}")
+        y = np.asarray(sim[n].values, dtype=float)
+        if y.shape != phi.shape:
+            raise InputError(f"the simulation's {n} is not on the same axis as its phi1")
+        data[n] = y
+    return phi, data
+
+
+def derivative_in_time(omega2_fine: np.ndarray, omega1_fine: np.ndarray, cond: Conditioning) -> np.ndarray:
+    """d omega2/dt (rad/s^2) of a revolution on the fine grid: the band-limited derivative with
+    respect to phi1 (harmonic k times i k), times the cam speed omega1(phi1) (rad/s)."""
+    spec = np.fft.rfft(omega2_fine)
+    spec[cond.n_harmonics + 1:] = 0.0
+    k = np.arange(spec.size)
+    d_dphi = np.fft.irfft(1j * k * spec, n=omega2_fine.size)
+    return d_dphi * omega1_fine
+
+
+def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_omega2: bool = False) -> SimulatedCycle:
+    """The last whole revolution of a simulation (or the part it covers), conditioned like the
+    measurement. ``sim`` holds ``phi1`` (rad, from the start of the rise) and the signals on one axis
+    (``phi1`` itself for the kinematic level, ``time`` for the dynamic models).
+
+    ``epsilon2_from_omega2``: for a model whose epsilon2 leaves out the impulses of its impacts (the
+    rigid model's velocity jumps), epsilon2 is taken as the time derivative of the band-limited
+    omega2 instead, which is what an accelerometer behind the same filter sees (filtering and
+    differentiation commute)."""
+    names = list(names)
+    if epsilon2_from_omega2 and "omega1" in sim and "omega1" not in names:
+        names.append("omega1")
+    phi, data = _sim_angle(sim, names)
+    ok = np.isfinite(phi)
+    for y in data.values():
+        ok &= np.isfinite(y)
+    phi = phi[ok]
+    data = {n: y[ok] for n, y in data.items()}
+    if phi.size < 4:
+        raise InputError(f"the simulation ({sim.attrs.get('model', '?')}) has fewer than 4 finite samples")
+    theta = np.unwrap(phi) if np.any(np.diff(phi) < -math.pi) else phi
+    order = np.argsort(theta, kind="stable")
+    theta = theta[order]
+    data = {n: y[order] for n, y in data.items()}
+    fine = cond.fine_grid
+    k_last = int(math.floor(theta[-1] / TWO_PI + 1e-9)) - 1
+    if k_last >= 0 and theta[0] <= TWO_PI * k_last + 1e-6:
+        a = TWO_PI * k_last
+        fine_vals = {n: np.interp(a + fine, theta, y) for n, y in data.items()}
+        covered = np.ones(cond.n_grid, bool)
+        note = f"revolution {k_last + 1} of {k_last + 1} simulated (steady state)"
+    else:
+        # partial revolution: compare on the covered angles only; the rest is the dwell, at rest
+        lo, hi = theta[0] % TWO_PI, theta[0] % TWO_PI + (theta[-1] - theta[0])
+        base = theta[0] - lo
+        x = base + fine
+        inside = (x >= theta[0]) & (x <= theta[-1])
+        fine_vals = {n: np.where(inside, np.interp(x, theta, y), 0.0) for n, y in data.items()}
+        g = cond.grid + base
+        covered = (g >= theta[0]) & (g <= theta[-1])
+        note = (f"the simulation covers cam angles {math.degrees(lo):.1f}..{math.degrees(hi):.1f} deg only; "
+                "metrics use that range, the figures show the rest of the revolution as rest (zero)")
+    if epsilon2_from_omega2:
+        w1 = fine_vals.pop("omega1", None)
+        if w1 is None:
+            w1 = np.full(fine.size, float(sim.attrs.get("omega1_rad_s", np.nan)))
+        if not np.all(np.isfinite(w1)):
+            raise InputError("the simulation has no cam speed omega1 to differentiate omega2 in time")
+        fine_vals["epsilon2"] = derivative_in_time(fine_vals["omega2"], w1, cond)
+        note += "; epsilon2 = d(omega2)/dt of the filtered omega2 (impact impulses included)"
+    signals = {n: condition(v, cond) for n, v in fine_vals.items()}
+    return SimulatedCycle(cond.grid, signals, covered, note)

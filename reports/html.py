@@ -1,0 +1,81 @@
+"""The self-contained HTML report: jinja2 with autoescaping, figures as base64 PNG.
+
+Every string that comes from a file or a user (file names, variable names, attributes, processing
+history, notes) reaches the page through jinja2's autoescape, so markup in a channel name shows
+as text. The page loads nothing from the network.
+"""
+from __future__ import annotations
+
+import base64
+import datetime as dt
+import math
+from pathlib import Path
+
+import jinja2
+import numpy as np
+
+from reports.figures import all_figures, png_bytes
+from reports.pipeline import Report, headline
+from reports.summary import build_summary
+
+TEMPLATES = Path(__file__).with_name("templates")
+METRIC_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_magnitude", "sg_phase",
+                  "sg_comprehensive", "nrmse", "peak_max_error", "peak_min_error", "peak_max_shift_deg",
+                  "peak_min_shift_deg", "lag_deg")
+
+
+def _fmt(value, spec: str = ".3g") -> str:
+    """Numbers formatted, None/NaN as an em dash, anything else as text (escaped by the template)."""
+    if value is None:
+        return "—"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        v = float(value)
+        if not math.isfinite(v):
+            return "—"
+        return format(v, spec)
+    return str(value)
+
+
+def environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+        autoescape=True,                      # every template, whatever its extension
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True, lstrip_blocks=True,
+    )
+    env.globals["fmt"] = _fmt
+    return env
+
+
+def _attr_text(v, limit: int = 400) -> str:
+    s = np.array2string(v, threshold=8) if isinstance(v, np.ndarray) else str(v)
+    return s if len(s) <= limit else s[:limit] + " …"
+
+
+def render_html(report: Report, figures=None, dpi: int = 90) -> str:
+    """The report page as a string. ``figures``: list of (title, Figure); default all_figures(report)."""
+    figures = all_figures(report) if figures is None else figures
+    figs = []
+    for title, fig in figures:
+        png = png_bytes(fig, dpi=dpi)
+        w, h = fig.get_size_inches() * dpi
+        figs.append({"title": title, "png_b64": base64.b64encode(png).decode("ascii"), "width": int(round(w)),
+                     "height": int(round(h))})
+    summary = build_summary(report)
+    ds = report.measured
+    variables = [{"name": str(n), "dims": ", ".join(map(str, ds[n].dims)), "units": str(ds[n].attrs.get("units", "")),
+                  "long_name": str(ds[n].attrs.get("long_name", ""))} for n in ds.variables]
+    attributes = [(str(k), _attr_text(v)) for k, v in ds.attrs.items() if k != "processing_history"]
+    rows = report.threshold_rows
+    context = {
+        "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "measured": summary["measured"], "op": report.scene, "notes": report.notes,
+        "headline": headline(report), "comparisons": report.comparisons, "metric_columns": METRIC_COLUMNS,
+        "events": report.events, "simulations": summary["simulations"], "conditioning": summary["conditioning"],
+        "thresholds": {"file": report.thresholds_source, "rows": rows}, "passed": report.passed,
+        "failed": [r for r in rows if not r["passed"]], "figures": figs,
+        "variables": variables, "attributes": attributes,
+    }
+    return environment().get_template("report.html.j2").render(**context)

@@ -1,0 +1,40 @@
+"""The report as a PDF (matplotlib PdfPages): a summary page, then every figure."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from matplotlib.backends.backend_pdf import PdfPages
+from matplotlib.figure import Figure
+
+from reports.figures import all_figures
+from reports.pipeline import Report, headline
+
+
+def _summary_page(report: Report) -> Figure:
+    fig = Figure(figsize=(11.69, 8.27))
+    ax = fig.add_axes([0.04, 0.04, 0.92, 0.92])
+    ax.axis("off")
+    lines = [f"labtool report: {report.measured_path}",
+             f"cam speed {report.scene['cam_speed_rpm']:g} rpm (measured {report.cycles.cam_speed_rpm:.2f} rpm), "
+             f"law {report.scene['law']}, Fu {report.scene['Fu']:g} N, j {report.scene['backlash_mm']:g} mm, "
+             f"{len(report.cycles.revolutions)} whole revolution(s)", ""]
+    if report.threshold_rows:
+        nfail = sum(not r["passed"] for r in report.threshold_rows)
+        lines.append(f"thresholds ({report.thresholds_source}): " + ("all passed" if not nfail else f"{nfail} FAILED"))
+    lines += ["", f"{'model, w1':34s} {'w2 ISO R':>9s} {'w2 S&G C':>9s} {'w2 NRMSE':>9s} {'e2 ISO R':>9s} {'e2 S&G C':>9s} {'e2 NRMSE':>9s}"]
+    for h in headline(report):
+        lines.append(f"{h['label'][:34]:34s} {h['omega2_iso_rating']:9.3f} {h['omega2_sg_comprehensive']:9.3f} "
+                     f"{h['omega2_nrmse']:9.3f} {h['epsilon2_iso_rating']:9.3f} {h['epsilon2_sg_comprehensive']:9.3f} "
+                     f"{h['epsilon2_nrmse']:9.3f}")
+    lines += [""] + [f"note: {n}" for n in report.notes]
+    ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace", fontsize=8.5, wrap=True)
+    return fig
+
+
+def write_pdf(report: Report, path: Path, figures=None) -> None:
+    """Write the summary page and the figures to ``path`` (the caller makes it atomic)."""
+    figures = all_figures(report) if figures is None else figures
+    with PdfPages(path) as pdf:
+        pdf.savefig(_summary_page(report))
+        for _, fig in figures:
+            pdf.savefig(fig)

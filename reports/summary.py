@@ -1,0 +1,91 @@
+"""The report as one JSON object, for a lab's automation (``labtool report --json``).
+
+Keys (stable): ``format`` ("labtool.report.summary"), ``format_version`` (1), ``measured`` (file,
+cam speeds, Ka, whole revolutions), ``operating_point`` (what the models simulated, edge units),
+``conditioning``, ``simulations`` (per model and omega1 mode: level used, note, wall time,
+indicators), ``comparisons`` (per model, mode and signal: ``overall`` metrics on the cycle average
+and ``per_revolution``), ``headline``, ``events``, ``thresholds`` (rows with ``passed``),
+``passed`` (true when every threshold holds, also when there are none), ``notes``.
+Non-finite numbers become null so that the output is strict JSON.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from reports.pipeline import Report, headline
+
+FORMAT_VERSION = 1
+
+
+def _clean(obj):
+    """Plain JSON types; NaN/Inf -> None."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if obj is None or isinstance(obj, str):
+        return obj
+    return str(obj)
+
+
+def measured_info(report: Report) -> dict:
+    ds = report.measured
+    a = ds.attrs
+    ka = a.get("ka_m_s2_per_v", a.get("ka"))
+    return {
+        "file": report.measured_path,
+        "source": a.get("source", "recording"),
+        "cam_speed_rpm_nominal": a.get("cam_speed_rpm"),
+        "cam_speed_rpm_measured": report.cycles.cam_speed_rpm,
+        "ka_m_s2_per_v": ka,
+        "ka_source": a.get("ka_source", a.get("calibration", None)),
+        "whole_revolutions": len(report.cycles.revolutions),
+        "partial_revolutions_left_out": report.cycles.partial,
+        "processing_history": a.get("processing_history", a.get("history")),
+    }
+
+
+def build_summary(report: Report) -> dict:
+    sims = [{
+        "requested_model": r.requested, "model": r.model, "omega1": r.omega1, "label": r.label,
+        "note": r.note, "wall_s": r.wall_s, "revolutions": r.revolutions,
+        "indicators": {k: v for k, v in r.indicators.items() if not isinstance(v, (np.ndarray, list))},
+    } for r in report.sims]
+    comps = []
+    for c in report.comparisons:
+        comps.append({k: c[k] for k in ("requested_model", "model", "omega1", "signal", "label", "covered_fraction",
+                                         "overall", "per_revolution")})
+    out = {
+        "format": "labtool.report.summary",
+        "format_version": FORMAT_VERSION,
+        "measured": measured_info(report),
+        "operating_point": report.scene,
+        "conditioning": {"grid_points_per_revolution": report.conditioning.n_grid,
+                         "harmonics": report.conditioning.n_harmonics,
+                         "description": report.conditioning.describe()},
+        "simulations": sims,
+        "comparisons": comps,
+        "headline": headline(report),
+        "events": report.events,
+        "thresholds": {"file": report.thresholds_source, "rows": report.threshold_rows},
+        "passed": report.passed,
+        "notes": report.notes,
+        "wall_s": report.wall_s,
+    }
+    return _clean(out)
+
+
+def to_json(report: Report) -> str:
+    return json.dumps(build_summary(report), indent=1, allow_nan=False)

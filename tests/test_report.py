@@ -1,0 +1,216 @@
+"""labtool report: the pipeline on synthetic measurements with a known answer, the outputs, bad input."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from labtool.cli import main
+from labtool.output import write_netcdf
+from models.errors import InputError
+from reports import align, pipeline
+from reports.synthetic import synthetic_measured
+
+EVIL_CHANNEL = "<img src=x onerror=alert(1)>"
+EVIL_ATTR = "aE_t,<script>alert('x')</script>"
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("report")
+    exact = synthetic_measured(noise=0.0, gain=1.0, revolutions=3.4)
+    scaled = synthetic_measured(noise=0.0, gain=1.3, revolutions=3.4)
+    late = synthetic_measured(noise=0.0, gain=1.0, lag_deg=3.0, revolutions=3.4)
+    noisy = synthetic_measured(noise=0.03, gain=1.05, revolutions=3.4, seed=3)
+    noisy[EVIL_CHANNEL] = ("time", np.zeros(noisy.sizes["time"]), {"units": "V", "long_name": "<b>bold</b> channel"})
+    noisy.attrs["channel_names"] = EVIL_ATTR
+    paths = {}
+    for name, ds in (("exact", exact), ("scaled", scaled), ("late", late), ("noisy", noisy)):
+        paths[name] = d / f"{name}.nc"
+        write_netcdf(ds, paths[name])
+    no_omega = exact.drop_vars("omega2")
+    paths["no_omega2"] = d / "no_omega2.nc"
+    write_netcdf(no_omega, paths["no_omega2"])
+    fast = exact.copy()
+    fast.attrs["cam_speed_rpm"] = 5000.0
+    paths["too_fast"] = d / "too_fast.nc"
+    write_netcdf(fast, paths["too_fast"])
+    paths["dir"] = d
+    return paths
+
+
+def _kin_report(path, **kw):
+    return pipeline.build_report(path, models=("kinematic",), modes=("const",), **kw)
+
+
+def test_measured_identical_to_the_model_gives_perfect_scores(files):
+    """The synthetic measurement is the kinematics itself: after alignment on the cam angle every
+    error is ~0 and every ISO score ~1 (checks the alignment, grid and filter end to end)."""
+    rep = _kin_report(files["exact"])
+    assert len(rep.cycles.revolutions) == 3 and rep.cycles.partial == 2
+    assert rep.cycles.cam_speed_rpm == pytest.approx(180.0, rel=1e-6)
+    for c in rep.comparisons:
+        o = c["overall"]
+        assert o["iso_rating"] == pytest.approx(1.0, abs=2e-3), c["signal"]
+        assert o["sg_comprehensive"] == pytest.approx(0.0, abs=2e-3)
+        assert o["nrmse"] == pytest.approx(0.0, abs=2e-3)
+        for r in c["per_revolution"]:
+            assert r["iso_rating"] == pytest.approx(1.0, abs=2e-3)
+
+
+def test_scaled_measurement_gives_the_sprague_geers_magnitude(files):
+    """measured = 1.3 x model: M = sqrt(psi_cc/psi_mm) - 1 = 1/1.3 - 1, P = 0, on both signals."""
+    rep = _kin_report(files["scaled"])
+    for c in rep.comparisons:
+        assert c["overall"]["sg_magnitude"] == pytest.approx(1 / 1.3 - 1, abs=1e-3)
+        assert c["overall"]["sg_phase"] == pytest.approx(0.0, abs=2e-3)
+        assert c["overall"]["peak_max_error"] == pytest.approx(1 / 1.3 - 1, abs=5e-3)
+
+
+def test_late_measurement_shows_as_a_negative_lag(files):
+    """The measurement lags the model by 3 deg of cam angle: the model is early, lag = -3 deg."""
+    rep = _kin_report(files["late"])
+    for c in rep.comparisons:
+        assert c["overall"]["lag_deg"] == pytest.approx(-3.0, abs=0.5)
+        assert c["overall"]["peak_max_shift_deg"] == pytest.approx(-3.0, abs=1.0)
+
+
+def test_cli_writes_html_pdf_json_and_escapes_file_strings(files, capsys):
+    d = files["dir"]
+    html, pdf, js = d / "r.html", d / "r.pdf", d / "s.json"
+    rc = main(["report", str(files["noisy"]), "--models", "kinematic", "-o", str(html), "--pdf", str(pdf),
+               "--json", str(js)])
+    assert rc == 0, capsys.readouterr().err
+    text = html.read_text(encoding="utf-8")
+    # markup from the file shows as text
+    assert EVIL_CHANNEL not in text and "<script>alert" not in text and "<b>bold</b>" not in text
+    assert "&lt;img src=x onerror=alert(1)&gt;" in text
+    assert "&lt;script&gt;alert(" in text
+    assert "&lt;b&gt;bold&lt;/b&gt; channel" in text
+    # self-contained: figures embedded, nothing fetched from the network
+    assert text.count('src="data:image/png;base64,') >= 5
+    assert "http://" not in text and "https://" not in text
+    assert pdf.read_bytes().startswith(b"%PDF")
+    summary = json.loads(js.read_text())
+    assert summary["format"] == "labtool.report.summary" and summary["passed"] is True
+    assert {(c["requested_model"], c["omega1"], c["signal"]) for c in summary["comparisons"]} == {
+        ("kinematic", "const", "omega2"), ("kinematic", "const", "epsilon2"), ("kinematic", "var", "omega2"),
+        ("kinematic", "var", "epsilon2")}
+    assert summary["measured"]["whole_revolutions"] == 3
+    assert "kinematic, w1 = ct." in capsys.readouterr().out
+
+
+def test_thresholds_pass_and_fail_set_the_exit_code(files, capsys):
+    d = files["dir"]
+    good = d / "good.toml"
+    good.write_text('[omega2]\niso_rating = 0.5\nnrmse = { max = 0.2 }\n[epsilon2]\nsg_comprehensive = 1.0\n')
+    bad = d / "bad.toml"
+    bad.write_text('[omega2]\niso_rating = 0.999\n[apply]\nomega1 = ["const"]\n')
+    args = ["report", str(files["noisy"]), "--models", "kinematic", "--force"]
+    assert main(args + ["--thresholds", str(good), "-o", str(d / "g.html"), "--json", str(d / "g.json")]) == 0
+    assert all(r["passed"] for r in json.loads((d / "g.json").read_text())["thresholds"]["rows"])
+    assert main(args + ["--thresholds", str(bad), "-o", str(d / "b.html"), "--json", str(d / "b.json")]) == 1
+    s = json.loads((d / "b.json").read_text())
+    assert s["passed"] is False and len(s["thresholds"]["rows"]) == 1 and s["thresholds"]["rows"][0]["omega1"] == "const"
+    assert "FAILED" in (d / "b.html").read_text()
+    assert "threshold checks failed" in capsys.readouterr().err
+
+
+def _one_line_exit_2(capsys, args, fragment):
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("labtool: error:"), err
+    assert fragment in err[0]
+
+
+def test_measured_file_without_omega2_is_one_line_exit_2(files, capsys):
+    out = files["dir"] / "x.html"
+    _one_line_exit_2(capsys, ["report", str(files["no_omega2"]), "-o", str(out)], "no omega2")
+    assert not out.exists()
+
+
+def test_cam_speed_the_models_cannot_do_is_one_line_exit_2(files, capsys):
+    out = files["dir"] / "x.html"
+    _one_line_exit_2(capsys, ["report", str(files["too_fast"]), "-o", str(out)], "5000 rpm")
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--rpm", "-10", "-o", str(out)], "-10 rpm")
+    assert not out.exists()
+
+
+def test_threshold_file_with_an_unknown_metric_is_one_line_exit_2(files, capsys):
+    th = files["dir"] / "unknown.toml"
+    th.write_text("[omega2]\niso_ratin = 0.5\n")
+    out = files["dir"] / "x.html"
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--thresholds", str(th), "-o", str(out)],
+                     "unknown metric 'iso_ratin'")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("content,fragment", [
+    ("[omega3]\nnrmse = 0.1\n", "unknown signal"),
+    ("[omega2]\nnrmse = 'small'\n", "finite number"),
+    ("[omega2]\nnrmse = { below = 0.1 }\n", "expected {min"),
+    ("[omega2]\nnrmse = { min = 0.5, max = 0.1 }\n", "above max"),
+    ("[apply]\nmodels = ['stiff']\n", "unknown 'stiff'"),
+    ("[apply]\nscope = 'sometimes'\n", "scope"),
+    ("[omega2\n", "not valid TOML"),
+])
+def test_bad_threshold_files(files, capsys, content, fragment):
+    th = files["dir"] / "bad_th.toml"
+    th.write_text(content)
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--thresholds", str(th), "-o",
+                              str(files["dir"] / "x.html")], fragment)
+
+
+def test_other_bad_inputs(files, capsys, tmp_path):
+    junk = tmp_path / "junk.nc"
+    junk.write_bytes(b"this is not netcdf")
+    _one_line_exit_2(capsys, ["report", str(junk), "-o", str(tmp_path / "a.html")], "not a NetCDF4 file")
+    _one_line_exit_2(capsys, ["report", str(tmp_path / "missing.nc"), "-o", str(tmp_path / "a.html")], "not found")
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--models", "stiff", "-o", str(tmp_path / "a.html")],
+                     "unknown model 'stiff'")
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--omega1", "fast", "-o", str(tmp_path / "a.html")],
+                     "unknown omega1 mode 'fast'")
+    existing = tmp_path / "exists.html"
+    existing.write_text("keep me")
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "-o", str(existing)], "already exists")
+    assert existing.read_text() == "keep me"
+
+
+def test_a_model_that_is_not_there_is_replaced_by_the_kinematic_level_and_said(files, monkeypatch):
+    monkeypatch.setattr(pipeline, "model_available", lambda name: False)
+    rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
+    assert rep.sims[0].model == "kinematic" and rep.sims[0].requested == "elastic"
+    assert any("elastic model is not available" in n for n in rep.notes)
+    assert rep.comparisons[0]["overall"]["iso_rating"] == pytest.approx(1.0, abs=2e-3)
+
+
+def test_a_gap_makes_its_revolution_partial():
+    ds = synthetic_measured(noise=0.0, revolutions=4.3)
+    t = ds["time"].values
+    keep = (t < 0.5) | (t > 0.52)           # 20 ms lost inside the second whole revolution
+    ds = ds.isel(time=keep)
+    cyc = align.measured_cycles(ds, ("omega2", "epsilon2"), align.Conditioning())
+    full = align.measured_cycles(synthetic_measured(noise=0.0, revolutions=4.3), ("omega2",), align.Conditioning())
+    assert len(cyc.revolutions) == len(full.revolutions) - 1
+    assert cyc.partial == full.partial + 1
+
+
+def test_no_whole_revolution_is_input_error():
+    ds = synthetic_measured(noise=0.0, revolutions=0.8)
+    with pytest.raises(InputError, match="no whole cam revolution"):
+        align.measured_cycles(ds, ("omega2",), align.Conditioning())
+
+
+def test_time_derivative_on_the_cam_angle_grid():
+    """omega2 = sin(3 phi1) at omega1 = 20 rad/s: d omega2/dt = 3 * 20 * cos(3 phi1) exactly
+    (a band-limited signal, below the filter's harmonic limit)."""
+    cond = align.Conditioning(n_grid=360, n_harmonics=20)
+    phi = cond.fine_grid
+    d = align.derivative_in_time(np.sin(3 * phi), np.full(phi.size, 20.0), cond)
+    assert np.allclose(d, 60.0 * np.cos(3 * phi), atol=1e-9)
+
+
+def test_harmonic_lowpass_keeps_low_and_removes_high_harmonics():
+    x = np.linspace(0, 2 * math.pi, 400, endpoint=False)
+    y = np.sin(2 * x) + 0.5 * np.cos(50 * x)
+    assert np.allclose(align.harmonic_lowpass(y, 10), np.sin(2 * x), atol=1e-12)

@@ -1,0 +1,69 @@
+"""The report opened in a real headless browser (Chromium): the figures and tables render, offline.
+
+Skipped only when Chromium is not installed (``.ci/run`` installs Debian's chromium)."""
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from labtool.cli import main
+from labtool.output import write_netcdf
+from reports.synthetic import synthetic_measured
+
+CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "", shutil.which("chromium-browser") or "")
+                 if p and Path(p).exists()), None)
+
+pytestmark = [pytest.mark.browser,
+              pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")]
+
+
+def _chromium(args, profile: Path, timeout=90):
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync",
+           "--disable-dev-shm-usage", f"--user-data-dir={profile}", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def report_html(tmp_path_factory):
+    d = tmp_path_factory.mktemp("browser")
+    ds = synthetic_measured(noise=0.03, gain=1.05, revolutions=3.4)
+    ds["<i>evil"] = ("time", np.zeros(ds.sizes["time"]), {"units": "V", "long_name": "<script>document.title='pwned'</script>"})
+    write_netcdf(ds, d / "m.nc")
+    html = d / "report.html"
+    assert main(["report", str(d / "m.nc"), "--models", "kinematic", "-o", str(html)]) == 0
+    return html
+
+
+def test_dom_has_the_tables_and_figures(report_html, tmp_path):
+    res = _chromium(["--dump-dom", report_html.as_uri()], tmp_path / "profile")
+    dom = res.stdout
+    assert res.returncode == 0 and "</html>" in dom, res.stderr[-2000:]
+    assert dom.count("<img") >= 5 and 'src="data:image/png;base64,' in dom
+    assert '<table id="headline">' in dom and "kinematic, w1 = ct." in dom and "kinematic, w1 = var." in dom
+    assert '<table id="metrics">' in dom and '<table id="events">' in dom
+    # the script in the file's attribute never ran (title unchanged) and shows as text
+    assert "<title>labtool report" in dom and "pwned</title>" not in dom
+    assert "&lt;script&gt;document.title" in dom
+
+
+def test_screenshot_shows_the_figures(report_html, tmp_path):
+    """The first figure (omega2, measured vs model) is at the top of the page: its coloured model
+    curves (matplotlib tab:blue and tab:red) must appear in the rendered pixels."""
+    shot = tmp_path / "shot.png"
+    res = _chromium([f"--screenshot={shot}", "--window-size=1200,1600", "--hide-scrollbars", report_html.as_uri()],
+                    tmp_path / "profile")
+    assert shot.exists(), res.stderr[-2000:]
+    from matplotlib.image import imread
+    img = (imread(str(shot))[..., :3] * 255).astype(int)
+    assert img.shape[0] >= 1500 and img.shape[1] >= 1100
+
+    def count(rgb, tol=40):
+        return int(np.sum(np.all(np.abs(img - np.array(rgb)) < tol, axis=-1)))
+
+    assert count((31, 119, 180)) > 300      # tab:blue, omega1 constant
+    assert count((214, 39, 40)) > 300       # tab:red, omega1 variable
+    # and the page is not blank: many distinct grey levels from text and tables
+    assert len(np.unique(img.reshape(-1, 3)[:, 0])) > 50
