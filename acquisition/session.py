@@ -12,13 +12,13 @@ import os
 import time
 
 from acquisition.device import Device, DeviceDisconnected, Event
-from acquisition.recorder import DiskFull, Recorder
+from acquisition.recorder import DiskFull, Recorder, _classify
 from models.errors import InputError
 
 
 @dataclasses.dataclass
 class RunResult:
-    """How the run ended. outcome: done | interrupted | disconnected | disk_full."""
+    """How the run ended. outcome: done | interrupted | disconnected | disk_full | write_error."""
 
     path: str
     outcome: str
@@ -74,11 +74,15 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     except DeviceDisconnected as exc:
         outcome, message = "disconnected", f"device disconnected: {exc}"
         _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message)))
-    except DiskFull:
-        outcome, message, complete = "disk_full", "disk full (ENOSPC): recording stopped, samples written so far kept", False
+    except OSError as exc:  # DiskFull included; a plain ENOSPC from below is the same thing
+        if isinstance(_classify(exc), DiskFull):
+            outcome, message = "disk_full", "disk full (ENOSPC): recording stopped, samples written so far kept"
+        else:
+            outcome, message = "write_error", f"cannot write {path}: {exc.strerror or exc}; recording stopped"
+        complete = False
     finally:
         _try(device.stop)
-        if outcome == "disk_full":
+        if outcome in ("disk_full", "write_error"):
             rec.abandon(message)
         else:
             try:

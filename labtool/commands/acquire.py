@@ -161,7 +161,7 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
                    "see the 'clip' events", err=True)
     if result.outcome == "interrupted":
         typer.echo("labtool: stopped by Ctrl-C; the recording is closed and complete", err=True)
-    if result.outcome in ("disconnected", "disk_full"):
+    if result.outcome in ("disconnected", "disk_full", "write_error"):
         raise InputError(f"{result.message}; {result.n_samples} samples kept in {output}")
 
 

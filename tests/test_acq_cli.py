@@ -1,0 +1,111 @@
+"""``labtool acquire``: the must-show run, scene files, bad input (one line, exit 2), omega2 recovered vs truth."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import signal
+
+from acquisition import signal_chain as sc
+from acquisition.recorder import read_recording
+from labtool.cli import main
+
+
+def test_must_show_sim_180_rpm_10_s_fast_writes_a_valid_v1_file(tmp_path, capsys):
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--device", "sim", "--rpm", "180", "--duration", "10", "--fast", "-o", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    rec = read_recording(out)
+    a = rec["attrs"]
+    assert a["format"] == "labtool.recording" and a["format_version"] == 1 and a["complete"]
+    assert a["sample_rate_hz"] == 10000.0 and a["cam_speed_rpm"] == 180.0
+    assert rec["signals"].shape == (100000, 3) and rec["channel_names"] == ["aE_t", "aE_n", "tacho"]
+    assert rec["ka_m_s2_per_v"][0] == 86.43 and math.isnan(rec["ka_m_s2_per_v"][2])
+    assert a["law"] == "sine" and a["Fu_N"] == 0.0 and a["backlash_mm"] == 0.128 and a["seed"] == 0
+    assert [k for _, k, _ in rec["events"]] == ["start", "stop"]
+
+
+def test_recovered_omega2_matches_the_truth(tmp_path):
+    """Tacho -> rise start; integrate aE_t * Ka / DE over the rise: the peak omega2 is the truth's."""
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--rpm", "300", "--duration", "2", "--fast", "--seed", "5", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    fs = rec["attrs"]["sample_rate_hz"]
+    v = rec["signals"]
+    scene = sc.StandScene(cam_speed_rpm=300)
+    DE = scene.mechanism.DE
+    eps = signal.sosfiltfilt(signal.butter(4, 400, fs=fs, output="sos"), v[:, 0] * rec["ka_m_s2_per_v"][0]) / DE
+    rises = np.flatnonzero((v[1:, 2] > 2.5) & (v[:-1, 2] <= 2.5)) + 1
+    T_rise = scene.program.rise_angle / scene.omega1_nominal
+    n_rise = int(T_rise * fs)
+    for r in rises[:3]:
+        r = r - 2  # the anti-alias filter's delay, as on the tacho
+        omega = np.cumsum(eps[r:r + n_rise]) / fs
+        t = (r + np.arange(n_rise)) / fs
+        truth = sc.truth(scene, t)["omega2"]
+        assert omega.max() == pytest.approx(truth.max(), rel=0.03)
+        assert np.sqrt(np.mean((omega - truth) ** 2)) < 0.05 * truth.max()
+
+
+def test_scene_file_and_overrides(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text('[stand]\ncam_speed_rpm = 500\nseed = 9\nduration_s = 0.5\nlaw = "sine"\nbacklash_mm = 0.128\n')
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--scene", str(scene), "--fast", "--rpm", "300", "-o", str(out)]) == 0
+    a = read_recording(out)["attrs"]
+    assert a["cam_speed_rpm"] == 300.0 and a["seed"] == 9 and read_recording(out)["signals"].shape[0] == 5000
+
+
+def test_clipping_warns(tmp_path, capsys):
+    out = tmp_path / "c.h5"
+    assert main(["acquire", "--fast", "--duration", "1", "--fault", "clip@0.5", "-o", str(out)]) == 0
+    assert "clipping on aE_t" in capsys.readouterr().err
+    assert any(k == "clip" for _, k, _ in read_recording(out)["events"])
+
+
+def test_bad_input_one_line_exit_2(tmp_path, capsys):
+    (tmp_path / "exists.h5").write_text("x")
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "bad.toml").write_text("[stand]\nrpm_typo = 3\n")
+    o = str(tmp_path / "o.h5")
+    cases = [
+        ["acquire", "--device", "usb6009", "-o", o],
+        ["acquire", "--device", "nidaqmx", "-o", o],
+        ["acquire", "--rate", "200000", "--fast", "-o", o],
+        ["acquire", "--rate", "-5", "--fast", "-o", o],
+        ["acquire", "--fast", "-o", str(tmp_path / "exists.h5")],
+        ["acquire", "--fast", "-o", str(tmp_path / "afile" / "r.h5")],
+        ["acquire", "--fast", "-o", str(tmp_path / "nofolder" / "r.h5")],
+        ["acquire", "--fast", "-o", str(tmp_path)],
+        ["acquire", "--fast", "--duration", "0", "-o", o],
+        ["acquire", "--fast", "--duration", "inf", "-o", o],
+        ["acquire", "--fast", "--law", "zigzag", "-o", o],
+        ["acquire", "--fast", "--rpm", "0", "-o", o],
+        ["acquire", "--fast", "--fault", "melt@1", "-o", o],
+        ["acquire", "--fast", "--scene", str(tmp_path / "bad.toml"), "-o", o],
+        ["acquire", "--fast", "--scene", str(tmp_path / "none.toml"), "-o", o],
+        ["acquire", "--fast", "--mode", "shake", "-o", o],
+        ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fault", "drop@1", "-o", o],
+    ]
+    for argv in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("labtool: error: "), (argv, err)
+    assert (tmp_path / "exists.h5").read_text() == "x"
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_force_overwrites(tmp_path):
+    out = tmp_path / "r.h5"
+    out.write_text("old")
+    assert main(["acquire", "--fast", "--duration", "0.2", "--force", "-o", str(out)]) == 0
+    assert read_recording(out)["signals"].shape[0] == 2000
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.text(max_size=30).filter(lambda s: s.strip() != "sim" and not s.strip().startswith("nidaqmx:")))
+def test_any_other_device_name_is_refused(tmp_path_factory, spec):
+    out = tmp_path_factory.mktemp("d") / "r.h5"
+    assert main(["acquire", "--device", spec, "--fast", "-o", str(out)]) == 2
+    assert not out.exists()
