@@ -1,0 +1,89 @@
+"""Elastic model: cost and accuracy of the solver presets on Table 1's 16 runs, and the tables of
+docs/models.md (Table 3 comparison, lw fit). Run: .venv/bin/python benchmarks/bench_elastic.py [--tables]
+
+Not a test: it prints wall times (which depend on the machine) and markdown tables.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+
+from models.elastic import compare_table3
+from models.paper import read_reference, table1_runs
+from models.scene import Scene
+from models.simulate import simulate
+
+
+def _runs(accuracy, backlash=None, **kw):
+    out = []
+    for r in table1_runs().itertuples():
+        j = r.j_mm * 1e-3 if backlash is None else backlash
+        s = Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=j, jt_factor=r.Jt_factor, accuracy=accuracy, **kw)
+        t0 = time.perf_counter()
+        res = simulate(s, "elastic")
+        out.append((time.perf_counter() - t0, res.indicators, res.dataset.sizes["time"]))
+    return out
+
+
+def presets():
+    ref = _runs("reference")
+    print("| preset | wall, 16 runs (s) | events equal to reference | max xel error (um) | max contact-moment error (N m) |")
+    print("|---|---|---|---|---|")
+    for acc in ("fast", "standard", "reference"):
+        res = ref if acc == "reference" else _runs(acc)
+        same = sum((a[1]["jumps"], a[1]["impacts"], a[1]["separations"]) ==
+                   (b[1]["jumps"], b[1]["impacts"], b[1]["separations"]) for a, b in zip(res, ref))
+        dx = max(max(abs(a[1]["xel_max_mm"] - b[1]["xel_max_mm"]), abs(a[1]["xel_min_mm"] - b[1]["xel_min_mm"]))
+                 for a, b in zip(res, ref)) * 1e3
+        dm = max(abs(a[1]["MR13D_contact_min_Nm"] - b[1]["MR13D_contact_min_Nm"]) for a, b in zip(res, ref))
+        print(f"| {acc} | {sum(r[0] for r in res):.2f} | {same}/16 | {dx:.4f} | {dm:.3f} |")
+
+
+def lw_fit():
+    """Contact length that best reproduces Table 3's interior-flank deformations (j = 0.016 mm runs,
+    where the interior minimum is not disturbed by a landing back from the exterior flank)."""
+    t3 = read_reference("table3_elastic")
+    print("| lw (mm) | geometric mean of xel_min(ours)/xel_min(paper), runs 1-4, 9-12 | run 9 xel_max ratio |")
+    print("|---|---|---|")
+    best = None
+    for lw in (4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0):
+        res = _runs("fast", contact_length=lw * 1e-3)
+        ratios = [ind["xel_min_mm"] / ref.xel_min_mm for (_, ind, _), ref in zip(res, t3.itertuples()) if ref.B_j_level == 1]
+        g = float(np.exp(np.mean(np.log(ratios))))
+        r9 = res[8][1]["xel_max_mm"] / t3.xel_max_mm[8]
+        print(f"| {lw:g} | {g:.3f} | {r9:.2f} |")
+        if best is None or abs(np.log(g)) < abs(np.log(best[1])):
+            best = (lw, g)
+    print(f"\nbest lw on the grid: {best[0]:g} mm (ratio {best[1]:.3f})")
+
+
+def tables():
+    d = compare_table3()
+    print("| run | Fu | j | n1 | Jt | MR13D max (paper) | % | MR13D min (paper) | % | xel max mm (paper) | xel min mm (paper) | % | exterior deformation mm | jumps (paper) | impacts (paper) | separations |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in d.itertuples():
+        print(f"| {r.run} | {r.Fu_N:g} | {r.j_mm:g} | {r.n1_rpm:g} | {r.Jt:g} | {r.MR13D_max:.2f} ({r.paper_MR13D_max:g}) | {r.MR13D_max_pct:+.1f} "
+              f"| {r.MR13D_min:.2f} ({r.paper_MR13D_min:g}) | {r.MR13D_min_pct:+.1f} | {r.xel_max_mm:.4f} ({r.paper_xel_max_mm:g}) "
+              f"| {r.xel_min_mm:.4f} ({r.paper_xel_min_mm:g}) | {r.xel_min_pct:+.0f} | {max(r.xel_max_mm - r.j_mm, 0):.4f} "
+              f"| {r.jumps} ({r.paper_jumps}) | {r.impacts} ({r.paper_impacts}) | {r.separations} |")
+    print()
+    closed = _runs("standard", backlash=0.0)
+    t3 = read_reference("table3_elastic")
+    print("| run | contact MR13D max (paper) | % | contact MR13D min (paper) | % | xel max mm (paper) | xel min mm (paper) | jumps (paper) | impacts (paper) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for (_, ind, _), ref in zip(closed, t3.itertuples()):
+        mx, mn = ind["MR13D_contact_max_Nm"], ind["MR13D_contact_min_Nm"]
+        print(f"| {ref.run} | {mx:.2f} ({ref.MR13D_max_Nm:g}) | {100 * (mx / ref.MR13D_max_Nm - 1):+.1f} | {mn:.2f} ({ref.MR13D_min_Nm:g}) "
+              f"| {100 * (mn / ref.MR13D_min_Nm - 1):+.1f} | {ind['xel_max_mm']:.4f} ({ref.xel_max_mm:g}) | {ind['xel_min_mm']:.4f} ({ref.xel_min_mm:g}) "
+              f"| {ind['jumps']} ({ref.jumps}) | {ind['impacts']} ({ref.impacts}) |")
+
+
+if __name__ == "__main__":
+    presets()
+    if "--tables" in sys.argv:
+        print()
+        lw_fit()
+        print()
+        tables()
