@@ -29,6 +29,7 @@ app = typer.Typer(
 # One module per command group; each exposes ``register(app)``.
 COMMAND_MODULES = (
     "labtool.commands.kinematics",
+    "labtool.commands.simulate",
     "labtool.commands.demo",
     "labtool.commands.report",
     "labtool.commands.doe",

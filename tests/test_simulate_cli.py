@@ -1,0 +1,79 @@
+"""``labtool simulate``: the JSON contract, NetCDF output, dispatch, one-line errors with exit 2."""
+import json
+
+import pytest
+import xarray as xr
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from labtool.cli import main
+from models.simulate import INDICATORS
+
+
+def _json(capsys, args):
+    assert main(["simulate", *args, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_json_keys_and_rigid_values(capsys):
+    out = _json(capsys, ["--model", "rigid", "--rpm", "180", "--fu", "0", "--backlash-mm", "0.128",
+                         "--accuracy", "fast"])
+    assert list(out) == [*INDICATORS, "model", "accuracy", "wall_s"]
+    assert out["model"] == "rigid" and out["accuracy"] == "fast"
+    assert out["xel_max_mm"] is None and out["xel_min_mm"] is None
+    assert out["MR13D_max_Nm"] == pytest.approx(5.0, rel=0.1)        # Table 2, run 5
+    assert isinstance(out["jumps"], int) and out["jumps"] > 0 and out["impacts"] > 0
+    assert out["percussion_max_Ns"] > 0 and out["dphi2_max_deg"] > 0
+
+
+def test_auto_picks_kinematic_without_sign_change(capsys):
+    out = _json(capsys, ["--fu", "65", "--accuracy", "fast"])       # run 9: MR13D > 0 on the rise
+    assert out["model"] == "kinematic"
+    assert out["MR13D_max_Nm"] == pytest.approx(17.0, rel=0.1)
+
+
+def test_netcdf_output_has_units_and_refuses_overwrite(tmp_path, capsys):
+    path = tmp_path / "sim.nc"
+    args = ["simulate", "--model", "rigid", "--accuracy", "fast", "--omega1", "const", "-o", str(path)]
+    assert main(args) == 0
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        for name in ("time", "phi1", "omega1", "phi2", "omega2", "epsilon2", "MR13D", "gap", "contact",
+                     "event_time", "event_percussion", "dphi2", "domega2", "domega1"):
+            assert "units" in ds[name].attrs and "long_name" in ds[name].attrs, name
+        assert ds.attrs["model"] == "rigid" and ds.attrs["omega1_mode"] == "const"
+        assert ds.sizes["event"] > 0
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "already exists" in err[0]
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["--backlash-mm", "-0.01"], "backlash"),
+    (["--restitution", "1.5"], "restitution"),
+    (["--restitution", "-0.2"], "restitution"),
+    (["--jt-factor", "0"], "Jt"),
+    (["--rpm", "0"], "cam speed"),
+    (["--omega1", "sometimes"], "omega1"),
+    (["--model", "quantum"], "unknown model"),
+    (["--accuracy", "perfect"], "accuracy"),
+    (["--rpm", "nan"], "--rpm"),
+])
+def test_bad_input_is_one_line_exit_2(capsys, args, msg):
+    assert main(["simulate", "--model", "rigid", *args] if "--model" not in args else ["simulate", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("labtool: error:") and msg in err[0]
+
+
+@settings(max_examples=25, deadline=None)
+@given(k=st.one_of(st.floats(max_value=-1e-9, allow_nan=False, allow_infinity=False),
+                   st.floats(min_value=1.0 + 1e-9, allow_nan=False, allow_infinity=False)))
+def test_any_restitution_outside_unit_interval_is_rejected(k):
+    import io
+    from contextlib import redirect_stderr
+    buf = io.StringIO()
+    with redirect_stderr(buf):
+        code = main(["simulate", "--model", "rigid", "--restitution", repr(k)])
+    assert code == 2
+    lines = buf.getvalue().strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("labtool: error:")
