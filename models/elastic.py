@@ -56,7 +56,8 @@ PRESETS = {
 }
 OUTPUT_STEP = 2e-5        # s, output sampling (>= 25 samples per contact period of ~0.5 ms)
 GRID_POINTS = 4001        # cam-angle grid for the kinematic tables (linear interpolation in time)
-MAX_SEGMENTS = 20000      # guard against endless chatter
+ZENO_SEGMENTS = 200       # this many phases in a row, each shorter than ZENO_DT, is endless chatter
+ZENO_DT = 1e-9            # s
 
 
 @dataclass(frozen=True)
@@ -198,10 +199,12 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     t0, y = 0.0, np.array([x0, v0], dtype=float)
     args = (t_grid, drive_grid, m_grid, kc, gap, damping)
     segments, events = [], []
+    short = 0                     # consecutive phases shorter than ZENO_DT
     while t0 < t_end:
-        if len(segments) >= MAX_SEGMENTS:
-            raise SolverError(f"elastic model: more than {MAX_SEGMENTS} contact phases before "
-                              f"t = {t0:.4g} s (endless chatter); add contact damping or check the scene")
+        if short >= ZENO_SEGMENTS:
+            raise SolverError(f"elastic model: {ZENO_SEGMENTS} contact switches within "
+                              f"{ZENO_SEGMENTS * ZENO_DT:.1g} s at t = {t0:.6g} s (endless chatter); "
+                              "add contact damping or check the scene")
         specs = _events_for(phase, gap)
         evs = [_make_event(f, d) for f, d, _ in specs]
         sol = solve_ivp(rhs, (t0, t_end), y, method=method, args=(phase,) + args, events=evs,
@@ -209,6 +212,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
         if sol.status == -1:
             raise SolverError(f"elastic model: integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
         segments.append((phase, sol))
+        short = short + 1 if sol.t[-1] - t0 < ZENO_DT else 0
         if sol.status != 1:
             break
         hit = next(i for i, te in enumerate(sol.t_events) if len(te))

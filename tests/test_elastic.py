@@ -234,3 +234,15 @@ def test_contact_stiffness_rejects_bad_values(lw, f):
         contact_stiffness(lw)
     with pytest.raises(InputError):
         contact_stiffness(6e-3, f)
+
+
+def test_endless_chatter_is_a_solver_error(monkeypatch):
+    """Restarting exactly on a boundary (no nudge) makes a boundary event re-fire from rounding; the
+    guard turns that into a SolverError (one line, exit 2) instead of an endless loop."""
+    from models.errors import SolverError
+    monkeypatch.setattr(E, "BOUNDARY_NUDGE", 0.0)
+    s = Scene(cam_speed_rpm=300, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
+    with pytest.raises(SolverError, match="chatter"):
+        E.simulate(s)
+    monkeypatch.undo()
+    assert E.simulate(s).indicators["jumps"] >= 1      # with the nudge it runs through
