@@ -109,3 +109,21 @@ def test_any_other_device_name_is_refused(tmp_path_factory, spec):
     out = tmp_path_factory.mktemp("d") / "r.h5"
     assert main(["acquire", "--device", spec, "--fast", "-o", str(out)]) == 2
     assert not out.exists()
+
+
+SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data"
+
+
+@pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz"])
+def test_sample_data_is_what_its_scene_makes(tmp_path, name):
+    out = tmp_path / f"{name}.h5"
+    assert main(["acquire", "--scene", str(SAMPLE / "scenes" / f"{name}.toml"), "--fast", "-o", str(out)]) == 0
+    kept, fresh = read_recording(SAMPLE / f"{name}.h5"), read_recording(out)
+    np.testing.assert_array_equal(kept["signals"], fresh["signals"])
+    assert kept["attrs"]["complete"] and not any(k in ("clip", "gap", "overrun") for _, k, _ in kept["events"])
+    assert (SAMPLE / f"{name}.h5").stat().st_size < 1_000_000
+
+
+def test_sample_calibration_gives_the_papers_ka():
+    from acquisition.calibration import load_calibration
+    assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(86.43, rel=0.005)

@@ -147,6 +147,8 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
         if live is not None:
             live.start()
         result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=progress)
+        if live is not None:
+            progress.finish(result.wall_s)
     finally:
         if live is not None:
             live.stop()
@@ -199,9 +201,16 @@ def _live_display(console, dev, duration):
 
     live = Live(render(), console=console, refresh_per_second=4, transient=False)
 
-    def progress(rec, elapsed):
-        if elapsed - state["last"] >= 0.25:
+    def progress(rec, elapsed, final=False):
+        state["rec"] = rec
+        if final or elapsed - state["last"] >= 0.25:
             state["last"] = elapsed
             live.update(render(rec, elapsed))
+
+    def finish(wall_s):
+        if state.get("rec") is not None:
+            progress(state["rec"], wall_s, final=True)
+
+    progress.finish = finish
 
     return live, progress

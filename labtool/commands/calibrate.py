@@ -41,6 +41,7 @@ def calibrate(
     def _write(tmp: Path):
         try:
             tmp.write_text(text, encoding="utf-8")
+            tmp.chmod(0o644)  # mkstemp makes it private; a calibration is meant to be shared
         except OSError as exc:
             raise InputError(f"cannot write {output}: {exc.strerror}") from None
     atomic_write(output, _write)
