@@ -74,7 +74,8 @@ def fig_mr13d(sims) -> tuple[str, Figure] | None:
     for ax in axes:
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
-    fig.suptitle("MR13D and jump indicators of the simulations (cf. paper Figs 7-9); a sign change of MR13D means contact loss")
+    fig.suptitle("MR13D and jump indicators of the simulations, last simulated revolution (cf. paper Figs 7-9)",
+                 fontsize=10)
     return "MR13D and jump indicators (Figs 7-9)", fig
 
 
@@ -187,7 +188,8 @@ def fig_iso_per_revolution(report) -> tuple[str, Figure] | None:
         ax.set_xlabel("measured revolution")
         ax.set_ylim(0, 1.02)
         ax.grid(True, alpha=0.3)
-    axes[0].set_ylabel("rating R (fair > 0.58, good > 0.8, excellent > 0.94)")
+    axes[0].set_ylabel("ISO rating R")
+    fig.suptitle("dotted: grade bounds fair 0.58, good 0.8, excellent 0.94", fontsize=8)
     axes[0].legend(fontsize=7)
     return "ISO rating per revolution", fig
 

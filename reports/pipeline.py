@@ -114,8 +114,12 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
     rpm = overrides.get("cam_speed_rpm")
     src = "option"
     if rpm is None:
-        rpm = _attr_float(ds, "cam_speed_rpm", "n1_rpm")
-        src = "file attribute cam_speed_rpm"
+        # the nominal speed the stand was set to; labtool process keeps it as cam_speed_rpm_stated
+        for name in ("cam_speed_rpm_stated", "cam_speed_rpm", "n1_rpm"):
+            rpm = _attr_float(ds, name)
+            if rpm is not None:
+                src = f"file attribute {name}"
+                break
     if rpm is None:
         rpm, src = measured_rpm, "measured from phi1"
     limit = max_cam_speed_rpm()
@@ -205,23 +209,22 @@ def compare_run(cycles: align.MeasuredCycles, run: SimRun) -> list[dict]:
 def _measured_events(ds: xr.Dataset, cycles: align.MeasuredCycles) -> dict:
     """Impacts and jumps the processing found, per whole revolution (None when it reports none).
 
-    Accepts event variables whose name contains 'impact' or 'jump' holding event times (s), or
-    scalar attributes ``impacts``/``jumps`` (counts per revolution)."""
+    Impacts: event times in seconds on an event dimension, ``impact_time`` or the acceleration
+    spikes of ``labtool process`` (``spike_time``: an impact shows as a spike above the processing
+    band). Jumps: ``jump_time``. Else scalar attributes ``impacts``/``jumps`` (per revolution)."""
     out = {}
-    t0 = cycles.time[:, 0]
-    t1 = cycles.time[:, -1]
-    for kind in ("impacts", "jumps"):
-        names = [n for n in ds.variables if kind[:-1] in str(n).lower() and "time" not in ds[n].dims]
+    t0, t1 = cycles.time[:, 0], cycles.time[:, -1]
+    candidates = {"impacts": ("impact_time", "spike_time"), "jumps": ("jump_time",)}
+    for kind, names in candidates.items():
         val = None
         for n in names:
-            arr = np.asarray(ds[n].values)
-            if arr.ndim == 1 and np.issubdtype(arr.dtype, np.floating) and ds[n].attrs.get("units") == "s":
+            if n in ds.variables and ds[n].ndim == 1 and "time" not in ds[n].dims:
+                arr = np.asarray(ds[n].values, dtype=float)
                 counts = [int(np.sum((arr >= a) & (arr <= b))) for a, b in zip(t0, t1)]
                 val = float(np.mean(counts))
                 break
         if val is None:
-            v = _attr_float(ds, kind, f"{kind}_per_revolution")
-            val = v
+            val = _attr_float(ds, kind, f"{kind}_per_revolution")
         out[kind] = val
     return out
 

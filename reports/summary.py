@@ -44,16 +44,30 @@ def measured_info(report: Report) -> dict:
     ds = report.measured
     a = ds.attrs
     ka = a.get("ka_m_s2_per_v", a.get("ka"))
+    ka_source = a.get("ka_source", a.get("calibration"))
+    if ka is None:   # labtool process: one Ka per channel
+        per = {k[3:-len("_m_s2_per_v")]: a[k] for k in a
+               if k.startswith("ka_") and k.endswith("_m_s2_per_v") and "uncertainty" not in k}
+        if per:
+            vals = set(map(str, per.values()))
+            ka = next(iter(per.values())) if len(vals) == 1 else ", ".join(f"{c}: {v}" for c, v in per.items())
+            srcs = {str(a[k]) for k in a if k.startswith("ka_source_")}
+            ka_source = "; ".join(sorted(srcs)) or None
+    history = a.get("processing_history", a.get("history"))
+    try:    # labtool process stores the history as a JSON list of steps
+        history = json.dumps(json.loads(history), indent=1) if isinstance(history, str) else history
+    except ValueError:
+        pass
     return {
         "file": report.measured_path,
         "source": a.get("source", "recording"),
-        "cam_speed_rpm_nominal": a.get("cam_speed_rpm"),
+        "cam_speed_rpm_nominal": a.get("cam_speed_rpm_stated", a.get("cam_speed_rpm")),
         "cam_speed_rpm_measured": report.cycles.cam_speed_rpm,
         "ka_m_s2_per_v": ka,
-        "ka_source": a.get("ka_source", a.get("calibration", None)),
+        "ka_source": ka_source,
         "whole_revolutions": len(report.cycles.revolutions),
         "partial_revolutions_left_out": report.cycles.partial,
-        "processing_history": a.get("processing_history", a.get("history")),
+        "processing_history": history,
     }
 
 

@@ -1,7 +1,9 @@
 """``labtool demo``: the whole pipeline on the simulated stand and sample_data/.
 
-Grows with the pipeline; today: kinematics of the paper's mechanism at 180 rpm, its summary
-table, a plot, and the 16 runs of Table 1 against the paper's Table 3 (kinematic MR13D).
+Kinematics of the paper's mechanism at 180 rpm; the 16 runs of Table 1 against the paper's Table 3
+(kinematic MR13D); the simulated stand records the paper's experiment; processing; the rigid and
+elastic models against it in report.html (labtool/demo_steps.py). Ends by printing where the report
+is and its headline figures; a step whose piece is missing is skipped and said.
 """
 from __future__ import annotations
 
