@@ -246,3 +246,29 @@ def test_endless_chatter_is_a_solver_error(monkeypatch):
         E.simulate(s)
     monkeypatch.undo()
     assert E.simulate(s).indicators["jumps"] >= 1      # with the nudge it runs through
+
+
+def test_hunt_crossley_damping_dissipates_on_every_contact():
+    """With damping each rebound leaves slower than it arrived; the energy never grows."""
+    gap, M, v0 = 16e-6, 1.7, 0.05
+    t, drive = _const_grid(0.0, 3e-3)
+    _, m = _const_grid(M, 3e-3)
+    segs, events = E.integrate(t, drive, m, KC, gap, damping=2.0, y0=(gap / 2, v0, E.FLIGHT),
+                               rtol=1e-10, atol=(1e-16, 1e-12), max_step=1e-5)
+    speeds = [abs(e["v"]) for e in events]
+    assert len(speeds) >= 4 and np.all(np.diff(speeds[1::2]) < 0)      # take-off speeds fall
+    for land, leave in zip(events[0::2], events[1::2]):
+        assert abs(leave["v"]) < abs(land["v"])
+
+
+def test_omega1_var_scales_inertial_moment_by_sync_over_nominal_squared():
+    """Fu = 0: MR13D is inertial, so 'var' (cam at n1*1000/920) gives (1000/920)^2 times 'const'."""
+    var = simulate(_scene(1, accuracy="fast"), "elastic").indicators
+    const = simulate(_scene(1, accuracy="fast", omega1_mode="const"), "elastic").indicators
+    assert var["MR13D_max_Nm"] / const["MR13D_max_Nm"] == pytest.approx((1000 / 920) ** 2, rel=2e-3)
+
+
+@pytest.mark.parametrize("law", ["cosine", "poly345"])
+def test_other_laws_run(law):
+    ind = simulate(Scene(law=law, accuracy="fast"), "elastic").indicators
+    assert ind["MR13D_max_Nm"] > 0 > ind["MR13D_min_Nm"] and ind["jumps"] >= 1
