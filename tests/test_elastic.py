@@ -272,3 +272,19 @@ def test_omega1_var_scales_inertial_moment_by_sync_over_nominal_squared():
 def test_other_laws_run(law):
     ind = simulate(Scene(law=law, accuracy="fast"), "elastic").indicators
     assert ind["MR13D_max_Nm"] > 0 > ind["MR13D_min_Nm"] and ind["jumps"] >= 1
+
+
+@settings(max_examples=8, deadline=None)
+@given(rpm=st.floats(30, 600), Fu=st.floats(0, 300), j=st.sampled_from([0.0, 0.016e-3, 0.3e-3]),
+       jt=st.floats(0.3, 6), lw=st.floats(1e-3, 30e-3), damping=st.sampled_from([0.0, 1.0, 100.0]),
+       law=st.sampled_from(["sine", "cosine", "modtrap"]))
+def test_any_valid_scene_runs_to_finite_results(rpm, Fu, j, jt, lw, damping, law):
+    s = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, backlash=j, jt_factor=jt, contact_length=lw,
+              contact_damping=damping, accuracy="fast")
+    res = simulate(s, "elastic")
+    for v in ("x_el", "dx_el", "contact_force", "omega2", "epsilon2", "MR13D"):
+        assert np.all(np.isfinite(res.dataset[v].values))
+    x = res.dataset["x_el"].values
+    phase = res.dataset["contact_phase"].values
+    assert np.all(x[phase == E.INTERIOR] <= 1e-12) and np.all(x[phase == E.EXTERIOR] >= j - 1e-12)
+    assert res.indicators["jumps"] >= 0 and res.indicators["impacts"] >= 0
