@@ -1,5 +1,5 @@
 """Elastic model: cost and accuracy of the solver presets on Table 1's 16 runs, and the tables of
-docs/models.md (Table 3 comparison, lw fit). Run: .venv/bin/python benchmarks/bench_elastic.py [--tables]
+docs/models.md (Table 3 comparison, lw fit). Run: .venv/bin/python benchmarks/bench_elastic.py [--tables | --figure]
 
 Not a test: it prints wall times (which depend on the machine) and markdown tables.
 """
@@ -80,7 +80,39 @@ def tables():
               f"| {ind['jumps']} ({ref.jumps}) | {ind['impacts']} ({ref.impacts}) |")
 
 
+def figure9(path="docs/figures/elastic_fig9_run1.png"):
+    """The time series behind the paper's Figure 9 (run 1): MR13D and x_el over the rise, with the
+    gap of Table 1 (j = 0.016 mm) and with the gap closed."""
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(2, 2, figsize=(10, 5.5), sharex=True)
+    for col, j in enumerate((0.016e-3, 0.0)):
+        ds = simulate(Scene(backlash=j), "elastic").dataset
+        t = ds.time.values * 1e3
+        ax[0, col].plot(t, ds["MR13D"], lw=0.8, label="contact force moment")
+        ax[0, col].plot(t, ds["MR13D_static"], lw=1.2, ls="--", label="static reaction R31 moment")
+        ax[1, col].plot(t, ds["x_el"] * 1e3, lw=0.8)
+        if j > 0:
+            ax[1, col].axhline(j * 1e3, color="grey", lw=0.6, ls=":")
+        ax[0, col].set_title(f"run 1 (Fu = 0, n1 = 180 rpm, Jt = 1), j = {j * 1e3:g} mm")
+        ax[1, col].set_xlabel("time from the start of the rise (ms)")
+    ax[0, 0].set_ylabel("MR13D (N m)")
+    ax[1, 0].set_ylabel("x_el (mm)")
+    ax[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=80)
+    print("wrote", path)
+
+
 if __name__ == "__main__":
+    if "--figure" in sys.argv:
+        figure9()
+        sys.exit(0)
     presets()
     if "--tables" in sys.argv:
         print()
