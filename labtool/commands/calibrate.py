@@ -19,8 +19,8 @@ def register(app: typer.Typer) -> None:
 def calibrate(
     recording: Path = typer.Argument(..., help="recording (HDF5 v1) of the reference excitation"),
     channel: List[str] = typer.Option(["aE_t"], help="channel on the exciter (repeatable)"),
-    reference_accel: float = typer.Option(9.81, help="reference acceleration [m/s^2] (B&K 4291: 9.81)"),
-    reference_freq: float = typer.Option(79.6, help="reference frequency [Hz], refined by the fit"),
+    reference_accel: float = typer.Option(9.81, help="reference acceleration (m/s^2) (B&K 4291: 9.81)"),
+    reference_freq: float = typer.Option(79.6, help="reference frequency (Hz), refined by the fit"),
     convention: str = typer.Option("peak", help="peak | rms: what --reference-accel means"),
     reference_uncertainty: float = typer.Option(0.0, help="relative standard uncertainty of the exciter (e.g. 0.01)"),
     output: Path = typer.Option(..., "-o", "--output", help="calibration file to write (TOML)"),
