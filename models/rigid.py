@@ -631,3 +631,55 @@ def _dataset(scene, plant, info, omega1_0, times, s, r, events) -> xr.Dataset:
         "rise_only": int(scene.rise_only), "revolutions": scene.revolutions,
     })
     return ds
+
+
+# --------------------------------------------------------------------------------------------
+# the paper's Table 2: the 16 runs of Table 1 (sine law, omega1 variable)
+# --------------------------------------------------------------------------------------------
+TABLE2_KEYS = ("MR13D_max_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s", "percussion_max_Ns", "jumps")
+
+# the direction of each factor's effect as the paper's Discussion states it for the rigid model
+# (A = Fu, B = j, C = n1, D = Jt; +1 = a bigger factor gives a bigger indicator)
+PAPER_DIRECTIONS = {
+    "MR13D_max_Nm": {"A": +1, "C": +1, "D": +1},
+    "dphi2_max_deg": {"B": +1, "D": +1, "A": -1},
+    "domega2_max_rad_s": {"B": +1, "C": +1, "D": +1, "A": -1},
+    "domega1_max_rad_s": {"C": +1, "D": +1, "A": -1},
+    "percussion_max_Ns": {"B": +1, "C": +1, "D": +1, "A": -1},
+    "jumps": {"A": +1, "C": +1, "B": -1},
+}
+
+
+def rigid_vs_table2(accuracy: str = "standard", law: str = "sine", omega1_mode: str = "var"):
+    """The 16 runs of Table 1 with the rigid model against Table 2: a DataFrame with, per run, the
+    factors, our indicators, the paper's and the % differences (jumps: the difference in counts)."""
+    import pandas as pd
+
+    from models.paper import read_reference, table1_runs
+
+    t2 = read_reference("table2_rigid")
+    rows = []
+    for run, paper in zip(table1_runs().itertuples(), t2.itertuples()):
+        scene = Scene(law=law, cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3,
+                      jt_factor=run.Jt_factor, omega1_mode=omega1_mode, accuracy=accuracy)
+        ind = simulate(scene).indicators
+        row = {"run": run.run, "Fu_N": run.Fu_N, "j_mm": run.j_mm, "n1_rpm": run.n1_rpm, "Jt_factor": run.Jt_factor,
+               "A": int(paper.A_Fu_level), "B": int(paper.B_j_level), "C": int(paper.C_n1_level), "D": int(paper.D_Jt_level)}
+        for key in TABLE2_KEYS:
+            ours, ref = ind[key], getattr(paper, key)
+            row[key] = ours
+            row[f"paper_{key}"] = ref
+            if key == "jumps":
+                row["jumps_diff"] = ours - ref
+            else:
+                row[f"{key}_diff_pct"] = 100.0 * (ours / ref - 1.0) if ref != 0 else (0.0 if ours == 0 else float("inf"))
+        row["impacts"] = ind["impacts"]
+        row["liftoffs"] = ind["liftoffs"]
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def main_effects(df, prefix: str = "") -> dict:
+    """Main effect of each factor (mean at level 2 - mean at level 1) on each Table 2 indicator."""
+    return {key: {f: float(df.loc[df[f] == 2, prefix + key].mean() - df.loc[df[f] == 1, prefix + key].mean())
+                  for f in "ABCD"} for key in TABLE2_KEYS}
