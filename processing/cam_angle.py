@@ -169,18 +169,25 @@ def phi1_from_marks(index: np.ndarray, marks: np.ndarray, fallback_period: float
     marks = np.asarray(marks, dtype=float)
     if len(marks) == 0:
         raise InputError("no revolution mark found (no tacho pulse and no match with the kinematics)")
-    k = np.searchsorted(marks, index, side="right") - 1
     if len(marks) >= 2:
         periods = np.diff(marks)
         first, last = periods[0], periods[-1]
     else:
+        periods = np.empty(0)
         first = last = float(fallback_period)
-    kk = np.clip(k, 0, len(marks) - 1)
-    per = np.where(k < 0, first, np.where(k >= len(marks) - 1, last, 0.0))
-    inner = (k >= 0) & (k < len(marks) - 1)
-    if len(marks) >= 2:
-        per[inner] = periods[kk[inner]]
-    frac = (index - marks[kk]) / per
-    phi1 = np.mod(TWO_PI * frac, TWO_PI)
-    rev = np.where(k < 0, -1, k).astype(np.int64)
-    return phi1, rev
+    # per interval (before the first mark, between marks, after the last): origin and period
+    origin = np.concatenate([[marks[0]], marks])
+    per = np.concatenate([[first], periods, [last]])
+    if index.ndim == 1 and len(index) > 1 and np.all(np.diff(index[:2]) > 0) and _is_arange(index):
+        # contiguous samples: interval of each sample by counting, not by a search per sample
+        counts = np.diff(np.concatenate([[0], np.searchsorted(index, marks, side="right"), [len(index)]]))
+        k = np.repeat(np.arange(-1, len(marks)), counts)
+    else:
+        k = np.searchsorted(marks, index, side="right") - 1
+    scale = TWO_PI / per[k + 1]
+    phi1 = np.mod((index - origin[k + 1]) * scale, TWO_PI)
+    return phi1, k.astype(np.int64)
+
+
+def _is_arange(index: np.ndarray) -> bool:
+    return bool(index[-1] - index[0] == len(index) - 1 and index[1] - index[0] == 1)

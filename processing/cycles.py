@@ -27,13 +27,17 @@ class CycleAccumulator:
 
     def add(self, frac_pos: np.ndarray, values: dict[str, np.ndarray]) -> bool:
         """Add one revolution: ``frac_pos`` = phi1 (rad, increasing from ~0 to ~2 pi) of its samples."""
-        if any(not np.all(np.isfinite(values[k])) for k in self.names):
+        vals = np.stack([np.asarray(values[k], dtype=float) for k in self.names])
+        if not np.isfinite(vals).all():
             self.rejected += 1
             return False
-        for k in self.names:
-            v = np.interp(self.grid, frac_pos, values[k])
-            self.sum[k] += v
-            self.sumsq[k] += v * v
+        # one search for all variables: linear interpolation weights of the grid in frac_pos
+        j = np.clip(np.searchsorted(frac_pos, self.grid, side="right") - 1, 0, len(frac_pos) - 2)
+        w = np.clip((self.grid - frac_pos[j]) / (frac_pos[j + 1] - frac_pos[j]), 0.0, 1.0)
+        v = vals[:, j] * (1.0 - w) + vals[:, j + 1] * w
+        for i, k in enumerate(self.names):
+            self.sum[k] += v[i]
+            self.sumsq[k] += v[i] * v[i]
         self.count += 1
         return True
 

@@ -26,8 +26,9 @@ def detect_spikes(residual: np.ndarray, lowpassed: np.ndarray, fs: float, k_sigm
     r = np.asarray(residual, dtype=float)
     if valid is not None:
         r = np.where(valid, r, 0.0)
-    med = np.median(r)
-    sigma = 1.4826 * np.median(np.abs(r - med))
+    sub = r[::8] if len(r) > 4096 else r  # the scale estimate needs no more than every 8th sample
+    med = np.median(sub)
+    sigma = 1.4826 * np.median(np.abs(sub - med))
     thr = max(k_sigma * sigma, floor_fraction * float(np.max(np.abs(lowpassed))) if len(lowpassed) else 0.0)
     if thr <= 0 or len(r) < 3:
         return np.empty(0, dtype=np.int64), np.empty(0), thr

@@ -12,7 +12,7 @@ These terms change by about 2.5 and 0.25 m/s^2 over the 15 deg stroke (2-3 % of 
 
 Offset and drift: the sensor chain is AC-coupled and the conditioner has an offset, so the zero of
 the acceleration is unknown. The follower rests in the dwells (omega2 = 0, epsilon2 = 0, aE_n = 0
-there), so each channel is referenced to the median of the middle of every dwell, interpolated
+there), so each channel is referenced to the mean of the middle 60 % of every dwell, interpolated
 linearly between dwells. omega2 is the integral of epsilon2 over each motion interval (rise or
 return, plus a margin into the dwells), started at 0 and corrected by a linear ramp so that it
 ends at 0 in the next dwell: the integration drift cannot accumulate beyond one motion interval.
@@ -35,11 +35,12 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def dwell_baseline(x: np.ndarray, dwell: np.ndarray, middle: float = 0.6, min_len: int = 8) -> np.ndarray:
-    """Baseline (same unit as x) through the median of the middle part of every complete dwell.
+    """Baseline (same unit as x) through the mean of the middle part of every complete dwell.
 
-    x: (n,) or (n, nch); dwell: (n,) bool. Dwells touching the ends of the array are incomplete
-    (their centre is unknown) and are used only when no complete dwell exists. Constant
-    extrapolation beyond the first and last dwell centre.
+    x: (n,) or (n, nch); dwell: (n,) bool. The middle ``middle`` fraction keeps the impacts and the
+    settling at the dwell's ends out. Dwells touching the ends of the array are incomplete (their
+    centre is unknown) and are used only when no complete dwell exists. Constant extrapolation
+    beyond the first and last dwell centre.
     """
     x2 = x[:, None] if x.ndim == 1 else x
     n = len(x2)
@@ -47,16 +48,19 @@ def dwell_baseline(x: np.ndarray, dwell: np.ndarray, middle: float = 0.6, min_le
     full = [(a, b) for a, b in rr if a > 0 and b < n and b - a >= min_len]
     use = full or [(a, b) for a, b in rr if b - a >= min_len]
     if not use:
-        out = np.repeat(np.median(x2, axis=0, keepdims=True), n, axis=0)
+        out = np.repeat(np.mean(x2, axis=0, keepdims=True), n, axis=0)
         return out[:, 0] if x.ndim == 1 else out
-    centres, levels = [], []
-    for a, b in use:
-        cut = int((b - a) * (1 - middle) / 2)
-        levels.append(np.median(x2[a + cut:b - cut], axis=0))
-        centres.append(0.5 * (a + b - 1))
-    levels = np.asarray(levels)
+    ab = np.asarray(use)
+    cut = ((ab[:, 1] - ab[:, 0]) * (1 - middle) / 2).astype(int)
+    lo, hi = ab[:, 0] + cut, ab[:, 1] - cut
+    centres = 0.5 * (ab[:, 0] + ab[:, 1] - 1)
     idx = np.arange(n, dtype=float)
-    out = np.column_stack([np.interp(idx, centres, levels[:, j]) for j in range(x2.shape[1])])
+    cols = []
+    for j in range(x2.shape[1]):
+        cs = np.concatenate([[0.0], np.cumsum(x2[:, j])])
+        levels = (cs[hi] - cs[lo]) / (hi - lo)
+        cols.append(np.interp(idx, centres, levels))
+    out = np.column_stack(cols)
     return out[:, 0] if x.ndim == 1 else out
 
 

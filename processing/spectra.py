@@ -10,6 +10,7 @@ left out of both.
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft as sfft
 
 
 def default_nperseg(fs: float, n_samples: int, seconds: float = 4.0) -> int:
@@ -28,6 +29,8 @@ class WelchAccumulator:
         self.nperseg = int(nperseg)
         self.hop = self.nperseg // 2
         self.window = np.hanning(self.nperseg + 1)[:-1]  # periodic Hann, as scipy's 'hann'
+        self._wfft = np.fft.rfft(self.window)
+        self._w32 = self.window.astype(np.float32)
         self.nch = n_channels
         self.sum_amp = np.zeros((self.nperseg // 2 + 1, n_channels))
         self.sum_pow = np.zeros_like(self.sum_amp)
@@ -53,15 +56,17 @@ class WelchAccumulator:
             ok = (badcum[starts + self.nperseg] - badcum[starts]) == 0
             self.skipped += int((~ok).sum())
             starts = starts[ok]
-            for k in range(0, len(starts), 64):  # bounded temporaries
-                idx = starts[k:k + 64, None] + np.arange(self.nperseg)[None, :]
-                seg = buf[idx]  # (m, nperseg, nch)
-                seg = seg - seg.mean(axis=1, keepdims=True)
-                spec = np.fft.rfft(seg * self.window[None, :, None], axis=1)
-                mag = np.abs(spec)
-                self.sum_amp += mag.sum(axis=0)
-                self.sum_pow += (mag**2).sum(axis=0)
-                self.count += len(idx)
+            # detrending by the segment mean commutes with the FFT: X((x - m) w) = X(x w) - m W;
+            # channel-major float32 transforms are ~4x faster and far more precise than needed
+            bt = np.ascontiguousarray(buf.T)
+            for st in starts:
+                seg = bt[:, st:st + self.nperseg]
+                spec = sfft.rfft((seg * self._w32).astype(np.float32), axis=1)
+                spec -= seg.mean(axis=1)[:, None] * self._wfft[None, :]
+                mag = np.abs(spec).astype(np.float64)
+                self.sum_amp += mag.T
+                self.sum_pow += (mag * mag).T
+                self.count += 1
             keep_from = nseg * self.hop
         else:
             keep_from = 0

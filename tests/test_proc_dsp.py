@@ -63,12 +63,12 @@ def test_spectra_sine_amplitude_parseval_and_scipy():
     assert amp[np.argmin(np.abs(f - 62.5))] == pytest.approx(3.0, rel=0.01)
     f2, p = spectra.welch_psd(x, fs, nperseg=4096)
     fr, pr = signal.welch(x, fs, window="hann", nperseg=4096, noverlap=2048, detrend="constant")
-    np.testing.assert_allclose(p, pr, rtol=1e-9)
+    np.testing.assert_allclose(p, pr, rtol=1e-4, atol=1e-6 * pr.max())  # float32 transforms
     assert np.sum(p) * (f2[1] - f2[0]) == pytest.approx(np.var(x), rel=0.02)
     acc = spectra.WelchAccumulator(fs, 4096, 1)
     for a in range(0, n, 777):  # block-wise feeding gives the same estimate
         acc.feed(x[a:a + 777, None])
-    np.testing.assert_allclose(acc.psd()[:, 0], pr, rtol=1e-9)
+    np.testing.assert_allclose(acc.psd()[:, 0], pr, rtol=1e-4, atol=1e-6 * pr.max())
     bad = np.zeros(n, bool)
     bad[10000] = True
     acc2 = spectra.WelchAccumulator(fs, 4096, 1)
