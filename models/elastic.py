@@ -192,13 +192,23 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     t (s), kind ('leave_interior', 'land_exterior', 'leave_exterior', 'land_interior', ...), v (m/s).
     """
     t_end = float(t_grid[-1] if t_end is None else t_end)
+    t0 = 0.0
+    segments, events = [], []
     if y0 is None:
         x0, v0, phase = initial_state(float(drive_grid[0]), kc, gap)
+        nonzero = np.flatnonzero(drive_grid)
+        if drive_grid[0] == 0 and nonzero.size:
+            # unloaded start: nothing moves until the drive departs from zero; then sit against the
+            # flank it loads, so the run does not begin with a zero-speed "landing" or "jump"
+            phase = INTERIOR if drive_grid[nonzero[0]] > 0 else EXTERIOR
+            x0 = _restart_position(phase == INTERIOR, phase, gap)
+            t0 = float(t_grid[nonzero[0] - 1])
+            if t0 > 0:
+                segments.append((phase, _AtRest(0.0, t0, x0)))
     else:
         x0, v0, phase = y0
-    t0, y = 0.0, np.array([x0, v0], dtype=float)
+    y = np.array([x0, v0], dtype=float)
     args = (t_grid, drive_grid, m_grid, kc, gap, damping)
-    segments, events = [], []
     short = 0                     # consecutive phases shorter than ZENO_DT
     while t0 < t_end:
         if short >= ZENO_SEGMENTS:
@@ -225,6 +235,19 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
         y_hit[0] = _restart_position(specs[hit][0] is ev_zero, new_phase, gap)
         t0, y, phase = float(t_hit), y_hit, new_phase
     return segments, events
+
+
+class _AtRest:
+    """A phase segment with the follower at rest at x0 over [t0, t1] (solve_ivp result look-alike)."""
+
+    def __init__(self, t0: float, t1: float, x0: float):
+        self.t = np.array([t0, t1])
+        self.x0 = x0
+        self.y = np.array([[x0, x0], [0.0, 0.0]])
+
+    def sol(self, tt):
+        tt = np.atleast_1d(tt)
+        return np.vstack([np.full(tt.size, self.x0), np.zeros(tt.size)])
 
 
 BOUNDARY_NUDGE = 1e-13   # m, how far inside the new phase a restart begins (<< any deformation)

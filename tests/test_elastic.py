@@ -288,3 +288,12 @@ def test_any_valid_scene_runs_to_finite_results(rpm, Fu, j, jt, lw, damping, law
     phase = res.dataset["contact_phase"].values
     assert np.all(x[phase == E.INTERIOR] <= 1e-12) and np.all(x[phase == E.EXTERIOR] >= j - 1e-12)
     assert res.indicators["jumps"] >= 0 and res.indicators["impacts"] >= 0
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_run_starting_unloaded_starts_on_the_flank_about_to_be_loaded(sign):
+    t = np.linspace(0.0, 5e-3, 11)
+    drive = sign * np.maximum(t - 1e-3, 0.0) * 1e4          # zero, then a ramp
+    segs, events = E.integrate(t, drive, np.full(11, 2.0), KC, gap=16e-6, rtol=1e-9,
+                               atol=(1e-15, 1e-11), max_step=2e-5)
+    assert events == [] and segs[0][0] == (E.INTERIOR if sign > 0 else E.EXTERIOR)
