@@ -214,3 +214,20 @@ def test_harmonic_lowpass_keeps_low_and_removes_high_harmonics():
     x = np.linspace(0, 2 * math.pi, 400, endpoint=False)
     y = np.sin(2 * x) + 0.5 * np.cos(50 * x)
     assert np.allclose(align.harmonic_lowpass(y, 10), np.sin(2 * x), atol=1e-12)
+
+
+def test_json_to_stdout_is_one_object(files, capsys, tmp_path):
+    rc = main(["report", str(files["exact"]), "--models", "kinematic", "--omega1", "const", "-o",
+               str(tmp_path / "r.html"), "--json", "-"])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["passed"] is True and summary["headline"][0]["omega2_iso_grade"] == "excellent"
+
+
+@pytest.mark.parametrize("drop", ["epsilon2", "phi1"])
+def test_measured_file_without_epsilon2_or_phi1_is_one_line_exit_2(files, capsys, tmp_path, drop):
+    import xarray as xr
+    ds = xr.open_dataset(files["exact"], engine="h5netcdf").load().drop_vars(drop)
+    path = tmp_path / f"no_{drop}.nc"
+    write_netcdf(ds, path)
+    _one_line_exit_2(capsys, ["report", str(path), "-o", str(tmp_path / "r.html")], f"no {drop}" if drop == "epsilon2" else "no cam angle phi1")
