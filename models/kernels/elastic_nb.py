@@ -28,7 +28,8 @@ from models.kernels import dopri5 as dp
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
 N_EXP = 10.0 / 9.0
 NUDGE = 1e-13           # m, as models.elastic.BOUNDARY_NUDGE
-MAX_STEPS = 2_000_000
+MAX_STEPS = 2_000_000       # accepted steps per run (memory ~100 B a step)
+MAX_SEGMENTS = 1_000_000    # phases per run
 
 
 @njit(cache=True)
@@ -127,7 +128,7 @@ def _first_step(t0, y0, f0, t_bound, max_step, rtol, atol, phase, tg, drive, mg,
 
 @njit(cache=True)
 def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_step,
-        max_steps, max_segments):
+        max_steps, max_segments, zeno_segments, zeno_dt):
     """The phase-by-phase loop. Returns (status, t_fail, n_steps, n_seg, nfev, step arrays,
     segment arrays, event arrays); see ``integrate`` for their layout."""
     cap = min(max_steps, 4096)
@@ -135,13 +136,14 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
     st_h = np.empty(cap)
     st_y = np.empty((cap, 2))
     st_Q = np.empty((cap, 2, 4))
-    seg_phase = np.empty(max_segments, dtype=np.int64)
-    seg_first = np.empty(max_segments, dtype=np.int64)
-    seg_end = np.empty(max_segments)
-    ev_t = np.empty(max_segments)
-    ev_v = np.empty(max_segments)
-    ev_from = np.empty(max_segments, dtype=np.int64)
-    ev_to = np.empty(max_segments, dtype=np.int64)
+    scap = 256
+    seg_phase = np.empty(scap, dtype=np.int64)
+    seg_first = np.empty(scap, dtype=np.int64)
+    seg_end = np.empty(scap)
+    ev_t = np.empty(scap)
+    ev_v = np.empty(scap)
+    ev_from = np.empty(scap, dtype=np.int64)
+    ev_to = np.empty(scap, dtype=np.int64)
     K = np.empty((7, 2))
     y = np.array([x0, v0])
     y_new = np.empty(2)
@@ -150,11 +152,24 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
     t = 0.0
     phase = phase0
     nst, nseg, nev, nfev = 0, 0, 0, 0
+    short = 0                       # consecutive phases shorter than zeno_dt (models.elastic)
     while t < t_end:
+        if short >= zeno_segments:
+            return dp.NO_PROGRESS, t, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, seg_phase, seg_first, seg_end, ev_t, ev_v, ev_from, ev_to
         if nseg >= max_segments:
             return dp.TOO_MANY_EVENTS, t, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, seg_phase, seg_first, seg_end, ev_t, ev_v, ev_from, ev_to
+        if nseg == scap:
+            scap *= 2
+            seg_phase = dp.grow(seg_phase, scap)
+            seg_first = dp.grow(seg_first, scap)
+            seg_end = dp.grow(seg_end, scap)
+            ev_t = dp.grow(ev_t, scap)
+            ev_v = dp.grow(ev_v, scap)
+            ev_from = dp.grow(ev_from, scap)
+            ev_to = dp.grow(ev_to, scap)
         seg_phase[nseg] = phase
         seg_first[nseg] = nst
+        t_seg0 = t
         # events of this phase: (which, direction, next phase); which 0: x, 1: x - gap
         if phase == INTERIOR:
             ne, w0, d0, n0, w1, d1, n1 = 1, 0, 1.0, (FLIGHT if gap > 0 else EXTERIOR), 0, 0.0, 0
@@ -223,6 +238,7 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
                 dp.dense_eval(y, h, Q, s_hit, tmp)
                 seg_end[nseg] = t_hit
                 nseg += 1
+                short = short + 1 if t_hit - t_seg0 < zeno_dt else 0
                 new_phase = n0 if hit == 0 else n1
                 at_zero = (w0 if hit == 0 else w1) == 0
                 ev_t[nev] = t_hit
@@ -263,45 +279,56 @@ _NAMES = ("interior", "flight", "exterior")
 
 
 def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
-              rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, method="RK45", max_segments=None,
-              max_steps=MAX_STEPS, stats=None):
+              rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, method="RK45",
+              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, stats=None):
     """Compiled twin of ``models.elastic.integrate`` (same arguments and return value).
 
-    ``method`` is accepted for compatibility and must be RK45 (Dormand-Prince 5(4)).
-    ``stats`` (dict, optional) receives nfev and n_steps: the cost measure of the benchmarks.
+    ``method`` is accepted for compatibility and must be RK45 (Dormand-Prince 5(4)). Limits: the
+    model's chatter guard (ZENO_SEGMENTS consecutive phases shorter than ZENO_DT), ``max_steps``
+    steps and ``max_segments`` phases per run. ``stats`` (dict, optional) receives nfev and
+    n_steps: the cost measure of the benchmarks.
     """
     from models import elastic
 
     if method != "RK45":
         raise ValueError("the compiled loop is Dormand-Prince 5(4) (RK45) only")
-    if max_segments is None:
-        max_segments = elastic.MAX_SEGMENTS
+    zeno_n = int(getattr(elastic, "ZENO_SEGMENTS", 200))
+    zeno_dt = float(getattr(elastic, "ZENO_DT", 1e-9))
     tg = np.ascontiguousarray(t_grid, dtype=float)
+    drive_grid = np.ascontiguousarray(drive_grid, dtype=float)
     t_end = float(tg[-1] if t_end is None else t_end)
     if y0 is None:
+        # the start of models.elastic.integrate: static equilibrium; at rest with no load, against
+        # the flank the first non-zero drive will load
         x0, v0, phase = elastic.initial_state(float(drive_grid[0]), kc, gap)
+        nonzero = np.flatnonzero(drive_grid)
+        if drive_grid[0] == 0 and nonzero.size:
+            phase = INTERIOR if drive_grid[nonzero[0]] > 0 else EXTERIOR
+            x0 = elastic._restart_position(phase == INTERIOR, phase, gap)
     else:
         x0, v0, phase = y0
     max_step = float(min(max_step, t_end)) if math.isfinite(max_step) else float(t_end)
-    out = run(tg, np.ascontiguousarray(drive_grid, dtype=float), np.ascontiguousarray(m_grid, dtype=float),
+    out = run(tg, drive_grid, np.ascontiguousarray(m_grid, dtype=float),
               float(kc), float(gap), float(damping), t_end, float(x0), float(v0), int(phase),
-              float(rtol), np.asarray(atol, dtype=float), max_step, int(max_steps), int(max_segments) + 1)
+              float(rtol), np.asarray(atol, dtype=float), max_step, int(max_steps), int(max_segments),
+              zeno_n, zeno_dt)
     status, t_fail, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, sph, sfirst, send, ev_t, ev_v, ev_from, ev_to = out
     if stats is not None:
         stats["nfev"] = stats.get("nfev", 0) + int(nfev)
         stats["n_steps"] = stats.get("n_steps", 0) + int(nst)
+    if status == dp.NO_PROGRESS:
+        raise SolverError(f"elastic model: {zeno_n} contact switches within {zeno_n * zeno_dt:.1g} s at "
+                          f"t = {t_fail:.6g} s (endless chatter); add contact damping or check the scene")
     if status == dp.TOO_MANY_EVENTS:
-        raise SolverError(f"elastic model: more than {max_segments} contact phases before t = {t_fail:.4g} s "
-                          "(endless chatter); add contact damping or check the scene")
+        raise SolverError(f"elastic model (compiled): more than {max_segments} contact phases before "
+                          f"t = {t_fail:.4g} s (the phase cap per run)")
     if status != dp.OK:
         raise SolverError(f"elastic model (compiled): {dp.STATUS_TEXT[status]} at t = {t_fail:.6g} s "
-                          f"(limit: {max_steps} steps per run)")
+                          f"(limits: {max_steps} steps, {max_segments} phases per run)")
     segments = []
     for k in range(nseg):
         a = sfirst[k]
         b = sfirst[k + 1] if k + 1 < nseg else nst
-        if b <= a:     # a phase that ended inside its first step's start (cannot happen) -> skip
-            continue
         segments.append((int(sph[k]), dp.DenseRun(st_t[a:b], st_h[a:b], st_y[a:b], st_Q[a:b], float(send[k]))))
     events = [{"t": float(ev_t[i]), "kind": _KIND[(int(ev_from[i]), int(ev_to[i]))], "v": float(ev_v[i]),
                "from": _NAMES[int(ev_from[i])], "to": _NAMES[int(ev_to[i])]} for i in range(nev)]
