@@ -297,3 +297,23 @@ def test_a_run_starting_unloaded_starts_on_the_flank_about_to_be_loaded(sign):
     segs, events = E.integrate(t, drive, np.full(11, 2.0), KC, gap=16e-6, rtol=1e-9,
                                atol=(1e-15, 1e-11), max_step=2e-5)
     assert events == [] and segs[0][0] == (E.INTERIOR if sign > 0 else E.EXTERIOR)
+
+
+def test_stiff_contact_approaches_the_rigid_model():
+    """j = 0, omega1 const: as Kc grows the elastic MR13D and omega2 converge on the rigid model's
+    (models.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
+    drops the load of the dwell, is left out)."""
+    pytest.importorskip("models.rigid")
+    s = Scene(Fu=65.0, backlash=0.0, omega1_mode="const")
+    rig = simulate(s, "rigid").dataset
+    errs = []
+    for f in (1.0, 30.0, 1000.0):
+        el = simulate(s.replace(kc_factor=f), "elastic").dataset
+        ph = el["phi1"].values
+        inner = ph < 0.999 * ph[-1]
+        mr = np.interp(ph, rig["phi1"].values, rig["MR13D"].values)
+        w2 = np.interp(ph, rig["phi1"].values, rig["omega2"].values)
+        errs.append((np.abs(el["MR13D"].values - mr)[inner].max(), np.abs(el["omega2"].values - w2)[inner].max()))
+    errs = np.array(errs)
+    assert np.all(np.diff(errs, axis=0) < 0)
+    assert errs[-1, 0] < 0.002 * 17.2 and errs[-1, 1] < 1e-4 * 10.6
