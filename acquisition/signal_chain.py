@@ -203,6 +203,25 @@ def truth(scene: StandScene, t, seed: int | None = None) -> dict:
             "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
 
 
+def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandScene:
+    """The StandScene a simulated recording was made with, from its root attributes.
+
+    ``truth(scene_from_attrs(read_recording(p)["attrs"]), t)`` is the noise-free truth behind
+    recording p (t = row / sample_rate_hz when there are no gaps). InputError if the recording does
+    not come from the simulated stand. The mechanism is the default one unless given.
+    """
+    def text(v):
+        return v.decode() if isinstance(v, bytes) else str(v)
+    if text(attrs.get("device", "")) != "sim" or "stand_mode" not in attrs:
+        raise InputError("this recording does not come from the simulated stand: it has no known truth")
+    return StandScene(
+        mode=text(attrs["stand_mode"]), law=text(attrs["law"]), cam_speed_rpm=float(attrs["cam_speed_rpm"])
+        if "cam_speed_rpm" in attrs else 180.0, Fu=float(attrs["Fu_N"]), backlash=float(attrs["backlash_mm"]) * 1e-3,
+        jt_factor=float(attrs["jt_factor"]), ripple=float(attrs["truth_omega1_ripple"]),
+        cal_accel=float(attrs["cal_accel_m_s2_peak"]), cal_freq=float(attrs["cal_freq_hz"]),
+        cal_channel=text(attrs["cal_channel"]), mechanism=mechanism or Mechanism.default())
+
+
 def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
     """Specific force along the sensor axes (n, 2) in m/s^2: truth minus gravity, on the moving axes.
 

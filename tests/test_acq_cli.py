@@ -127,3 +127,15 @@ def test_sample_data_is_what_its_scene_makes(tmp_path, name):
 def test_sample_calibration_gives_the_papers_ka():
     from acquisition.calibration import load_calibration
     assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(86.43, rel=0.005)
+
+
+def test_truth_from_a_recordings_attributes(tmp_path):
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--fast", "--rpm", "500", "--ripple", "0.01", "--duration", "0.3", "-o", str(out)]) == 0
+    rec = read_recording(out)
+    scene = sc.scene_from_attrs(rec["attrs"])
+    assert scene.cam_speed_rpm == 500 and scene.ripple == 0.01 and scene.backlash == pytest.approx(0.128e-3)
+    t = np.arange(rec["signals"].shape[0]) / rec["attrs"]["sample_rate_hz"]
+    np.testing.assert_array_equal(sc.truth(scene, t)["omega2"], sc.truth(sc.StandScene(cam_speed_rpm=500, ripple=0.01), t)["omega2"])
+    with pytest.raises(sc.InputError):
+        sc.scene_from_attrs({"device": "nidaqmx"})
