@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import signal
+import threading
 import time
 
 from acquisition.device import Device, DeviceDisconnected, Event
@@ -57,9 +59,14 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     target = None if duration_s is None else int(round(duration_s * actual))
     outcome, message, complete = "done", "duration reached", True
     t0 = time.perf_counter()
+    stop = _StopRequest()
     try:
+        stop.install()
         device.start()
         while target is None or rec.device_index < target:
+            if stop.signum is not None:
+                outcome, message = "interrupted", f"stopped by the user ({stop.name})"
+                break
             block = device.read_block()
             if block is None:
                 outcome, message = "done", "device finished"
@@ -81,6 +88,7 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
             outcome, message = "write_error", f"cannot write {path}: {exc.strerror or exc}; recording stopped"
         complete = False
     finally:
+        stop.restore()
         _try(device.stop)
         if outcome in ("disk_full", "write_error"):
             rec.abandon(message)
@@ -93,6 +101,35 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     wall = time.perf_counter() - t0
     return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
                      rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)
+
+
+class _StopRequest:
+    """Ctrl-C / SIGTERM set a flag the loop checks between blocks, so a stop never lands in the
+    middle of an HDF5 write; a second signal raises KeyboardInterrupt (the user insists)."""
+
+    def __init__(self):
+        self.signum = None
+        self._old = {}
+
+    @property
+    def name(self) -> str:
+        return "Ctrl-C" if self.signum == signal.SIGINT else "SIGTERM"
+
+    def install(self):
+        if threading.current_thread() is not threading.main_thread():
+            return  # signals reach the main thread only; KeyboardInterrupt is still caught
+        for s in (signal.SIGINT, signal.SIGTERM):
+            self._old[s] = signal.signal(s, self._handler)
+
+    def _handler(self, signum, frame):
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+
+    def restore(self):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+        self._old = {}
 
 
 def _try(fn):

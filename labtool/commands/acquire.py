@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import signal as _signal
 import sys
 import tomllib
 from pathlib import Path
@@ -140,10 +139,7 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
     progress = None
     if console.is_terminal:
         live, progress = _live_display(console, dev, duration)
-    old = _signal.getsignal(_signal.SIGTERM) if _is_main_thread() else None
-    if old is not None:
-        _signal.signal(_signal.SIGTERM, _raise_interrupt)  # `kill` stops as cleanly as Ctrl-C
-    try:
+    try:  # session.run turns Ctrl-C and SIGTERM into a clean stop between blocks
         if live is not None:
             live.start()
         result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=progress)
@@ -152,8 +148,6 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
     finally:
         if live is not None:
             live.stop()
-        if old is not None:
-            _signal.signal(_signal.SIGTERM, old)
     rt = (result.n_samples / result.rate_hz) / result.wall_s if result.wall_s > 0 else float("inf")
     typer.echo(f"wrote {output}: {result.n_samples} samples x {len(dev.channel_names)} channels at "
                f"{result.rate_hz:g} Hz ({result.n_samples / result.rate_hz:.3f} s, {rt:.1f}x real time), "
@@ -162,18 +156,9 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
         typer.echo(f"labtool: warning: clipping on {', '.join(result.clipped)} (ADC range exceeded); "
                    "see the 'clip' events", err=True)
     if result.outcome == "interrupted":
-        typer.echo("labtool: stopped by Ctrl-C; the recording is closed and complete", err=True)
+        typer.echo(f"labtool: {result.message}; the recording is closed and complete", err=True)
     if result.outcome in ("disconnected", "disk_full", "write_error"):
         raise InputError(f"{result.message}; {result.n_samples} samples kept in {output}")
-
-
-def _is_main_thread():
-    import threading
-    return threading.current_thread() is threading.main_thread()
-
-
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
 
 
 def _live_display(console, dev, duration):
