@@ -520,6 +520,9 @@ def simulate(scene: Scene):
     t_end = phases[-1].t1
     n = max(int(preset["samples"] * span / program.rise_angle), 200)
     times = np.linspace(0.0, t_end, n + 1)
+    # the last sample just inside the simulated span: at phi1 = rise exactly the dwell begins (the
+    # load switches off, as in models.kinematics), which would put a step into every time series
+    times[-1] = t_end * (1.0 - 1e-9)
     s = sample(plant, phases, times)
     rfj_full = sample(plant0, phases0, times)
     ref = (rfj_full["phi1"], rfj_full["omega1"], rfj_full["phi2"], rfj_full["omega2"])
