@@ -58,6 +58,57 @@ class Conditioning:
                 f"{self.n_grid} points ({360.0 / self.n_grid:g} deg)")
 
 
+@dataclasses.dataclass(frozen=True)
+class TimeFilter:
+    """The time-domain low-pass ``labtool process`` applied to the measurement (Butterworth, SOS,
+    zero-phase), re-applied to the simulations so that both sides see the same filter."""
+
+    fs: float           # Hz, the recording's sample rate
+    cutoff_hz: float
+    order: int
+
+    def describe(self) -> str:
+        return (f"the processing's low-pass (Butterworth order {self.order}, {self.cutoff_hz:.1f} Hz, zero-phase, "
+                f"at {self.fs:g} Hz) re-applied to the simulations")
+
+    def apply_periodic(self, y: np.ndarray) -> np.ndarray:
+        """Filter one period sampled uniformly in time, as a periodic signal (3 copies, middle kept)."""
+        from processing.filters import lowpass_sos, zero_phase
+        sos = lowpass_sos(self.fs, self.cutoff_hz, self.order)
+        n = y.size
+        return zero_phase(sos, np.concatenate([y, y, y]))[n:2 * n]
+
+
+def processing_filter(ds: xr.Dataset) -> TimeFilter | None:
+    """The low-pass recorded in the measured file's processing history (``lowpass`` step), else its
+    ``lowpass_hz`` attribute (order 4); None when the file records none or processing is absent."""
+    import json
+    try:
+        import processing.filters  # noqa: F401  (the filter design lives there)
+    except ImportError:
+        return None
+    fs = ds.attrs.get("sample_rate_hz")
+    cutoff, order = ds.attrs.get("lowpass_hz"), 4
+    try:
+        steps = json.loads(ds.attrs.get("processing_history", "[]"))
+        for st in steps if isinstance(steps, list) else []:
+            if isinstance(st, dict) and st.get("step") == "lowpass":
+                par = st.get("parameters", {})
+                cutoff = par.get("cutoff_hz", cutoff)
+                order = int(par.get("order", order))
+                if par.get("zero_phase") is False or par.get("kind", "butterworth") != "butterworth":
+                    return None   # not a filter this re-implementation reproduces
+    except (TypeError, ValueError):
+        pass
+    try:
+        fs, cutoff = float(fs), float(cutoff)
+    except (TypeError, ValueError):
+        return None
+    if not (math.isfinite(fs) and math.isfinite(cutoff) and 0 < cutoff < fs / 2 and 1 <= order <= 12):
+        return None
+    return TimeFilter(fs, cutoff, order)
+
+
 def harmonic_lowpass(y: np.ndarray, n_harmonics: int) -> np.ndarray:
     """Keep harmonics 0..n_harmonics of a periodic sample (last axis = one period)."""
     spec = np.fft.rfft(y, axis=-1)
@@ -164,6 +215,17 @@ class SimulatedCycle:
     note: str
 
 
+def _sim_time(sim: xr.Dataset, ok: np.ndarray, order: np.ndarray) -> np.ndarray | None:
+    """The simulation's time (s) on the same axis as phi1, strictly increasing, or None."""
+    if "time" not in sim.variables or sim["time"].shape != sim["phi1"].shape:
+        return None
+    t = np.asarray(sim["time"].values, dtype=float)[ok][order]
+    # an impact may repeat a time stamp (the states before and after it): non-decreasing is enough
+    if not (np.all(np.isfinite(t)) and np.all(np.diff(t) >= 0) and t[-1] > t[0]):
+        return None
+    return t
+
+
 def _sim_angle(sim: xr.Dataset, names) -> tuple[np.ndarray, dict]:
     if "phi1" not in sim.variables:
         raise InputError("the simulation has no cam angle phi1")
@@ -189,7 +251,23 @@ def derivative_in_time(omega2_fine: np.ndarray, omega1_fine: np.ndarray, cond: C
     return d_dphi * omega1_fine
 
 
-def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_omega2: bool = False) -> SimulatedCycle:
+def _time_filtered_revolution(theta, t, data, a, fine, tf: TimeFilter) -> dict:
+    """Signals of the revolution [a, a + 2 pi] resampled uniformly in the simulation's own time at
+    the recording's rate, low-passed like the measurement (periodically), then put on ``a + fine``."""
+    ta, tb = np.interp([a, a + TWO_PI], theta, t)
+    n = max(int(round((tb - ta) * tf.fs)), 16)
+    tt = ta + (tb - ta) * np.arange(n) / n
+    th = np.interp(tt, t, theta)
+    th_ext = np.append(th, a + TWO_PI)          # periodic closure for the interpolation
+    out = {}
+    for name, y in data.items():
+        yf = tf.apply_periodic(np.interp(tt, t, y))
+        out[name] = np.interp(a + fine, th_ext, np.append(yf, yf[0]))
+    return out
+
+
+def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_omega2: bool = False,
+                    time_filter: TimeFilter | None = None) -> SimulatedCycle:
     """The last whole revolution of a simulation (or the part it covers), conditioned like the
     measurement. ``sim`` holds ``phi1`` (rad, from the start of the rise) and the signals on one axis
     (``phi1`` itself for the kinematic level, ``time`` for the dynamic models).
@@ -197,7 +275,10 @@ def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_om
     ``epsilon2_from_omega2``: for a model whose epsilon2 leaves out the impulses of its impacts (the
     rigid model's velocity jumps), epsilon2 is taken as the time derivative of the band-limited
     omega2 instead, which is what an accelerometer behind the same filter sees (filtering and
-    differentiation commute)."""
+    differentiation commute).
+
+    ``time_filter``: the measurement's processing low-pass, applied to the simulation in its own
+    time before the common conditioning (whole revolutions only)."""
     names = list(names)
     if epsilon2_from_omega2 and "omega1" in sim and "omega1" not in names:
         names.append("omega1")
@@ -214,12 +295,20 @@ def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_om
     theta = theta[order]
     data = {n: y[order] for n, y in data.items()}
     fine = cond.fine_grid
-    k_last = int(math.floor(theta[-1] / TWO_PI + 1e-9)) - 1
-    if k_last >= 0 and theta[0] <= TWO_PI * k_last + 1e-6:
+    # a simulation that stops within half a fine-grid step of a revolution's end covers it
+    # (interpolation holds the end value over that sliver)
+    slack = 0.5 * TWO_PI / fine.size
+    k_last = int(math.floor((theta[-1] + slack) / TWO_PI)) - 1
+    t = _sim_time(sim, ok, order)
+    if k_last >= 0 and theta[0] <= TWO_PI * k_last + slack:
         a = TWO_PI * k_last
-        fine_vals = {n: np.interp(a + fine, theta, y) for n, y in data.items()}
         covered = np.ones(cond.n_grid, bool)
         note = f"revolution {k_last + 1} of {k_last + 1} simulated (steady state)"
+        if time_filter is not None and t is not None:
+            fine_vals = _time_filtered_revolution(theta, t, data, a, fine, time_filter)
+            note += "; processing low-pass applied"
+        else:
+            fine_vals = {n: np.interp(a + fine, theta, y) for n, y in data.items()}
     else:
         # partial revolution: compare on the covered angles only; the rest is the dwell, at rest
         lo, hi = theta[0] % TWO_PI, theta[0] % TWO_PI + (theta[-1] - theta[0])

@@ -58,6 +58,7 @@ class Report:
     thresholds_source: str | None
     notes: list                       # what was skipped or replaced, and why
     wall_s: float = 0.0
+    time_filter: align.TimeFilter | None = None   # the processing low-pass, re-applied to the simulations
 
     @property
     def passed(self) -> bool:
@@ -157,7 +158,7 @@ def model_available(name: str) -> bool:
 
 
 def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutions: float,
-                   cond: align.Conditioning) -> SimRun:
+                   cond: align.Conditioning, time_filter: align.TimeFilter | None = None) -> SimRun:
     """One model at one omega1 mode over whole revolutions; a model that is not there yet is
     replaced by the kinematic level, and the note says so."""
     from models.scene import Scene
@@ -173,7 +174,8 @@ def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutio
     t0 = time.perf_counter()
     res = simulate(scene, level)
     # the rigid model's impacts are velocity jumps: its epsilon2 omits their impulses
-    cycle = align.simulated_cycle(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid")
+    cycle = align.simulated_cycle(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid",
+                                  time_filter=time_filter)
     warning = "; ".join(x for x in (note, cycle.note if not cycle.covered.all() else "") if x)
     return SimRun(requested, res.model, mode, res.dataset, res.indicators, cycle, time.perf_counter() - t0,
                   "; ".join(x for x in (note, cycle.note) if x), revolutions, warning)
@@ -262,6 +264,10 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     cycles = align.measured_cycles(ds, SIGNALS, cond)
     op = operating_point(ds, cycles.cam_speed_rpm, overrides or {})
     notes = []
+    time_filter = align.processing_filter(ds)
+    if time_filter is None:
+        notes.append("the measured file records no processing low-pass that the report can reproduce: "
+                     "the simulations see only the common harmonic low-pass")
     if ds.attrs.get("source") == "synthetic":
         notes.append("the measured file is SYNTHETIC (kinematics + noise, reports.synthetic), not a recording")
     if cycles.partial:
@@ -271,7 +277,7 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
         for mode in modes:
             say(f"simulating {model}, omega1 {mode}")
             try:
-                run = run_simulation(op, model, mode, accuracy, revolutions, cond)
+                run = run_simulation(op, model, mode, accuracy, revolutions, cond, time_filter)
             except LabtoolError:
                 raise
             except (ValueError, ArithmeticError) as exc:
@@ -284,7 +290,7 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     comparisons = [c for run in sims for c in compare_run(cycles, run)]
     rows = evaluate(thresholds, comparisons) if thresholds else []
     return Report(str(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(ds, cycles, sims),
-                  rows, thresholds.source if thresholds else None, notes, time.perf_counter() - t0)
+                  rows, thresholds.source if thresholds else None, notes, time.perf_counter() - t0, time_filter)
 
 
 def _check_choice(values, allowed, what) -> tuple:

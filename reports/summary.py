@@ -88,7 +88,11 @@ def build_summary(report: Report) -> dict:
         "operating_point": report.scene,
         "conditioning": {"grid_points_per_revolution": report.conditioning.n_grid,
                          "harmonics": report.conditioning.n_harmonics,
-                         "description": report.conditioning.describe()},
+                         "processing_lowpass_on_simulations": None if report.time_filter is None else {
+                             "fs_hz": report.time_filter.fs, "cutoff_hz": report.time_filter.cutoff_hz,
+                             "order": report.time_filter.order},
+                         "description": report.conditioning.describe() + (
+                             "" if report.time_filter is None else "; before that, " + report.time_filter.describe())},
         "simulations": sims,
         "comparisons": comps,
         "headline": headline(report),
