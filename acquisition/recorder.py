@@ -127,15 +127,18 @@ class Recorder:
         """Append a device block; a jump in first_index becomes a ``gap`` event at the joint row."""
         if block.first_index < self.device_index:
             raise ValueError(f"block starts at device sample {block.first_index}, before {self.device_index} already seen")
-        for ev in block.events:
-            self.add_event(ev)
         missing = block.first_index - self.device_index
         if missing:
-            # rows stay contiguous; the event at the joint says how much time is missing
             self.gaps += 1
             self.samples_lost += missing
-            self.add_event(Event(self.n_samples, "gap", f"missing_samples={missing} ({missing / self.rate_hz:.4f} s) "
-                                                        f"lost before this row; device sample {block.first_index}"))
+        joint = self.n_samples
+        # device events carry device sample numbers; the file's index is the row
+        for ev in block.events:
+            self.add_event(Event(max(joint, ev.index - self.samples_lost), ev.kind, ev.detail))
+        if missing:
+            # rows stay contiguous; the event at the joint says how much time is missing
+            self.add_event(Event(joint, "gap", f"missing_samples={missing} ({missing / self.rate_hz:.4f} s) "
+                                               f"lost before this row; device sample {block.first_index}"))
         self.device_index = block.end_index
         if block.n:
             data = np.asarray(block.data, dtype=np.float32)

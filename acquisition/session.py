@@ -73,6 +73,7 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
                 break
             if target is not None and block.end_index > target:
                 block.data = block.data[: max(0, target - block.first_index)]
+                block.events = [e for e in block.events if e.index < target]
             rec.write_block(block)
             if progress is not None:
                 progress(rec, time.perf_counter() - t0)

@@ -80,6 +80,16 @@ def test_gaps_and_overruns_are_events_at_the_joint(tmp_path):
     assert rec["attrs"]["samples_lost"] == 3000
 
 
+def test_event_index_is_the_row_even_after_a_gap(tmp_path):
+    p = tmp_path / "cg.h5"
+    session.run(sim(seed=4, duration=3.0, faults=[Fault("overrun", 1.0, 0.2), Fault("clip", 2.5)]), p, 10000, 3.0)
+    rec = read_recording(p)
+    clip = [i for i, k, _ in rec["events"] if k == "clip"]
+    assert clip == [25004 - 2000]  # device sample 25004, 2000 samples lost before it
+    assert rec["signals"][clip[0], 0] >= 10.0 - 20.0 / 2**16 - 1e-6  # the row sits at the rail
+    assert rec["signals"][clip[0] - 1, 0] < 9.9
+
+
 WRITER = r"""
 import sys
 from acquisition import session, signal_chain as sc
