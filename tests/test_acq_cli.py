@@ -87,6 +87,8 @@ def test_bad_input_one_line_exit_2(tmp_path, capsys):
         ["acquire", "--fast", "--scene", str(tmp_path / "none.toml"), "-o", o],
         ["acquire", "--fast", "--mode", "shake", "-o", o],
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fault", "drop@1", "-o", o],
+        ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fast", "-o", o],
+        ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "-o", o],  # no NI-DAQmx runtime here
     ]
     for argv in cases:
         assert main(argv) == 2, argv

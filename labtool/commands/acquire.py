@@ -98,6 +98,8 @@ def acquire(
     else:
         if fault:
             raise InputError("--fault works with --device sim only")
+        if not realtime:
+            raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
         from acquisition.nidaqmx_driver import NIDAQmxDevice
         dev = NIDAQmxDevice(arg, iepe_excitation=iepe_excitation)
         k = float("nan") if opts["ka"] is None else float(opts["ka"])
