@@ -136,6 +136,10 @@ def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
     ax.set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
     ax.set_ylabel(f"{sym} [{unit}]")
     ax.set_xlim(0, 360)
+    # the paper plots against time: a time axis at the measured mean cam speed
+    deg_per_s = 6.0 * cyc.cam_speed_rpm
+    top = ax.secondary_xaxis("top", functions=(lambda d: d / deg_per_s, lambda t: t * deg_per_s))
+    top.set_xlabel(f"time from the start of the rise [s] at {cyc.cam_speed_rpm:.1f} rpm", fontsize=8)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     used = runs[0].model
