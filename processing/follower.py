@@ -75,22 +75,35 @@ def integrate_motion(epsilon2: np.ndarray, moving: np.ndarray, fs: float, margin
     """
     n = len(epsilon2)
     out = np.zeros(n)
-    dt = 1.0 / fs
-    bad_cum = np.concatenate([[0], np.cumsum(bad)]) if bad is not None else None
-    for a, b in runs(moving):
-        a0, b0 = max(a - margin, 0), min(b + margin, n)
-        if a == 0 or b == n or a0 == 0 or b0 == n:
-            out[a0:b0] = np.nan
-            continue
-        if bad_cum is not None and bad_cum[b0] - bad_cum[a0] > 0:
-            out[a0:b0] = np.nan
-            continue
-        e = epsilon2[a0:b0]
-        w = np.empty(len(e))
-        w[0] = 0.0
-        np.cumsum(0.5 * (e[1:] + e[:-1]) * dt, out=w[1:])
-        w -= w[-1] * np.linspace(0.0, 1.0, len(w))
-        out[a0:b0] = w
+    rr = runs(moving)
+    if not rr:
+        return out
+    ab = np.asarray(rr)
+    a0 = np.maximum(ab[:, 0] - margin, 0)
+    b0 = np.minimum(ab[:, 1] + margin, n)
+    # widened runs may meet: each keeps its own samples up to the midpoint between them
+    if len(ab) > 1:
+        mid = (ab[:-1, 1] + ab[1:, 0]) // 2
+        b0[:-1] = np.minimum(b0[:-1], mid)
+        a0[1:] = np.maximum(a0[1:], mid)
+    ok = (ab[:, 0] > 0) & (ab[:, 1] < n) & (a0 > 0) & (b0 < n)
+    if bad is not None:
+        bc = np.concatenate([[0], np.cumsum(bad)])
+        ok &= (bc[b0] - bc[a0]) == 0
+    # one cumulative trapezoid over the window; each run takes differences from its first sample
+    c = np.empty(n)
+    c[0] = 0.0
+    np.cumsum(0.5 * (epsilon2[1:] + epsilon2[:-1]) / fs, out=c[1:])
+    lengths = b0 - a0
+    run_of = np.repeat(np.arange(len(ab)), lengths)
+    pos = np.repeat(a0 - np.cumsum(np.concatenate([[0], lengths[:-1]])), lengths) + np.arange(lengths.sum())
+    start, last = a0[run_of], b0[run_of] - 1
+    w = c[pos] - c[start]
+    end_val = c[last] - c[start]
+    frac = (pos - start) / np.maximum(last - start, 1)
+    vals = w - frac * end_val
+    vals[~ok[run_of]] = np.nan
+    out[pos] = vals
     return out
 
 

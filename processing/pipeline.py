@@ -282,16 +282,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
                     spikes["amplitude"].extend(amp[keep].tolist())
                     spikes["threshold"].extend([thr] * int(keep.sum()))
                 # cycle statistics: revolutions whose start mark lies in this core
-                for k in np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b)):
-                    m0, m1 = marks[k], marks[k + 1]
-                    s0, s1 = int(math.ceil(m0)) - wa, int(math.floor(m1)) - wa + 1
-                    if s0 < 0 or s1 > len(idx) or s1 - s0 < 8:
-                        continue
-                    if clipped[s0:s1].any():
-                        cyc.rejected += 1
-                        continue
-                    pos = 2.0 * math.pi * (idx[s0:s1] - m0) / (m1 - m0)
-                    cyc.add(pos, {v: res[v][s0:s1] for v in cyc.names})
+                _add_cycles(cyc, res, clipped, marks, a, b, wa, len(idx))
                 progress(b - a)
             rev_offset += len(marks)
 
@@ -347,6 +338,36 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     return {"cam_speed_rpm": rpm_measured, "revolutions_averaged": cyc.count, "spikes": len(spikes["index"]),
             "clipped": n_clipped, "normal_check_rel_rms": check, "lowpass_hz": cutoff, "phi1_method": method,
             "segments": len(segs), "history": hist.steps}
+
+
+def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
+    """Resample every complete revolution starting in [a, b) on the phi1 grid, all at once.
+
+    phi1 is linear in the sample index within a revolution, so linear interpolation in the sample
+    index at m_k + (phi/2 pi)(m_{k+1} - m_k) is linear interpolation in phi1.
+    """
+    k = np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b))
+    if len(k) == 0:
+        return
+    m0, m1 = marks[k] - wa, marks[k + 1] - wa
+    inside = (m0 >= 0) & (np.floor(m1) + 1 < n)
+    k, m0, m1 = k[inside], m0[inside], m1[inside]
+    if len(k) == 0:
+        return
+    bad = clipped.copy()
+    for name in cyc.names:
+        bad |= ~np.isfinite(res[name])
+    bc = np.concatenate([[0], np.cumsum(bad)])
+    lo, hi = np.floor(m0).astype(np.int64), np.floor(m1).astype(np.int64) + 2
+    good = (bc[hi] - bc[lo]) == 0
+    cyc.rejected += int((~good).sum())
+    m0, m1 = m0[good], m1[good]
+    if len(m0) == 0:
+        return
+    x = m0[:, None] + (cyc.grid / (2.0 * math.pi))[None, :] * (m1 - m0)[:, None]
+    i0 = np.floor(x).astype(np.int64)
+    w = x - i0
+    cyc.add_block({name: res[name][i0] * (1.0 - w) + res[name][i0 + 1] * w for name in cyc.names})
 
 
 def _extremes(block, vmin, vmax):
