@@ -161,6 +161,8 @@ def measured_cycles(ds: xr.Dataset, names, cond: Conditioning) -> MeasuredCycles
         raise InputError("the measured file has fewer than 16 usable samples of phi1 and the signals")
     t, phi = t[ok], phi[ok]
     data = {n: y[ok] for n, y in data.items()}
+    if np.any(np.diff(t) <= 0):
+        raise InputError("the measured file's time does not increase sample by sample")
     theta = _unwrapped_angle(phi)
     if theta[-1] < theta[0]:
         raise InputError("the measured cam angle phi1 decreases over the recording; expected the cam to turn forwards")

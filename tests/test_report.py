@@ -259,3 +259,45 @@ def test_the_processing_lowpass_is_reapplied_to_the_simulations(tmp_path, monkey
     other = {c["signal"]: c["overall"] for c in rep2.comparisons}
     assert other["epsilon2"]["sg_comprehensive"] > 5 * same["epsilon2"]["sg_comprehensive"]
     assert other["epsilon2"]["sg_comprehensive"] > 0.03
+
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_BASE = synthetic_measured(noise=0.01, revolutions=2.6, fs=2000.0)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kind=st.sampled_from(["nan_block", "phi_const", "phi_reversed", "time_reversed", "inf", "short", "huge_phi",
+                             "time_dup"]),
+       start=st.floats(0.0, 0.9), frac=st.floats(0.0, 1.0))
+def test_damaged_measurements_give_a_report_or_an_input_error(kind, start, frac):
+    """Whatever is wrong with the measured signals, the alignment either finds whole revolutions or
+    raises InputError (one line, exit 2), never another exception."""
+    ds = _BASE.copy(deep=True)
+    n = ds.sizes["time"]
+    i0, i1 = int(start * n), int(start * n + frac * (n - start * n))
+    if kind == "nan_block":
+        ds["omega2"].values[i0:i1] = np.nan
+    elif kind == "inf":
+        ds["epsilon2"].values[i0:i1] = np.inf
+    elif kind == "phi_const":
+        ds["phi1"].values[i0:i1] = 1.0
+    elif kind == "phi_reversed":
+        ds["phi1"].values[:] = ds["phi1"].values[::-1]
+    elif kind == "time_reversed":
+        ds = ds.assign_coords(time=ds["time"].values[::-1].copy())
+    elif kind == "short":
+        ds = ds.isel(time=slice(0, max(int(frac * 50), 1)))
+    elif kind == "huge_phi":
+        ds["phi1"].values[i0:i1] *= 1e6
+    elif kind == "time_dup":
+        t = ds["time"].values.copy()
+        t[i0:i1] = t[i0]
+        ds = ds.assign_coords(time=t)
+    try:
+        cyc = align.measured_cycles(ds, ("omega2", "epsilon2"), align.Conditioning())
+    except InputError:
+        return
+    assert len(cyc.revolutions) >= 1
+    assert all(np.all(np.isfinite(v)) for v in cyc.signals.values())
