@@ -213,3 +213,28 @@ def test_property_malformed_files_raise_only_labtool_errors(tmp_path, good_v1, d
         rec.close()
     except LabtoolError:
         pass
+
+
+def test_killed_swmr_writer_reads_with_warnings(tmp_path):
+    """A recorder killed while writing in SWMR mode leaves the consistency flags set."""
+    import subprocess
+    import sys
+    import textwrap
+
+    p = tmp_path / "killed.h5"
+    code = textwrap.dedent(f"""
+        import os, h5py, numpy as np
+        f = h5py.File({str(p)!r}, "w", libver="latest")
+        f.attrs.update(dict(format="labtool.recording", format_version=1, sample_rate_hz=1000.0,
+                            start_time_utc="2026-11-22T00:00:00Z", complete=False))
+        d = f.create_dataset("signals", shape=(0, 2), maxshape=(None, 2), chunks=(256, 2), dtype="f4")
+        d.attrs["channel_names"] = np.array(["aE_t", "aE_n"], dtype=h5py.string_dtype())
+        f.swmr_mode = True
+        d.resize((1000, 2)); d[:] = 1.0; d.flush(); f.flush()
+        os._exit(0)  # killed: no close
+    """)
+    subprocess.run([sys.executable, "-c", code], check=True)
+    with open_recording(p) as rec:
+        assert rec.n_samples == 1000 and not rec.complete
+        assert any("SWMR" in w for w in rec.warnings) and any("incomplete" in w for w in rec.warnings)
+        assert rec.read(0, 1000).shape == (1000, 2)

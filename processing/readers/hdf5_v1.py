@@ -22,12 +22,23 @@ VERSION = 1
 
 def open_hdf5_v1(path) -> Recording:
     src = str(path)
+    swmr_note = None
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError) as exc:
-        raise FileFormatError(f"{src}: not a readable HDF5 file (truncated or corrupt?): {exc}") from None
+        # a recorder writing in SWMR mode that is still running, or was killed, leaves the file's
+        # consistency flags set: a SWMR reader may still open it and read what was flushed
+        try:
+            f = h5py.File(path, "r", swmr=True)
+            swmr_note = (f"{src}: the file is still marked open for writing (recorder running or killed); "
+                         "read in SWMR mode, up to the last flushed block")
+        except (OSError, ValueError):
+            raise FileFormatError(f"{src}: not a readable HDF5 file (truncated or corrupt?): {exc}") from None
     try:
-        return _build(f, src)
+        rec = _build(f, src)
+        if swmr_note:
+            rec.warnings.insert(0, swmr_note)
+        return rec
     except (FileFormatError, InputError):
         f.close()
         raise
