@@ -140,6 +140,35 @@ def test_k1_conserves_energy_and_reverses_normal_velocity(backlash_mm, jt):
     assert res.indicators["jumps"] >= res.indicators["impacts"]
 
 
+@pytest.mark.parametrize("kw", [dict(backlash=0.128e-3, jt_factor=4.0),
+                                dict(Fu=65.0, backlash=0.016e-3, jt_factor=4.0, restitution=0.5),
+                                dict(Fu=65.0, backlash=0.128e-3, cam_speed_rpm=300, restitution=0.8)])
+def test_energy_balance_through_flights_and_impacts(kw):
+    """Whole hybrid run (contact, flights, impacts): T(t) - T(0) = work of motor, cam gravity,
+    follower gravity and load - the impacts' losses, all recomputed from models.motor/linkage."""
+    sc = Scene(**kw)
+    ds = rigid.simulate(sc).dataset
+    mech = sc.mechanism
+    t, w1, w2 = ds["time"].values, ds["omega1"].values, ds["omega2"].values
+    phi1, phi2 = ds["phi1"].values, ds["phi2"].values
+    red = reduced_follower(mech, phi2, load_force_x(mech, sc.program, phi1, phi2, sc.Fu), sc.jt_factor)
+    T = 0.5 * ds.attrs["J_cam_kgm2"] * w1**2 + 0.5 * red.J * w2**2
+    s = ds.attrs["cam_sense"]
+    M1 = motor_moment_on_cam(mech, w1, ds.attrs["transmission_ratio"])
+    Mc = -mech.m1 * mech.g * mech.AK1 * s * np.cos(mech.theta10 + s * phi1)
+    power = (M1 + Mc) * w1 + (red.M_gravity + red.M_load) * w2
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
+    ev_t = ds["event_time"].values
+    loss = np.nan_to_num(ds["event_energy_before"].values - ds["event_energy_after"].values)
+    lost = np.array([loss[ev_t <= ti].sum() for ti in t])
+    assert ds.sizes["event"] >= 3
+    scale = np.trapezoid(np.abs(power), t)
+    tol = 5e-4 * scale                 # trapezoidal rule across the velocity jumps
+    if sc.restitution < 1:
+        assert lost[-1] > 2 * tol      # the losses are resolved by the check
+    assert np.max(np.abs((T - T[0]) - (work - lost))) < tol
+
+
 def test_restitution_law_exact_for_k_below_one():
     ds = rigid.simulate(Scene(restitution=0.6, backlash=0.128e-3)).dataset
     kind = ds["event_kind"].values
