@@ -26,7 +26,16 @@ def _summary_page(report: Report) -> Figure:
         lines.append(f"{h['label'][:34]:34s} {h['omega2_iso_rating']:9.3f} {h['omega2_sg_comprehensive']:9.3f} "
                      f"{h['omega2_nrmse']:9.3f} {h['epsilon2_iso_rating']:9.3f} {h['epsilon2_sg_comprehensive']:9.3f} "
                      f"{h['epsilon2_nrmse']:9.3f}")
-    lines += [""] + [f"note: {n}" for n in report.notes]
+    lines += ["", f"{'model, w1':34s} {'jumps/rev pred.':>16s} {'meas.':>6s} {'impacts/rev pred.':>18s} {'meas.':>6s}"]
+    dash = lambda v: "-" if v is None else f"{v:.2f}"   # noqa: E731
+    for e in report.events:
+        lines.append(f"{e['label'][:34]:34s} {dash(e['jumps_predicted_per_rev']):>16s} {dash(e['jumps_measured_per_rev']):>6s} "
+                     f"{dash(e['impacts_predicted_per_rev']):>18s} {dash(e['impacts_measured_per_rev']):>6s}")
+    desc = report.conditioning.describe()
+    if report.time_filter is not None:
+        desc = report.time_filter.describe() + "; then, on both sides, " + desc
+    lines += ["", "conditioning: " + desc, ""] + [f"note: {n}" for n in report.notes]
+    lines += ["", "ISO/TS 18571 grades: excellent > 0.94, good > 0.8, fair > 0.58, poor; S&G C and NRMSE: 0 = identical"]
     ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace", fontsize=8.5, wrap=True)
     return fig
 
