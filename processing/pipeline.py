@@ -68,6 +68,7 @@ class ProcessOptions:
     spike_k_sigma: float = events.DEFAULT_K_SIGMA
     tacho_channel: str = "tacho"
     ac_tau_s: float | None = None       # sensor chain's AC-coupling time constant (s), undone if given
+    mechanism: object | None = None     # models.mechanism.Mechanism; default: the paper's STB-216
 
 
 def process_recording(rec: Recording, output: Path, options: ProcessOptions | None = None,
@@ -129,7 +130,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     ka = np.array([cal["aE_t"][0], cal["aE_n"][0]])
     itacho = rec.channel_index(opts.tacho_channel) if rec.has_channel(opts.tacho_channel) else None
 
-    mech = Mechanism.default()
+    mech = opts.mechanism or Mechanism.default()
     law = opts.law or (rec.attrs.get("law") if isinstance(rec.attrs.get("law"), str) else None)
     program = CamProgram.for_mechanism(mech, law=law)
     law_name = program.segments[0].law.name
@@ -180,7 +181,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     hist.add("cam_angle", method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
              cam_speed_rpm_mean=rpm_measured, period_median_s=period / fs,
              period_min_s=float(all_periods.min()) / fs, period_max_s=float(all_periods.max()) / fs,
-             law=law_name, **({"autocorrelation_period_s": period_est / fs} if period_est else {}))
+             law=law_name, mechanism=mech.name, **({"autocorrelation_period_s": period_est / fs} if period_est else {}))
 
     # ---- filter design, margins ------------------------------------------------------------------
     cutoff = opts.lowpass_hz or filters.lowpass_cutoff_hz(rpm_measured, fs, opts.harmonics)

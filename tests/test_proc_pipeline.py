@@ -218,10 +218,44 @@ def test_csv_and_tdms_process_like_hdf5(tmp_path):
         np.savetxt(fh, volts, delimiter=",", fmt="%.7g")
     assert main(["process", str(c), "--sample-rate", "10000", "-o", str(tmp_path / "c.nc")]) == 0
     t = tmp_path / "r.tdms"
+    labview = {"aE_t": "aE300t", "aE_n": "aE300n", "tacho": "Dev1/ai2"}  # the paper's style of names
     with TdmsWriter(t) as w:
-        w.write_segment([ChannelObject("g", n, volts[:, j], properties={"wf_increment": 1e-4}) for j, n in enumerate(names)])
-    assert main(["process", str(t), "-o", str(tmp_path / "t.nc")]) == 0
+        w.write_segment([ChannelObject("g", labview[n], volts[:, j], properties={"wf_increment": 1e-4})
+                         for j, n in enumerate(names)])
+    assert main(["process", str(t), "-o", str(tmp_path / "t.nc")]) == 2  # aE_t missing
+    assert main(["process", str(t), "-o", str(tmp_path / "t.nc"), "--channels", "aE_x=aE300t"]) == 2
+    assert main(["process", str(t), "-o", str(tmp_path / "t.nc"),
+                 "--channels", "aE_t=aE300t,aE_n=aE300n,tacho=Dev1/ai2"]) == 0
     for f in ("c.nc", "t.nc"):
         ds = xr.open_dataset(tmp_path / f, engine="h5netcdf")
         e_o, e_e, _ = _rise_errors(ds, tr)
         assert e_o < 0.02 and e_e < 0.05, f
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=8, deadline=None)
+@given(cuts=st.lists(st.integers(1, 29999), max_size=4), clips=st.lists(st.integers(0, 29999), max_size=3),
+       kinds=st.lists(st.sampled_from(["gap", "overrun", "fault", "stop"]), min_size=4, max_size=4))
+def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
+    """Gaps, overruns and clips anywhere: the run ends cleanly (or with a LabtoolError), never
+    integrates across a cut, and whatever omega2 it gives over complete motion intervals is right."""
+    from models.errors import LabtoolError
+
+    tmp = tmp_path_factory.mktemp("ev")
+    spec = SynthSpec(rpm=300.0, duration_s=3.0)
+    evs = [(c, k, "") for c, k in zip(cuts, kinds)] + [(c, "clip", "") for c in clips]
+    try:
+        ds, tr, s, _ = _run(tmp, spec, events=evs, opts=ProcessOptions(chunk_samples=8192))
+    except LabtoolError:
+        return
+    om = ds["omega2"].values
+    splits = sorted({c for c, k in zip(cuts, kinds) if k in ("gap", "overrun")})
+    assert ds.attrs["n_segments"] == len(splits) + 1
+    ok = np.isfinite(om)
+    pk = np.abs(tr["omega2"]).max()
+    assert np.all(np.abs(om[ok] - tr["omega2"][ok]) < 0.05 * pk)
+    for c in clips:  # flagged, no acceleration, and no omega2 where the follower moves
+        assert ds["clipped"].values[c] == 1 and np.isnan(ds["epsilon2"].values[c])
+        assert np.isnan(om[c]) or not tr["moving"][c]

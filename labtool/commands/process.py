@@ -23,6 +23,8 @@ def process(
     rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
     lowpass_hz: Optional[float] = typer.Option(None, help="low-pass corner [Hz] (default: 100 x cam frequency)"),
     ac_tau: Optional[float] = typer.Option(None, help="AC-coupling time constant of the sensor chain [s], undone if given"),
+    channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=ai2'"),
+    mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
     chunk_samples: int = typer.Option(1 << 18, help="samples per processing chunk (memory bound)"),
     force: bool = typer.Option(False, help="overwrite an existing output file"),
 ) -> None:
@@ -41,14 +43,24 @@ def process(
     for name, v in (("--rpm", rpm), ("--lowpass-hz", lowpass_hz), ("--sample-rate", sample_rate), ("--ac-tau", ac_tau)):
         if v is not None and not (v > 0 and v < float("inf")):
             raise InputError(f"{name} must be a positive number, got {v}")
+    from models.mechanism import Mechanism
+
+    mapping = _channel_map(channels) if channels else {}
+    mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
     cal = read_calibration(calibration) if calibration is not None else None
     rec = open_recording(recording, sample_rate_hz=sample_rate)
+    try:
+        rec.rename_channels(mapping)
+    except Exception:
+        rec.close()
+        raise
 
     def warn(msg: str) -> None:
         typer.echo(f"labtool: warning: {msg}", err=True)
 
     opts = ProcessOptions(calibration=cal, calibration_source=str(calibration or ""), law=law, cam_speed_rpm=rpm,
-                          lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples)
+                          lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples,
+                          mechanism=mech)
     try:
         if sys.stderr.isatty():
             from rich.progress import Progress
@@ -64,3 +76,18 @@ def process(
                f"{summary['revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
                f"{summary['spikes']} spikes, {summary['clipped']} clipped samples, "
                f"|omega2| vs sqrt(aE_n/DE): {100 * check:.1f} % rms of peak")
+
+
+def _channel_map(text: str) -> dict[str, str]:
+    """'aE_t=ai0,aE_n=ai1' -> {"aE_t": "ai0", "aE_n": "ai1"}; InputError on anything else."""
+    from models.errors import InputError
+
+    out = {}
+    for part in text.split(","):
+        new, sep, old = part.partition("=")
+        if not sep or not new.strip() or not old.strip():
+            raise InputError(f"--channels: '{part}' is not NAME=SOURCE (e.g. aE_t=aE180t)")
+        if new.strip() not in ("aE_t", "aE_n", "tacho"):
+            raise InputError(f"--channels: '{new.strip()}' is not one of aE_t, aE_n, tacho")
+        out[new.strip()] = old.strip()
+    return out

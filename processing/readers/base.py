@@ -75,6 +75,16 @@ class Recording:
         raise FileFormatError(
             f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'})")
 
+    def rename_channels(self, mapping: dict[str, str]) -> None:
+        """Give source channels the names the chain uses, e.g. {"aE_t": "aE180t"} (new: old)."""
+        names = list(self.channel_names)
+        for new, old in mapping.items():
+            j = self.channel_index(old)
+            if new in names and names.index(new) != j:
+                raise InputError(f"{self.source}: cannot name channel '{old}' '{new}': another channel has that name")
+            names[j] = new
+        self.channel_names = names
+
     def has_channel(self, name: str) -> bool:
         return name.lower() in [c.lower() for c in self.channel_names]
 
