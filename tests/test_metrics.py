@@ -161,3 +161,30 @@ def test_lag_deg_is_the_correlation_lag_as_cam_angle():
     lag = 20
     delayed = np.concatenate([np.zeros(lag), sig[: N - lag]])
     assert metrics.compare(sig, delayed, X)["lag_deg"] == pytest.approx(lag * 360.0 / N)
+
+
+def _dtw_cost_bruteforce(x, y, window):
+    """Textbook row-by-row DTW (same steps, cost and band): the reference for the vectorised one."""
+    n, m = len(x), len(y)
+    D = np.full((n + 1, m + 1), np.inf)
+    D[0, 0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, m + 1):
+            if abs(i - j) <= window:
+                D[i, j] = (x[i - 1] - y[j - 1]) ** 2 + min(D[i - 1, j], D[i, j - 1], D[i - 1, j - 1])
+    return D[n, m]
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(5, 40), m=st.integers(5, 40), window=st.integers(0, 12), seed=st.integers(0, 10_000))
+def test_vectorised_dtw_matches_the_textbook_recursion(n, m, window, seed):
+    rng = np.random.default_rng(seed)
+    x, y = rng.standard_normal(n), rng.standard_normal(m)
+    pi, pj = metrics.dtw_path(x, y, window)
+    w = max(window, abs(n - m))
+    # the path is a valid warping path inside the band and its cost is the optimum
+    assert pi[0] == 0 and pj[0] == 0 and pi[-1] == n - 1 and pj[-1] == m - 1
+    steps = set(zip(np.diff(pi), np.diff(pj)))
+    assert steps <= {(1, 0), (0, 1), (1, 1)}
+    assert np.all(np.abs(pi - pj) <= w)
+    assert float(np.sum((x[pi] - y[pj]) ** 2)) == pytest.approx(_dtw_cost_bruteforce(x, y, w), rel=1e-9, abs=1e-12)
