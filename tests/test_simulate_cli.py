@@ -77,3 +77,20 @@ def test_any_restitution_outside_unit_interval_is_rejected(k):
     assert code == 2
     lines = buf.getvalue().strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("labtool: error:")
+
+
+import pytest as _pytest
+
+
+@_pytest.mark.parametrize("args,needle", [
+    (["--contact-length-mm", "0"], "contact length lw must be > 0"),
+    (["--kc-factor", "-1"], "contact stiffness factor must be > 0"),
+    (["--contact-damping", "-2"], "contact damping must be >= 0"),
+    (["--backlash-mm", "-0.01"], "backlash must be >= 0"),
+])
+def test_elastic_contact_options_reject_impossible_values(args, needle, capsys):
+    from labtool.cli import main
+
+    assert main(["simulate", "--model", "elastic", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]

@@ -40,6 +40,9 @@ def simulate(
     accuracy: str = typer.Option("standard", help="solver preset: fast, standard, reference"),
     restitution: float = typer.Option(1.0, help="Newton's restitution coefficient k in [0, 1] (rigid model)"),
     revolutions: float = typer.Option(1.0, help="cam revolutions to simulate [-]"),
+    contact_length_mm: float = typer.Option(6.0, help="roller-groove contact length lw [mm] for Kc = 8.05e4 lw^(8/9) (elastic model)"),
+    kc_factor: float = typer.Option(1.0, help="multiplier of the contact stiffness Kc [-] (elastic model)"),
+    contact_damping: float = typer.Option(0.0, help="Hunt-Crossley contact damping [s/m]; 0 = none, as in the paper (elastic model)"),
     rise_only: bool = typer.Option(True, "--rise-only/--full-cycle",
                                    help="simulate the rise only (as the paper's tables) or whole revolutions"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
@@ -55,12 +58,15 @@ def simulate(
     if output is not None:
         check_output_path(output, force)
     for name, value in (("--rpm", rpm), ("--fu", fu), ("--backlash-mm", backlash_mm), ("--jt-factor", jt_factor),
-                        ("--restitution", restitution), ("--revolutions", revolutions)):
+                        ("--restitution", restitution), ("--revolutions", revolutions),
+                        ("--contact-length-mm", contact_length_mm), ("--kc-factor", kc_factor),
+                        ("--contact-damping", contact_damping)):
         if not math.isfinite(value):
             raise InputError(f"{name} must be a finite number, got {value}")
     scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * 1e-3, jt_factor=jt_factor,
                   omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
-                  rise_only=rise_only)
+                  rise_only=rise_only, contact_length=contact_length_mm * 1e-3, kc_factor=kc_factor,
+                  contact_damping=contact_damping)
     try:
         result = run(scene, model)
     except ModuleNotFoundError as exc:  # a level whose module is not installed/written yet
