@@ -88,6 +88,10 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         else:
             outcome, message = "write_error", f"cannot write {path}: {exc.strerror or exc}; recording stopped"
         complete = False
+    except BaseException as exc:  # a bug or a model failure mid-run: keep the data, say so, re-raise
+        outcome, message, complete = "error", f"stopped by {type(exc).__name__}: {' '.join(str(exc).split())}", False
+        _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message[:250])))
+        raise
     finally:
         stop.restore()
         _try(device.stop)

@@ -37,6 +37,8 @@ TWO_PI = 2.0 * math.pi
 PAPER_KA = 86.43  # m/s^2 per V, paper sec. 2.4
 ACCEL_CHANNELS = ("aE_t", "aE_n")
 CHANNELS = ("aE_t", "aE_n", "tacho")
+TRUTH_MODELS = ("kinematic", "rigid", "elastic")
+MAX_MODEL_REVOLUTIONS = 200
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,10 +64,17 @@ class StandScene:
     cal_accel: float = 9.81
     cal_freq: float = 79.6
     cal_channel: str = "aE_t"
+    truth_model: str = "kinematic"
+    truth_revolutions: int = 0
     mechanism: Mechanism = dataclasses.field(default_factory=Mechanism.default, repr=False)
 
     def __post_init__(self):
+        model_truth = self.truth_model != "kinematic"
         checks = [
+            (self.truth_model in TRUTH_MODELS, f"truth model must be one of {', '.join(TRUTH_MODELS)}, got '{self.truth_model}'"),
+            (not model_truth or 1 <= self.truth_revolutions <= MAX_MODEL_REVOLUTIONS,
+             f"the {self.truth_model} truth needs 1 to {MAX_MODEL_REVOLUTIONS} cam revolutions (a finite, shorter --duration)"),
+            (not model_truth or self.ripple == 0.0, "the motor speed ripple applies to the kinematic truth only (set it to 0)"),
             (self.mode in ("run", "calibration"), f"stand mode must be 'run' or 'calibration', got '{self.mode}'"),
             (math.isfinite(self.cam_speed_rpm) and 0 < self.cam_speed_rpm <= 2000, f"cam speed must lie in (0, 2000] rpm, got {self.cam_speed_rpm}"),
             (math.isfinite(self.Fu) and self.Fu >= 0, f"load Fu must be >= 0 N, got {self.Fu}"),
@@ -95,7 +104,10 @@ class StandScene:
         return {
             "stand_mode": self.mode, "law": self.law, "cam_speed_rpm": float(self.cam_speed_rpm),
             "Fu_N": float(self.Fu), "backlash_mm": float(self.backlash * 1e3),
-            "jt_factor": float(self.jt_factor), "truth_model": "kinematic (models.kinematics.follower_motion)",
+            "jt_factor": float(self.jt_factor),
+            "truth_model": "kinematic (models.kinematics.follower_motion)" if self.truth_model == "kinematic" else
+            f"{self.truth_model} (models.simulate, omega1 const, accuracy fast, {self.truth_revolutions} revolutions)",
+            "truth_revolutions": int(self.truth_revolutions),
             "truth_omega1_ripple": float(self.ripple),
             "truth_omega1_ripple_form": "omega1 = Omega*(1 + ripple*sin(Omega*t)), phi1 = Omega*t + ripple*(1 - cos(Omega*t))",
             "cal_accel_m_s2_peak": float(self.cal_accel), "cal_freq_hz": float(self.cal_freq),
@@ -196,11 +208,65 @@ def truth(scene: StandScene, t, seed: int | None = None) -> dict:
         return {"phi1": z, "omega1": z, "epsilon1": z, "phi2": phi2, "psi": z, "omega2": z, "epsilon2": z,
                 "aE_t": shaker if scene.cal_channel == "aE_t" else z,
                 "aE_n": shaker if scene.cal_channel == "aE_n" else z}
+    if scene.truth_model != "kinematic":
+        return _model_truth(scene, t)
     phi1, omega1, epsilon1 = cam_angle(scene, t)
     phi2, omega2, epsilon2, psi = follower_motion(scene.program, mech, phi1, omega1, epsilon1)
     return {"phi1": phi1, "omega1": omega1, "epsilon1": epsilon1, "phi2": phi2, "psi": psi,
             "omega2": omega2, "epsilon2": epsilon2,
             "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
+
+
+_MODEL_TABLES: dict = {}
+
+
+def model_table(scene: StandScene) -> dict:
+    """The dynamic model's run behind a rigid/elastic truth: time (s) and phi1, omega1, phi2, omega2,
+    epsilon2 over ``truth_revolutions`` cam turns at constant cam speed (models.simulate, accuracy
+    fast). Cached per scene: the model runs once per run, not per block. Points at repeated times
+    (impacts of the rigid model) keep the later state, so omega2 steps across them.
+    """
+    key = (scene.truth_model, scene.law, scene.cam_speed_rpm, scene.Fu, scene.backlash, scene.jt_factor,
+           scene.truth_revolutions, repr(scene.mechanism))
+    if key not in _MODEL_TABLES:
+        from models.scene import Scene
+        from models.simulate import simulate
+        ms = Scene(law=scene.law, cam_speed_rpm=scene.cam_speed_rpm, Fu=scene.Fu, backlash=scene.backlash,
+                   jt_factor=scene.jt_factor, omega1_mode="const", revolutions=float(scene.truth_revolutions),
+                   rise_only=False, accuracy="fast", mechanism=scene.mechanism)
+        ds = simulate(ms, scene.truth_model).dataset
+        t = np.asarray(ds["time"].values, float)
+        keep = np.append(np.diff(t) > 0, True)
+        _MODEL_TABLES.clear()  # one model run in memory at a time
+        _MODEL_TABLES[key] = {name: np.asarray(ds[name].values, float)[keep]
+                              for name in ("time", "phi1", "omega1", "phi2", "omega2", "epsilon2")}
+    return _MODEL_TABLES[key]
+
+
+def _model_truth(scene: StandScene, t) -> dict:
+    tab = model_table(scene)
+    if t.size and (t.min() < tab["time"][0] - 1e-12 or t.max() > tab["time"][-1] + 1e-9):
+        raise InputError(f"the {scene.truth_model} truth covers 0 to {tab['time'][-1]:.3f} s only")
+    mech = scene.mechanism
+    out = {k: np.interp(t, tab["time"], tab[k]) for k in ("phi1", "omega1", "phi2", "omega2", "epsilon2")}
+    out["epsilon1"] = np.zeros_like(t)
+    out["psi"] = out["phi2"] - mech.phiD - mech.psi0
+    out["aE_t"] = out["epsilon2"] * mech.DE
+    out["aE_n"] = out["omega2"] ** 2 * mech.DE
+    return out
+
+
+def boxcar_epsilon2(scene: StandScene, t, dt: float):
+    """Mean epsilon2 over [t - dt/2, t + dt/2] (rad/s^2) = the change of omega2 over the interval / dt.
+
+    What a sampled sensor integrates over one (oversampled) interval: it keeps the whole velocity
+    step of an impact (the rigid model's omega2 jumps) and never misses a contact spike narrower
+    than dt, unlike sampling epsilon2 at points.
+    """
+    tab = model_table(scene)
+    lo = np.clip(t - 0.5 * dt, tab["time"][0], tab["time"][-1])
+    hi = np.clip(t + 0.5 * dt, tab["time"][0], tab["time"][-1])
+    return (np.interp(hi, tab["time"], tab["omega2"]) - np.interp(lo, tab["time"], tab["omega2"])) / dt
 
 
 def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandScene:
@@ -219,7 +285,9 @@ def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandSc
         if "cam_speed_rpm" in attrs else 180.0, Fu=float(attrs["Fu_N"]), backlash=float(attrs["backlash_mm"]) * 1e-3,
         jt_factor=float(attrs["jt_factor"]), ripple=float(attrs["truth_omega1_ripple"]),
         cal_accel=float(attrs["cal_accel_m_s2_peak"]), cal_freq=float(attrs["cal_freq_hz"]),
-        cal_channel=text(attrs["cal_channel"]), mechanism=mechanism or Mechanism.default())
+        cal_channel=text(attrs["cal_channel"]), mechanism=mechanism or Mechanism.default(),
+        truth_model=text(attrs.get("truth_model", "kinematic")).split()[0],
+        truth_revolutions=int(attrs.get("truth_revolutions", 0)))
 
 
 def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
@@ -299,6 +367,9 @@ def chain_block(scene: StandScene, params: ChainParams, state: ChainState, t_os,
     ``extra_m_s2`` (n_os, 2) is added to the sensed acceleration (fault injection: impacts).
     """
     tr = truth(scene, t_os)
+    if scene.truth_model != "kinematic" and scene.mode == "run" and t_os.size > 1:
+        # the sensor integrates over each interval: impacts keep their full velocity step
+        tr["aE_t"] = boxcar_epsilon2(scene, t_os, t_os[1] - t_os[0]) * scene.mechanism.DE
     acc = sensed_acceleration(scene, tr)
     if extra_m_s2 is not None:
         acc = acc + extra_m_s2

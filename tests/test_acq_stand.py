@@ -206,3 +206,41 @@ def test_parse_device_and_faults_good():
 def test_stand_scene_bad_input(kw):
     with pytest.raises(InputError):
         sc.StandScene(**kw)
+
+
+@pytest.fixture(scope="module")
+def rigid_scene():
+    return sc.StandScene(cam_speed_rpm=300, truth_model="rigid", truth_revolutions=2, ripple=0.0)
+
+
+def test_model_truth_is_the_models_run(rigid_scene):
+    tab = sc.model_table(rigid_scene)
+    t = tab["time"][::50]
+    tr = sc.truth(rigid_scene, t)
+    np.testing.assert_allclose(tr["omega2"], tab["omega2"][::50])
+    np.testing.assert_allclose(tr["aE_n"], tab["omega2"][::50] ** 2 * rigid_scene.mechanism.DE)
+    assert tab["time"][-1] == pytest.approx(2 * 0.2, rel=1e-6)  # two turns at 300 rpm
+    with pytest.raises(InputError):
+        sc.truth(rigid_scene, np.array([0.5]))  # beyond the model's run
+
+
+def test_boxcar_epsilon2_keeps_every_velocity_step(rigid_scene):
+    """Summing the interval means gives back omega2 exactly (telescoping), impacts included."""
+    dt = 1 / 20000
+    t = np.arange(dt / 2, 0.39, dt)
+    eps = sc.boxcar_epsilon2(rigid_scene, t, dt)
+    tab = sc.model_table(rigid_scene)
+    w = np.interp(t + dt / 2, tab["time"], tab["omega2"])
+    np.testing.assert_allclose(np.cumsum(eps) * dt + tab["omega2"][0], w, atol=1e-9)
+    # away from impacts it is the model's epsilon2
+    smooth = np.abs(eps - np.interp(t, tab["time"], tab["epsilon2"])) < 1.0
+    assert smooth.mean() > 0.9
+
+
+def test_model_truth_scene_rules():
+    with pytest.raises(InputError):
+        sc.StandScene(truth_model="elastic")  # no revolutions
+    with pytest.raises(InputError):
+        sc.StandScene(truth_model="elastic", truth_revolutions=3)  # default ripple 0.005
+    with pytest.raises(InputError):
+        sc.StandScene(truth_model="fem", truth_revolutions=3, ripple=0.0)

@@ -249,3 +249,16 @@ def test_block_before_what_was_written_is_a_bug(tmp_path):
     r.close()
     with pytest.raises(ValueError):
         Event(0, "nonsense")
+
+
+class _ModelFailure(Exception):
+    pass
+
+
+def test_an_unexpected_error_mid_run_keeps_the_data_marks_it_incomplete_and_propagates(tmp_path):
+    p = tmp_path / "e.h5"
+    with pytest.raises(_ModelFailure):
+        session.run(_StopAfter(sim(duration=5.0), 4, exc=_ModelFailure), p, 10000, 5.0)
+    rec = read_recording(p)
+    assert rec["signals"].shape[0] == 4000 and not rec["attrs"]["complete"]
+    assert any(k == "fault" and "_ModelFailure" in d for _, k, d in rec["events"])

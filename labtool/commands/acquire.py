@@ -17,11 +17,12 @@ SCENE_KEYS = {
     "mode": "mode", "law": "law", "cam_speed_rpm": "rpm", "Fu_N": "fu", "backlash_mm": "backlash_mm",
     "jt_factor": "jt_factor", "ripple": "ripple", "cal_accel_m_s2": "cal_accel", "cal_freq_hz": "cal_freq",
     "cal_channel": "cal_channel", "seed": "seed", "duration_s": "duration", "rate_hz": "rate",
-    "ka_m_s2_per_v": "ka",
+    "ka_m_s2_per_v": "ka", "truth_model": "truth",
 }
 DEFAULTS = {"mode": "run", "law": "sine", "rpm": 180.0, "fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0,
             "ripple": 0.005, "cal_accel": 9.81, "cal_freq": 79.6, "cal_channel": "aE_t", "seed": 0,
-            "duration": 10.0, "rate": 10000.0, "ka": 86.43}
+            "duration": 10.0, "rate": 10000.0, "ka": 86.43,
+            "truth": "kinematic"}
 
 
 def register(app: typer.Typer) -> None:
@@ -63,6 +64,9 @@ def acquire(
     cal_freq: Optional[float] = typer.Option(None, help="calibration mode: shaker frequency (Hz) (default 79.6)"),
     cal_accel: Optional[float] = typer.Option(None, help="calibration mode: shaker amplitude (m/s^2 peak) (default 9.81)"),
     cal_channel: Optional[str] = typer.Option(None, help="calibration mode: channel on the shaker (default aE_t)"),
+    truth: Optional[str] = typer.Option(None, help="sim: what moves the follower: kinematic (cam as input, default), "
+                                        "or the rigid / elastic dynamic model (finite --duration; impacts may clip: "
+                                        "consider --ka 864.3, the 480C02 at gain x1)"),
     scene: Optional[Path] = typer.Option(None, help="TOML scene file with a (stand) table; options given here override it"),
     fault: Optional[List[str]] = typer.Option(None, help="sim fault injection kind@seconds (overrun, drop, disconnect, clip); repeatable"),
     iepe_excitation: bool = typer.Option(False, help="nidaqmx: the DAQ powers the IEPE sensor (no 480C02)"),
@@ -73,12 +77,15 @@ def acquire(
 
     given = {k: v for k, v in dict(rpm=rpm, duration=duration, rate=rate, seed=seed, law=law, fu=fu,
                                      backlash_mm=backlash_mm, jt_factor=jt_factor, ripple=ripple, ka=ka, mode=mode,
-                                     cal_freq=cal_freq, cal_accel=cal_accel, cal_channel=cal_channel).items()
+                                     cal_freq=cal_freq, cal_accel=cal_accel, cal_channel=cal_channel,
+                                     truth=truth).items()
              if v is not None}
     opts = dict(DEFAULTS)
     if scene is not None:
         opts.update(load_scene(scene))
     opts.update(given)
+    if "ripple" in given or (scene is not None and "ripple" in load_scene(scene)):
+        opts["_ripple_given"] = True
     kind, arg = parse_device(device)
     if kind == "nidaqmx" and "ka" not in given and (scene is None or "ka" not in load_scene(scene)):
         opts["ka"] = None
@@ -115,7 +122,16 @@ def _sim_device(opts, realtime, faults, dur):
     from acquisition import signal_chain as sc
     from acquisition.sim_stand import SimStand, parse_fault
 
-    scene = sc.StandScene(mode=str(opts["mode"]), law=str(opts["law"]), cam_speed_rpm=float(opts["rpm"]),
+    model = str(opts["truth"])
+    revs = 0
+    if model != "kinematic":
+        if math.isinf(dur):
+            raise InputError(f"the {model} truth needs a finite --duration")
+        # one turn of margin past the last (whole, 0.1 s) block
+        revs = int(math.ceil((dur + 0.2) * float(opts["rpm"]) / 60.0)) + 1
+        if opts.get("_ripple_given") is None:
+            opts["ripple"] = 0.0  # the model's cam runs at constant speed
+    scene = sc.StandScene(truth_model=model, truth_revolutions=revs,mode=str(opts["mode"]), law=str(opts["law"]), cam_speed_rpm=float(opts["rpm"]),
                           Fu=float(opts["fu"]), backlash=float(opts["backlash_mm"]) * 1e-3,
                           jt_factor=float(opts["jt_factor"]), ripple=float(opts["ripple"]),
                           cal_accel=float(opts["cal_accel"]), cal_freq=float(opts["cal_freq"]),
