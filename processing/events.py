@@ -32,5 +32,8 @@ def detect_spikes(residual: np.ndarray, lowpassed: np.ndarray, fs: float, k_sigm
     thr = max(k_sigma * sigma, floor_fraction * float(np.max(np.abs(lowpassed))) if len(lowpassed) else 0.0)
     if thr <= 0 or len(r) < 3:
         return np.empty(0, dtype=np.int64), np.empty(0), thr
-    peaks, _ = signal.find_peaks(np.abs(r - med), height=thr, distance=max(1, int(refractory_s * fs)))
+    mag = np.abs(r - med)
+    if not (mag > thr).any():  # the usual case: nothing to look for
+        return np.empty(0, dtype=np.int64), np.empty(0), float(thr)
+    peaks, _ = signal.find_peaks(mag, height=thr, distance=max(1, int(refractory_s * fs)))
     return peaks.astype(np.int64), r[peaks], float(thr)
