@@ -1,24 +1,185 @@
-"""``--model auto``: the cheapest level of the fidelity ladder that the scene needs.
+"""``--model auto``: run only as much of the fidelity ladder as the scene needs, and say why.
 
-Start from the kinematic level; escalate only when the kinetostatic MR13D changes sign over the
-rise (the follower can leave the flank) and the groove has backlash.
+The ladder (DESIGN.md): kinematic -> rigid (1 DOF, the motor's speed variation) -> rigid + backlash
+(jumps and impacts) -> elastic (contact deformation). ``simulate_auto`` climbs it:
+
+1. Contact outputs requested (x_el, contact force, deformation): the elastic model, the only
+   level that has them.
+2. Otherwise the kinematic level first (cam as input, kinetostatic MR13D over the simulated span).
+   MR13D keeps its sign (by more than SIGN_MARGIN of its range) and omega1 is constant: the follower
+   never leaves the flank, so the rigid model *is* the kinematic model; no dynamic model runs, and
+   the jump indicators are exact zeros (no contact loss: the backlash run is the no-backlash run).
+   The same holds when the groove has no backlash (j = 0: the follower cannot leave the groove).
+3. omega1 variable, or a sign change with backlash: the rigid model, escalated in time. The
+   no-backlash run (1 DOF, the reference of the paper's dphi2/domega indicators) is integrated
+   first; before the first instant its flank force approaches zero the backlash run is the very
+   same ODE on the inner flank, so it is not integrated twice: the 2-DOF model with impacts starts
+   there, from the no-backlash run's state (``SharedPrefixLoop``). If the force never approaches
+   zero, no backlash run is integrated at all. The ``reference`` preset runs the plain model.
+
+The result says which level ran and why (``SimulationResult.reason``; dataset attributes
+``model``, ``model_reason``, ``auto_rhs_evaluations`` = the cost in right-hand-side evaluations of
+the compiled loops, ``auto_escalation_phi1_rad`` = where the backlash model took over).
 """
 from __future__ import annotations
 
+import dataclasses
+import math
+
+import numpy as np
+
 from models.scene import Scene
 
+CONTACT_OUTPUTS = frozenset({"x_el", "xel_max_mm", "xel_min_mm", "contact_force", "deformation",
+                             "MR13D_contact"})
+# a kinematic MR13D minimum closer to zero than this fraction of max |MR13D| counts as a sign
+# change: the dynamic levels shift MR13D by the motor's speed variation (< 1 % on Table 1's runs)
+SIGN_MARGIN = 0.02
+# the backlash run starts this many steps of the no-backlash run before its flank force first
+# changes sign (so that the lift-off event is found inside the backlash run, as in the full run)
+BACK_STEPS = 3
 
-def choose_level(scene: Scene, needs_contact_outputs: bool = False) -> tuple[str, str]:
-    """(level, reason). ``needs_contact_outputs``: the caller asks for x_el or contact forces."""
-    if needs_contact_outputs:
-        return "elastic", "contact outputs (x_el, contact force) were requested"
+
+def _sign_change(mn: float, mx: float) -> bool:
+    scale = max(abs(mn), abs(mx), 1e-12)
+    return not (mn > SIGN_MARGIN * scale or mx < -SIGN_MARGIN * scale)
+
+
+def choose_level(scene: Scene, needs_contact_outputs: bool = False, outputs=()) -> tuple[str, str]:
+    """(level, reason) from the kinematics alone: 'elastic', 'kinematic' or 'rigid'."""
+    level, reason, _ = _choose(scene, needs_contact_outputs or bool(CONTACT_OUTPUTS.intersection(outputs)))
+    return level, reason
+
+
+def _choose(scene: Scene, contact: bool):
+    """(level, reason, kinematic result or None)."""
+    if contact:
+        return "elastic", "contact outputs (x_el, contact force) were requested: only the elastic model has them", None
     from models.simulate import _kinematic
     kin = _kinematic(scene)
     mx, mn = kin.indicators["MR13D_max_Nm"], kin.indicators["MR13D_min_Nm"]
-    if not (mx > 0 > mn):
-        return "kinematic", (f"MR13D keeps its sign over the rise ({mn:.3g} to {mx:.3g} N m): "
-                             "no contact loss, the kinematic level is exact for this scene")
-    if scene.backlash == 0.0 and scene.omega1_mode == "const":
-        return "kinematic", "MR13D changes sign but the groove has no backlash and omega1 is constant"
-    return "rigid", (f"MR13D changes sign over the rise ({mn:.3g} to {mx:.3g} N m) with backlash "
-                     f"{scene.backlash * 1e3:g} mm: jumps and impacts need the rigid model with backlash")
+    change = _sign_change(mn, mx)
+    if scene.omega1_mode == "const" and (not change or scene.backlash == 0.0):
+        why = (f"MR13D keeps its sign over the rise ({mn:.3g} to {mx:.3g} N m)" if not change else
+               f"MR13D changes sign ({mn:.3g} to {mx:.3g} N m) but the groove has no backlash")
+        return "kinematic", (f"{why} and omega1 is constant: the follower never leaves the flank, the "
+                             "kinematic level is the rigid model's exact solution"), kin
+    if change and scene.backlash > 0.0:
+        return "rigid", (f"MR13D changes sign over the rise ({mn:.3g} to {mx:.3g} N m) with backlash "
+                         f"{scene.backlash * 1e3:g} mm: jumps and impacts need the rigid model with backlash"), kin
+    why = (f"MR13D keeps its sign ({mn:.3g} to {mx:.3g} N m)" if not change else
+           f"MR13D changes sign ({mn:.3g} to {mx:.3g} N m) but the groove has no backlash")
+    return "rigid", f"{why}; omega1 is variable: the motor's speed variation needs the 1-DOF rigid model", kin
+
+
+class SharedPrefixLoop:
+    """An integration loop for ``models.rigid.simulate`` (compiled) that integrates the prefix the
+    backlash run and the no-backlash run share only once.
+
+    First call (the backlash plant, j > 0): integrate the no-backlash run (j = 0) over the span,
+    find the first of its steps where its flank force is <= 0, and start the backlash run (contact
+    on the inner flank, free to lift off) BACK_STEPS steps earlier from its state; the prefix phase
+    is the no-backlash run's. Second call (j = 0): return the run already made. ``stats`` accumulates nfev/n_steps.
+    """
+
+    def __init__(self, stats: dict | None = None):
+        self.stats = {} if stats is None else stats
+        self.rfj = None            # (phi1_end, omega1_0, phases, events)
+        self.escalation_phi1 = None
+
+    def _kernel(self):
+        from models.kernels import rigid_nb
+        return rigid_nb.integrate
+
+    def __call__(self, P, phi1_end, omega1_0, preset, t_rise, start=None):
+        from models import rigid
+        kern = self._kernel()
+        if start is not None:
+            return kern(P, phi1_end, omega1_0, preset, t_rise, start, stats=self.stats)
+        if P.j == 0.0:
+            if self.rfj is not None and self.rfj[1] == omega1_0 and self.rfj[0] >= phi1_end:
+                return self.rfj[2], self.rfj[3]
+            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+        # the backlash run: the no-backlash run first (a little longer: rigid.simulate samples it
+        # up to the end of the backlash run, which may overshoot by an event's resolution)
+        P0 = dataclasses.replace(P, j=0.0)
+        end0 = phi1_end + 0.1
+        phases0, events0 = kern(P0, end0, omega1_0, preset, t_rise, stats=self.stats)
+        self.rfj = (end0, omega1_0, phases0, events0)
+        if len(phases0) != 1 or phases0[0].kind != "contact":
+            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+        ph = phases0[0]
+        ts = ph.sol.t
+        y = ph.sol(ts)
+        lam = np.asarray(rigid.contact_terms(P0, y[0], y[1], rigid.INNER)[5], dtype=float)
+        lam = np.where(y[0] <= phi1_end, lam, np.inf)        # only inside the backlash run's span
+        low = np.flatnonzero(lam <= 0.0)
+        first = int(low[0]) if low.size else ts.size - 1
+        if not low.size:
+            # the flank force never vanishes: the backlash run is the no-backlash run; cut it at
+            # the end of the backlash run's span
+            self.escalation_phi1 = None
+            return [rigid.Phase("contact", rigid.INNER, ph.t0, _time_at_phi1(ph, phi1_end), ph.sol)], []
+        k = first - BACK_STEPS
+        if k <= 0:                                            # at (or near) the start: the full run
+            self.escalation_phi1 = 0.0
+            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+        t_a = float(ts[k])
+        phi1_a, omega1_a = float(y[0, k]), float(y[1, k])
+        prefix = rigid.Phase("contact", rigid.INNER, ph.t0, t_a, ph.sol)
+        self.escalation_phi1 = phi1_a
+        phases, events = kern(P, phi1_end, omega1_0, preset, t_rise, ("contact", phi1_a, omega1_a, rigid.INNER),
+                              stats=self.stats, t_start=t_a)
+        return [prefix] + phases, events
+
+
+def _time_at_phi1(phase, phi1_end: float) -> float:
+    """Time (s) at which a contact phase's phi1 reaches phi1_end (bisection on its dense output)."""
+    lo, hi = phase.t0, phase.t1
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        if float(phase.sol(mid)[0]) < phi1_end:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def simulate_auto(scene: Scene, outputs=()):
+    """Run the cheapest level the scene needs (module doc). Returns models.simulate.SimulationResult."""
+    from models import accuracy
+    from models.simulate import _resolve
+
+    level, reason, kin = _choose(scene, bool(CONTACT_OUTPUTS.intersection(outputs)))
+    stats: dict = {}
+    escalation = None
+    if level == "kinematic":
+        result = kin
+        ind = result.indicators
+        ind.update(dphi2_max_deg=0.0, domega2_max_rad_s=0.0, domega1_max_rad_s=0.0, percussion_max_Ns=0.0,
+                   jumps=0, impacts=0)
+    elif level == "elastic":
+        if accuracy.solver("elastic", scene.accuracy) == "compiled":
+            result = accuracy.run_model(scene, "elastic", stats=stats)
+        else:
+            result = _resolve("elastic")(scene)
+    elif accuracy.solver("rigid", scene.accuracy) == "compiled":
+        loop = SharedPrefixLoop(stats)
+        result = accuracy.run_model(scene, "rigid", integrate=loop)
+        escalation = loop.escalation_phi1
+        if escalation is None:
+            reason += ("; the flank force of the 1-DOF run never vanishes: no backlash model was needed "
+                       "(no contact loss)")
+        elif escalation > 0.0:
+            reason += (f"; the 1-DOF run (no backlash) up to phi1 = {math.degrees(escalation):.2f} deg, "
+                       "just before its flank force changes sign, then the 2-DOF model with impacts")
+    else:
+        result = _resolve("rigid")(scene)
+        reason += "; the reference preset runs the full scipy model (no escalation in time)"
+    result.model = level
+    result.reason = reason
+    result.dataset.attrs.update(auto_rhs_evaluations=int(stats.get("nfev", 0)),
+                                auto_escalation_phi1_rad=float("nan") if escalation is None else float(escalation))
+    return result

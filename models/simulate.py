@@ -60,9 +60,12 @@ def simulate(scene: Scene, model: str = "auto") -> SimulationResult:
     t0 = time.perf_counter()
     reason = f"requested --model {model}"
     if model == "auto":
-        from models.auto import choose_level
-        model, reason = choose_level(scene)
-    result = _resolve(model)(scene)
+        # models.auto climbs the ladder (and escalates in time) itself; it sets model and reason
+        from models.auto import simulate_auto
+        result = simulate_auto(scene)
+        model, reason = result.model, result.reason
+    else:
+        result = _resolve(model)(scene)
     result.model = model
     result.reason = reason
     result.wall_s = time.perf_counter() - t0
