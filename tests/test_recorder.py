@@ -101,7 +101,7 @@ session.run(dev, sys.argv[1], 10000, 60.0, flush_interval_s=0.3, on_flush=flushe
 """
 
 
-def test_sigkill_leaves_every_flushed_sample_and_complete_false(tmp_path):
+def test_sigkill_leaves_every_flushed_sample_and_complete_false(tmp_path, capsys):
     p = tmp_path / "killed.h5"
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(p)], stdout=subprocess.PIPE, text=True, cwd=ROOT)
     flushed = []
@@ -129,6 +129,11 @@ def test_sigkill_leaves_every_flushed_sample_and_complete_false(tmp_path):
     assert [k for _, k, _ in rec["events"]][0] == "start"
     ref = reference_data(11, n / 10000 + 0.2)
     np.testing.assert_array_equal(rec["signals"], ref[:n])
+    # and labtool process (processing's reader) accepts it, with a warning
+    capsys.readouterr()
+    assert main(["process", str(p), "-o", str(tmp_path / "m.nc")]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "incomplete" in err
 
 
 class _StopAfter(Device):
