@@ -270,6 +270,10 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
                      "the simulations see only the common harmonic low-pass")
     if ds.attrs.get("source") == "synthetic":
         notes.append("the measured file is SYNTHETIC (kinematics + noise, reports.synthetic), not a recording")
+    dev = cycles.cam_speed_rpm / op["cam_speed_rpm"] - 1.0
+    if abs(dev) > 0.10:
+        notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
+                     f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
     if cycles.partial:
         notes.append(f"{cycles.partial} partial revolution(s) of the recording left out (ends or gaps)")
     sims = []

@@ -301,3 +301,9 @@ def test_damaged_measurements_give_a_report_or_an_input_error(kind, start, frac)
         return
     assert len(cyc.revolutions) >= 1
     assert all(np.all(np.isfinite(v)) for v in cyc.signals.values())
+
+
+def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
+    rep = pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",), overrides={"cam_speed_rpm": 250.0})
+    assert any("differs by -28 %" in n for n in rep.notes)
+    assert not any("differs" in n for n in _kin_report(files["exact"]).notes)
