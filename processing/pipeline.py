@@ -136,58 +136,42 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     law_name = program.segments[0].law.name
 
     # ---- pass 1: revolution marks and channel extremes -------------------------------------------
-    vmin = np.full(rec.n_channels, np.inf)
-    vmax = np.full(rec.n_channels, -np.inf)
     chunk = int(opts.chunk_samples)
     rpm_hint = opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
-    marks_by_seg: list[np.ndarray] = []
     method = "tacho" if itacho is not None else "correlation"
-    period_est = None
-    if itacho is None:
-        a0, b0 = max(segs, key=lambda s: s[1] - s[0])
-        probe = rec.read(a0, min(b0, a0 + int(20 * fs)))[:, it]
-        period_est = cam_angle.estimate_period(probe, fs)
-        if rpm_hint and math.isfinite(rpm_hint):
-            hinted = fs * 60.0 / rpm_hint
-            if abs(period_est / hinted - 1) > 0.2:
-                warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
-                     f"{rpm_hint:g} rpm by more than 20 %; using the data")
-    for a_seg, b_seg in segs:
-        marks = []
-        if itacho is not None:
-            det = cam_angle.TachoEdges()
-            for a, block in rec.chunks(chunk, a_seg, b_seg):
-                vmin, vmax = _extremes(block, vmin, vmax)
-                marks.extend(det.feed(a, block[:, itacho]))
-                progress(len(block))
-        else:
-            corr = cam_angle.CorrelationEdges(mech, program, period_est)
-            over = corr.n + 2
-            for a in range(a_seg, b_seg, chunk):
-                b = min(a + chunk, b_seg)
-                block = rec.read(a, min(b + over, b_seg))
-                vmin, vmax = _extremes(block[: b - a], vmin, vmax)
-                marks.extend(corr.feed(a, block[:, it] * ka[0], a, b))
-                progress(b - a)
-        marks_by_seg.append(np.asarray(marks, dtype=float))
-    if itacho is not None and sum(len(m) for m in marks_by_seg) < 2:
-        raise InputError(f"{rec.source}: tacho channel '{rec.channel_names[itacho]}' shows fewer than two pulses")
+    marks_by_seg, vmin, vmax, period_est = _find_marks(rec, segs, method, itacho, it, ka[0], chunk, mech, program,
+                                                       rpm_hint, warn, progress)
+    if method == "tacho" and sum(max(len(m) - 1, 0) for m in marks_by_seg) < 1:
+        warn(f"tacho channel '{rec.channel_names[itacho]}' shows fewer than two pulses; "
+             "finding the cam angle by correlation with the kinematics instead")
+        method = "correlation"
+        marks_by_seg, vmin, vmax, period_est = _find_marks(rec, segs, method, itacho, it, ka[0], chunk, mech,
+                                                           program, rpm_hint, warn, lambda k: None)
     all_periods = np.concatenate([np.diff(m) for m in marks_by_seg if len(m) >= 2] or [np.empty(0)])
     if len(all_periods) == 0:
         raise InputError(f"{rec.source}: fewer than two cam revolutions found; cannot process "
                          "(is the cam turning, are aE_t and the tacho connected?)")
     period = float(np.median(all_periods))
-    rpm_measured = 60.0 * fs / float(np.mean(all_periods))
+    regular = (all_periods > 0.8 * period) & (all_periods < 1.25 * period)
+    rpm_measured = 60.0 * fs / float(np.mean(all_periods[regular]))
+    # a revolution much longer or shorter than the others (missed or extra tacho pulse, a stall):
+    # its cam angle is not known, so its samples are NaN and it stays out of the statistics
+    irregular_by_seg = [~((np.diff(m) > 0.8 * period) & (np.diff(m) < 1.25 * period)) for m in marks_by_seg]
+    n_irregular = int(sum(x.sum() for x in irregular_by_seg))
+    if n_irregular:
+        warn(f"{n_irregular} revolutions deviate by more than 20 % from the median period "
+             f"{period / fs * 1e3:.1f} ms (missed tacho pulses?); their samples are NaN")
     hist.add("cam_angle", method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
              cam_speed_rpm_mean=rpm_measured, period_median_s=period / fs,
              period_min_s=float(all_periods.min()) / fs, period_max_s=float(all_periods.max()) / fs,
+             irregular_revolutions=n_irregular,
              law=law_name, mechanism=mech.name, **({"autocorrelation_period_s": period_est / fs} if period_est else {}))
 
     # ---- filter design, margins ------------------------------------------------------------------
     cutoff = opts.lowpass_hz or filters.lowpass_cutoff_hz(rpm_measured, fs, opts.harmonics)
     sos = filters.lowpass_sos(fs, cutoff, opts.filter_order)
     settle = filters.settle_samples(sos)
-    margin = int(math.ceil(1.3 * float(all_periods.max()))) + settle + 8
+    margin = int(math.ceil(1.3 * 1.25 * period)) + settle + 8
     margin_int = max(1, int(round(opts.dwell_margin_deg / 360.0 * period)))
     hist.add("lowpass", kind="butterworth", order=opts.filter_order, cutoff_hz=cutoff, zero_phase=True,
              rule=f"{opts.harmonics:g} x cam frequency, at most 0.4 fs" if not opts.lowpass_hz else "given",
@@ -234,7 +218,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
             v.attrs["long_name"] = long_name
             outv[name] = v._h5ds  # write through h5py: h5netcdf's per-call checks cost 10 % of the run
 
-        for iseg, ((a_seg, b_seg), marks) in enumerate(zip(segs, marks_by_seg)):
+        for iseg, ((a_seg, b_seg), marks, irregular) in enumerate(zip(segs, marks_by_seg, irregular_by_seg)):
             welch.reset_continuity()
             usable = len(marks) >= 2
             if not usable:
@@ -260,7 +244,8 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
                     outv["revolution"][a:b] = np.full(b - a, -1, dtype=np.int32)
                     progress(b - a)
                     continue
-                res = _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, margin_int, tau)
+                res = _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, margin_int, tau,
+                                      irregular)
                 rev = res["revolution"]
                 rev_g = np.where(rev >= 0, rev + rev_offset, -1)
                 for name in ("aE_t", "aE_n", "epsilon2", "omega2", "phi1"):
@@ -341,6 +326,43 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
             "segments": len(segs), "history": hist.steps}
 
 
+def _find_marks(rec, segs, method, itacho, it, ka_t, chunk, mech, program, rpm_hint, warn, progress):
+    """Pass 1: revolution marks per segment (tacho edges or matched filter) and channel extremes."""
+    fs = rec.sample_rate_hz
+    vmin = np.full(rec.n_channels, np.inf)
+    vmax = np.full(rec.n_channels, -np.inf)
+    period_est = None
+    if method == "correlation":
+        a0, b0 = max(segs, key=lambda s: s[1] - s[0])
+        probe = rec.read(a0, min(b0, a0 + int(20 * fs)))[:, it]
+        period_est = cam_angle.estimate_period(probe, fs)
+        if rpm_hint and math.isfinite(rpm_hint):
+            hinted = fs * 60.0 / rpm_hint
+            if abs(period_est / hinted - 1) > 0.2:
+                warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
+                     f"{rpm_hint:g} rpm by more than 20 %; using the data")
+    marks_by_seg = []
+    for a_seg, b_seg in segs:
+        marks = []
+        if method == "tacho":
+            det = cam_angle.TachoEdges()
+            for a, block in rec.chunks(chunk, a_seg, b_seg):
+                vmin, vmax = _extremes(block, vmin, vmax)
+                marks.extend(det.feed(a, block[:, itacho]))
+                progress(len(block))
+        else:
+            corr = cam_angle.CorrelationEdges(mech, program, period_est)
+            over = corr.n + 2
+            for a in range(a_seg, b_seg, chunk):
+                b = min(a + chunk, b_seg)
+                block = rec.read(a, min(b + over, b_seg))
+                vmin, vmax = _extremes(block[: b - a], vmin, vmax)
+                marks.extend(corr.feed(a, block[:, it] * ka_t, a, b))
+                progress(b - a)
+        marks_by_seg.append(np.asarray(marks, dtype=float))
+    return marks_by_seg, vmin, vmax, period_est
+
+
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
     """Resample every complete revolution starting in [a, b) on the phi1 grid, all at once.
 
@@ -419,7 +441,8 @@ def _float_attr(v):
         return None
 
 
-def _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, margin_int, tau=None) -> dict:
+def _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, margin_int, tau=None,
+                    irregular=None) -> dict:
     """The chain on one window of one segment (arrays over the window's samples)."""
     lp = filters.zero_phase(sos, phys, axis=0)
     if tau:
@@ -431,12 +454,18 @@ def _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, ma
     acc = lp - tables.gravity[k]
     moving = tables.moving[k]
     acc -= follower.dwell_baseline(acc, ~moving)
-    acc[clipped] = np.nan
+    bad = clipped
+    if irregular is not None and irregular.any():
+        # revolution k spans marks k..k+1; samples in an irregular one have no trustworthy phi1
+        bad = clipped | ((rev >= 0) & (rev < len(irregular)) & irregular[np.clip(rev, 0, len(irregular) - 1)])
+        phi1 = np.where(bad & ~clipped, np.nan, phi1)
+    acc[bad] = np.nan
     eps = acc[:, 0] / mech.DE
-    omega = follower.integrate_motion(np.nan_to_num(eps), moving, fs, margin_int, bad=clipped)
-    return {"aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega,
-            "omega2_abs_from_aE_n": follower.omega2_from_normal(np.nan_to_num(acc[:, 1], nan=0.0), mech.DE)
-            if not clipped.any() else np.where(clipped, np.nan, follower.omega2_from_normal(np.nan_to_num(acc[:, 1]), mech.DE)),
+    omega = follower.integrate_motion(np.nan_to_num(eps), moving, fs, margin_int, bad=bad)
+    omega[bad] = np.nan
+    absn = follower.omega2_from_normal(np.nan_to_num(acc[:, 1]), mech.DE)
+    absn[bad] = np.nan
+    return {"aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega, "omega2_abs_from_aE_n": absn,
             "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
 
 

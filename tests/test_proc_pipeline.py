@@ -259,3 +259,37 @@ def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
     for c in clips:  # flagged, no acceleration, and no omega2 where the follower moves
         assert ds["clipped"].values[c] == 1 and np.isnan(ds["epsilon2"].values[c])
         assert np.isnan(om[c]) or not tr["moving"][c]
+
+
+def test_missed_tacho_pulse_and_dead_tacho(tmp_path):
+    from processing.synthetic import make_signals
+
+    spec = SynthSpec(rpm=300.0, duration_s=3.0)
+    volts, names, tr = make_signals(spec)
+    # remove the 5th tacho pulse: that revolution looks twice as long
+    starts = np.flatnonzero(np.diff((volts[:, 2] > 2.5).astype(int)) == 1) + 1
+    s5 = starts[4]
+    volts[s5:s5 + 20, 2] = 0.0
+    p = tmp_path / "missed.h5"
+    write_v1(p, volts, names, spec.fs)
+    msgs = []
+    with open_recording(p) as rec:
+        s = process_recording(rec, tmp_path / "m.nc", warn=msgs.append)
+    ds = xr.open_dataset(tmp_path / "m.nc", engine="h5netcdf").load()
+    assert any("deviate" in m for m in msgs)
+    assert ds.attrs["cam_speed_rpm"] == pytest.approx(300.0, rel=1e-3)
+    om = ds["omega2"].values
+    assert np.isnan(om[s5 - 100:s5 + 1500]).all()  # the unknown revolution is NaN, not guessed
+    e_o, e_e, _ = _rise_errors(ds, tr)
+    assert e_o < 0.02 and e_e < 0.05
+    # a dead tacho: fall back to the correlation, with a warning
+    volts[:, 2] = 0.01
+    q = tmp_path / "dead.h5"
+    write_v1(q, volts, names, spec.fs)
+    msgs = []
+    with open_recording(q) as rec:
+        s = process_recording(rec, tmp_path / "d.nc", warn=msgs.append)
+    assert s["phi1_method"] == "correlation" and any("fewer than two pulses" in m for m in msgs)
+    ds = xr.open_dataset(tmp_path / "d.nc", engine="h5netcdf").load()
+    e_o, e_e, _ = _rise_errors(ds, tr)
+    assert e_o < 0.02 and e_e < 0.05
