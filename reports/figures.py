@@ -27,6 +27,12 @@ JUMP_VARS = {
 }
 
 
+def plain(text) -> str:
+    """A string from a file, shown literally by matplotlib ('$' would start mathtext and an
+    unbalanced one would fail the drawing)."""
+    return str(text).replace("$", r"\$")
+
+
 def _last_revolution(ds):
     """Mask of the simulation's last whole revolution (or everything) and its cam angle in deg."""
     phi = np.asarray(ds["phi1"].values, dtype=float)
@@ -94,8 +100,8 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
         y = np.abs(np.asarray(ds[n].values, dtype=float))
         ax.semilogy(f, np.where(y > 0, y, np.nan), lw=0.7)
         ax.set_xlim(0, min(float(f.max()), 1000.0))
-        ax.set_ylabel(f"[{ds[n].attrs.get('units', '')}]")
-        ax.set_title(str(ds[n].attrs.get("long_name", n)), fontsize=9)
+        ax.set_ylabel(plain(f"[{ds[n].attrs.get('units', '')}]"))
+        ax.set_title(plain(ds[n].attrs.get("long_name", n)), fontsize=9)
         ax.grid(True, alpha=0.3)
     if spectra:
         axes[len(spectra) - 1, 0].set_xlabel("frequency [Hz]")
@@ -104,7 +110,7 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
         ax = axes[i, 1]
         sel = t <= t[0] + max_time_s
         ax.plot(t[sel], np.asarray(ds[n].values, dtype=float)[sel], lw=0.6)
-        ax.set_ylabel(f"{n} [{ds[n].attrs.get('units', 'm/s²')}]")
+        ax.set_ylabel(plain(f"{n} [{ds[n].attrs.get('units', 'm/s²')}]"))
         ax.set_title(f"{n}, filtered and translated (first {max_time_s:g} s)", fontsize=9)
         ax.grid(True, alpha=0.3)
     if series:

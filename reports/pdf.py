@@ -36,7 +36,8 @@ def _summary_page(report: Report) -> Figure:
         desc = report.time_filter.describe() + "; then, on both sides, " + desc
     lines += ["", "conditioning: " + desc, ""] + [f"note: {n}" for n in report.notes]
     lines += ["", "ISO/TS 18571 grades: excellent > 0.94, good > 0.8, fair > 0.58, poor; S&G C and NRMSE: 0 = identical"]
-    ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace", fontsize=8.5, wrap=True)
+    # file strings (path, law, notes) are shown literally: '$' would start matplotlib's mathtext
+    ax.text(0.0, 1.0, "\n".join(lines).replace("$", r"\$"), va="top", ha="left", family="monospace", fontsize=8.5, wrap=True)
     return fig
 
 

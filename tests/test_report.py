@@ -24,6 +24,10 @@ def files(tmp_path_factory):
     noisy = synthetic_measured(noise=0.03, gain=1.05, revolutions=3.4, seed=3)
     noisy[EVIL_CHANNEL] = ("time", np.zeros(noisy.sizes["time"]), {"units": "V", "long_name": "<b>bold</b> channel"})
     noisy.attrs["channel_names"] = EVIL_ATTR
+    noisy.attrs["law"] = "sine"
+    # '$' in a file's strings must not reach matplotlib's mathtext (an unbalanced one fails the drawing)
+    noisy["aE_t_amplitude"].attrs["long_name"] = "amplitude $\\frac{ x$ of aE_t"   # mathtext would raise
+    noisy["aE_n"].attrs["units"] = "$\\undefinedcmd$"
     paths = {}
     for name, ds in (("exact", exact), ("scaled", scaled), ("late", late), ("noisy", noisy)):
         paths[name] = d / f"{name}.nc"
