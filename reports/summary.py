@@ -50,7 +50,12 @@ def measured_info(report: Report) -> dict:
                if k.startswith("ka_") and k.endswith("_m_s2_per_v") and "uncertainty" not in k}
         if per:
             vals = set(map(str, per.values()))
-            ka = next(iter(per.values())) if len(vals) == 1 else ", ".join(f"{c}: {v}" for c, v in per.items())
+            def g(v):
+                try:
+                    return f"{float(v):.5g}"
+                except (TypeError, ValueError):
+                    return str(v)
+            ka = next(iter(per.values())) if len(vals) == 1 else ", ".join(f"{c}: {g(v)}" for c, v in per.items())
             srcs = {str(a[k]) for k in a if k.startswith("ka_source_")}
             ka_source = "; ".join(sorted(srcs)) or None
     history = a.get("processing_history", a.get("history"))
