@@ -200,6 +200,20 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     check_sq, check_n, omega_peak = 0.0, 0, 0.0
     n_clipped = 0
     clip_events = rec.clip_indices()
+    lost_rows, lost_n, lost_unknown = rec.lost_samples()
+    # the ADC's rails, when the recording states its range (the simulated stand and the recorder do)
+    adc = _float_attr(rec.attrs.get("adc_range_v"))
+    bits = _float_attr(rec.attrs.get("adc_bits")) or 16
+    rail = adc - 2.5 * (2 * adc / 2**bits) if adc and adc > 0 else None
+    lost_cum = np.concatenate([[0], np.cumsum(lost_n)])
+
+    def row_time(rows):
+        """Time (s) of recording rows (float allowed), counting the samples lost before them."""
+        rows = np.asarray(rows, dtype=float)
+        return (rows + lost_cum[np.searchsorted(lost_rows, rows, side="right")]) / fs
+    if lost_unknown:
+        warn(f"{lost_unknown} gap/overrun events do not say how many samples were lost; after them the time "
+             "axis runs on the sample clock (the segments still split there)")
     rev_offset = 0
     rev_marks_global: list[np.ndarray] = []
 
@@ -209,7 +223,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
         tchunk = min(n, 1 << 16)
         tv = f.create_variable("time", ("time",), "f8", chunks=(tchunk,))
         tv.attrs["units"] = "s"
-        tv.attrs["long_name"] = "time from the first sample (sample clock; gaps are not closed)"
+        tv.attrs["long_name"] = "time from the first sample (the samples lost at gaps are counted)"
         tv = tv._h5ds
         outv = {}
         for name, (dt, units, long_name) in TIME_VARS.items():
@@ -231,10 +245,10 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
                 block = rec.read(wa, wb)
                 idx = np.arange(wa, wb)
                 c0, c1 = a - wa, b - wa
-                tv[a:b] = idx[c0:c1] / fs
+                tv[a:b] = row_time(idx[c0:c1])
                 volts = block[:, [it, inn]]
                 phys = volts * ka[None, :]
-                clipped = _clipped(volts, vmin[[it, inn]], vmax[[it, inn]], clip_events, wa, wb)
+                clipped = _clipped(volts, vmin[[it, inn]], vmax[[it, inn]], clip_events, wa, wb, rail)
                 n_clipped += int(clipped[c0:c1].sum())
                 outv["clipped"][a:b] = clipped[c0:c1].astype(np.int8)
                 welch.feed(phys[c0:c1], clipped[c0:c1])
@@ -279,8 +293,11 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
 
     if n_clipped:
         warn(f"{n_clipped} clipped samples flagged and kept out of the estimates")
+    hist.add("time_axis", rule="time = (row + samples lost before it, from the gap events' missing_samples) / fs",
+             samples_lost=int(lost_n.sum()), gaps_with_unknown_loss=lost_unknown)
     hist.add("clipping", flagged_samples=n_clipped, recorder_clip_events=int(len(clip_events)),
-             rule="recorder 'clip' events, or runs of >= 3 samples at the channel's extreme value")
+             rail_v=rail, rule="recorder 'clip' events, |v| within 2.5 LSB of the ADC range when stated, "
+                               "or runs of >= 3 samples at the channel's extreme value")
     check = math.sqrt(check_sq / check_n) / omega_peak if check_n and omega_peak > 0 else math.nan
     hist.add("check_normal", quantity="rms(|omega2| - sqrt(aE_n/DE)) / max|omega2| over the motion",
              value=check)
@@ -291,7 +308,8 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
              segments_skipped_clipped=welch.skipped, signal="Ka-scaled, mean removed per segment, unfiltered")
     hist.add("spikes", k_sigma=opts.spike_k_sigma, floor_fraction=events.DEFAULT_FLOOR_FRACTION,
              refractory_s=events.DEFAULT_REFRACTORY_S, count=len(spikes["index"]))
-    small = _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks_global, mech, program, rpm_measured, segs)
+    small = _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks_global, mech, program, rpm_measured, segs,
+                           row_time)
     small.attrs.update({
         "title": "labtool measured follower motion",
         "source_file": rec.source,
@@ -315,6 +333,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
         "n_revolutions_averaged": cyc.count,
         "n_clipped_samples": n_clipped,
         "n_segments": len(segs),
+        "n_samples_lost": int(lost_n.sum()),
         "processing_history": hist.to_json(),
     })
     try:
@@ -418,9 +437,12 @@ class KinematicTables:
         return k & (self.N - 1)
 
 
-def _clipped(volts, lo, hi, clip_events, wa, wb) -> np.ndarray:
-    """Samples at a channel's extreme value for >= 3 samples in a row, or named by a clip event."""
+def _clipped(volts, lo, hi, clip_events, wa, wb, rail=None) -> np.ndarray:
+    """Samples at the ADC's rails (|v| >= ``rail`` V, when the range is known), at a channel's
+    extreme value for >= 3 samples in a row, or named by a clip event."""
     out = np.zeros(len(volts), dtype=bool)
+    if rail is not None:
+        out |= (np.abs(volts) >= rail).any(axis=1)
     for j in range(volts.shape[1]):
         if not hi[j] > lo[j]:
             continue
@@ -469,7 +491,8 @@ def _process_window(phys, clipped, idx, marks, period, fs, sos, mech, tables, ma
             "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
 
 
-def _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks, mech, program, rpm, segments) -> xr.Dataset:
+def _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks, mech, program, rpm, segments,
+                   row_time) -> xr.Dataset:
     def var(dims, data, units, long_name):
         return (dims, np.asarray(data), {"units": units, "long_name": long_name})
 
@@ -497,7 +520,7 @@ def _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks, mech, program,
     order = np.argsort(si, kind="stable")
     si = si[order]
     all_marks = np.concatenate(rev_marks) if rev_marks else np.empty(0)
-    ds["spike_time"] = var("spike", si / fs, "s", "time of the spike peak")
+    ds["spike_time"] = var("spike", row_time(si), "s", "time of the spike peak")
     ds["spike_sample"] = var("spike", si, "1", "sample index of the spike peak")
     ds["spike_channel"] = var("spike", np.asarray(spikes["channel"], dtype=str)[order] if len(si) else np.array([], dtype=str),
                               "1", "channel of the spike")
@@ -518,7 +541,8 @@ def _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks, mech, program,
     phase = np.where(np.isfinite(ph), phase, "unknown") if len(si) else phase
     ds["spike_phi1"] = var("spike", ph, "rad", "cam angle at the spike")
     ds["spike_phase"] = var("spike", phase, "1", "cam phase at the spike: rise, return, dwell")
-    ds["revolution_start_time"] = var("revolution_mark", all_marks / fs, "s", "time of the revolution mark (phi1 = 0)")
+    ds["revolution_start_time"] = var("revolution_mark", row_time(all_marks), "s",
+                                      "time of the revolution mark (phi1 = 0)")
     per = np.concatenate([np.append(np.diff(m), np.nan) for m in rev_marks if len(m)] or [np.empty(0)])
     ds["revolution_omega1"] = var("revolution_mark", 2 * math.pi * fs / per if len(per) else per, "rad/s",
                                   "mean cam angular velocity over the revolution (NaN for the last of a segment)")

@@ -97,7 +97,11 @@ def test_output_names_units_history(tmp_path):
 def test_gaps_split_segments_and_clips_are_kept_out(tmp_path):
     spec = SynthSpec(rpm=300.0, duration_s=4.0)
     gap, clip = 15000, 27000
-    ds, tr, s, msgs = _run(tmp_path, spec, events=[(gap, "gap", "lost samples"), (clip, "clip", "aE_t")])
+    ds, tr, s, msgs = _run(tmp_path, spec, events=[(gap, "gap", "missing_samples=250 (0.025 s) lost before this row"),
+                                                   (gap, "overrun", "250 samples lost"), (clip, "clip", "aE_t")])
+    t = ds["time"].values
+    assert np.diff(t)[gap - 1] == pytest.approx(251 / spec.fs) and t[-1] == pytest.approx((40000 - 1 + 250) / spec.fs)
+    assert ds.attrs["n_samples_lost"] == 250
     assert s["segments"] == 2 and ds.attrs["n_segments"] == 2
     assert ds["segment_start"].values.tolist() == [0, gap] and ds["segment_stop"].values.tolist() == [gap, 40000]
     # nothing integrated across the gap: the motion interval cut by it is NaN, not interpolated

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from typing import Callable, Iterator
 
 import numpy as np
@@ -100,6 +101,29 @@ class Recording:
         cuts = sorted({e.index for e in self.events if e.kind in SPLITTING_KINDS and 0 < e.index < self.n_samples})
         bounds = [0, *cuts, self.n_samples]
         return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+    def lost_samples(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """(row indices, samples lost before each, events whose loss is unknown) from the gap events.
+
+        The recorder writes ``missing_samples=N`` at the start of a gap event's detail (samples the
+        device lost before that row). Overrun events at the same row are not counted twice.
+        """
+        rows, lost, unknown = [], [], 0
+        gap_rows = set()
+        for e in self.events:
+            if e.kind != "gap" or not (0 < e.index < self.n_samples):
+                continue
+            gap_rows.add(e.index)
+            m = re.search(r"missing_samples\s*=\s*(\d+)", e.detail)
+            if m:
+                rows.append(e.index)
+                lost.append(int(m.group(1)))
+            else:
+                unknown += 1
+        unknown += len({e.index for e in self.events if e.kind == "overrun" and 0 < e.index < self.n_samples}
+                       - gap_rows)
+        order = np.argsort(rows, kind="stable")
+        return np.asarray(rows, dtype=np.int64)[order], np.asarray(lost, dtype=np.int64)[order], unknown
 
     def clip_indices(self) -> np.ndarray:
         """Sample indices the recorder reported as clipped."""
