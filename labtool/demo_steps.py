@@ -185,7 +185,7 @@ def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list
         from reports.pdf import write_pdf
         from reports.summary import to_json
         rep = build_report(measured, ("rigid", "elastic"), ("const", "var"), accuracy="fast", revolutions=1.0,
-                           progress=lambda msg: console.print(f"  {msg}", highlight=False))
+                           progress=lambda msg: console.print(f"  {msg}", highlight=False), stand_in_on_failure=True)
         figs = all_figures(rep)
         html = render_html(rep, figs)
         atomic_write(html_path, lambda tmp: tmp.write_text(html, encoding="utf-8"))

@@ -253,8 +253,11 @@ def event_table(ds: xr.Dataset, cycles: align.MeasuredCycles, sims: list) -> lis
 
 def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Thresholds | None = None,
                  overrides: dict | None = None, accuracy: str = "standard", revolutions: float = 2.0,
-                 cond: align.Conditioning | None = None, progress=None) -> Report:
-    """Everything the report shows. ``progress(msg)`` is called before each long step."""
+                 cond: align.Conditioning | None = None, progress=None, stand_in_on_failure: bool = False) -> Report:
+    """Everything the report shows. ``progress(msg)`` is called before each long step.
+
+    ``stand_in_on_failure`` (the demo): a model that fails is replaced by the kinematic level with a
+    note, instead of ending the report (the CLI: exit 2 for a model's InputError/SolverError)."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     cond = cond or align.Conditioning()
@@ -282,11 +285,19 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
             say(f"simulating {model}, omega1 {mode}")
             try:
                 run = run_simulation(op, model, mode, accuracy, revolutions, cond, time_filter)
-            except LabtoolError:
-                raise
-            except (ValueError, ArithmeticError) as exc:
-                raise InputError(f"the {model} model cannot simulate {op['cam_speed_rpm']:g} rpm "
-                                 f"(omega1 {mode}): {exc}") from None
+            except Exception as exc:
+                if not stand_in_on_failure or model == "kinematic":
+                    if isinstance(exc, LabtoolError):
+                        raise
+                    if isinstance(exc, (ValueError, ArithmeticError)):
+                        raise InputError(f"the {model} model cannot simulate {op['cam_speed_rpm']:g} rpm "
+                                         f"(omega1 {mode}): {exc}") from None
+                    raise
+                # the demo keeps going: the kinematic level stands in, and the page says why
+                run = run_simulation(op, "kinematic", mode, accuracy, revolutions, cond, time_filter)
+                run.requested = model
+                run.warning = run.note = (f"the {model} model failed ({type(exc).__name__}: "
+                                          f"{str(exc).splitlines()[0] if str(exc) else ''}); the kinematic level stands in")
             if run.warning:
                 notes.append(f"{run.label}: {run.warning}")
             sims.append(run)

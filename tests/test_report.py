@@ -311,3 +311,21 @@ def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
     rep = pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",), overrides={"cam_speed_rpm": 250.0})
     assert any("differs by -28 %" in n for n in rep.notes)
     assert not any("differs" in n for n in _kin_report(files["exact"]).notes)
+
+
+def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_stand_in(files, monkeypatch):
+    import models.simulate as ms
+    real = ms.simulate
+
+    def broken(scene, model="auto"):
+        if model == "elastic":
+            raise ValueError("step size too small")
+        return real(scene, model)
+
+    monkeypatch.setattr(ms, "simulate", broken)
+    monkeypatch.setattr(pipeline, "model_available", lambda name: True)
+    with pytest.raises(InputError, match="elastic model cannot simulate 180 rpm"):
+        pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
+    rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",), stand_in_on_failure=True)
+    assert rep.sims[0].model == "kinematic" and rep.sims[0].requested == "elastic"
+    assert any("elastic model failed (ValueError: step size too small)" in n for n in rep.notes)
