@@ -36,6 +36,7 @@ from processing.history import History
 from processing.readers import Recording
 
 REQUIRED = ("aE_t", "aE_n")
+MAX_SPIKES = 100_000  # stored spike records (a noisy hour could otherwise hold millions)
 TIME_VARS = {
     # name: (dtype, units, long_name)
     "aE_t": ("f4", "m/s^2", "tangential acceleration of E, + along increasing psi (filtered, gravity and offset removed)"),
@@ -197,6 +198,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     welch = spectra.WelchAccumulator(fs, nper, 2)
     cyc = cycles.CycleAccumulator(["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"], opts.grid_points)
     spikes = {"index": [], "channel": [], "amplitude": [], "threshold": []}
+    n_spikes_seen = 0
     check_sq, check_n, omega_peak = 0.0, 0, 0.0
     n_clipped = 0
     clip_events = rec.clip_indices()
@@ -277,6 +279,10 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
                     pk, amp, thr = events.detect_spikes(phys[:, j] - res["lowpassed"][:, j], res["lowpassed"][:, j],
                                                         fs, opts.spike_k_sigma, valid=~clipped)
                     keep = (pk >= c0) & (pk < c1)
+                    n_spikes_seen += int(keep.sum())
+                    room = MAX_SPIKES - len(spikes["index"])
+                    if keep.sum() > room:  # bounded memory: keep the first MAX_SPIKES, count the rest
+                        keep &= np.cumsum(keep) <= room
                     spikes["index"].extend((pk[keep] + wa).tolist())
                     spikes["channel"].extend([name] * int(keep.sum()))
                     spikes["amplitude"].extend(amp[keep].tolist())
@@ -307,7 +313,9 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     hist.add("spectra", window="hann", nperseg=nper, overlap=0.5, segments=welch.count,
              segments_skipped_clipped=welch.skipped, signal="Ka-scaled, mean removed per segment, unfiltered")
     hist.add("spikes", k_sigma=opts.spike_k_sigma, floor_fraction=events.DEFAULT_FLOOR_FRACTION,
-             refractory_s=events.DEFAULT_REFRACTORY_S, count=len(spikes["index"]))
+             refractory_s=events.DEFAULT_REFRACTORY_S, count=n_spikes_seen, stored=len(spikes["index"]))
+    if n_spikes_seen > len(spikes["index"]):
+        warn(f"{n_spikes_seen} spikes found; only the first {len(spikes['index'])} are stored")
     small = _small_dataset(rec, fs, welch, cyc, stats, spikes, rev_marks_global, mech, program, rpm_measured, segs,
                            row_time)
     small.attrs.update({
@@ -333,6 +341,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
         "n_revolutions_averaged": cyc.count,
         "n_clipped_samples": n_clipped,
         "n_segments": len(segs),
+        "n_spikes": n_spikes_seen,
         "n_samples_lost": int(lost_n.sum()),
         "processing_history": hist.to_json(),
     })
@@ -340,7 +349,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
         small.to_netcdf(tmp, mode="a", engine="h5netcdf")
     except OSError as exc:
         raise InputError(f"cannot write the output: {exc}") from None
-    return {"cam_speed_rpm": rpm_measured, "revolutions_averaged": cyc.count, "spikes": len(spikes["index"]),
+    return {"cam_speed_rpm": rpm_measured, "revolutions_averaged": cyc.count, "spikes": n_spikes_seen,
             "clipped": n_clipped, "normal_check_rel_rms": check, "lowpass_hz": cutoff, "phi1_method": method,
             "segments": len(segs), "history": hist.steps}
 

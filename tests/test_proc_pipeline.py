@@ -297,3 +297,13 @@ def test_missed_tacho_pulse_and_dead_tacho(tmp_path):
     ds = xr.open_dataset(tmp_path / "d.nc", engine="h5netcdf").load()
     e_o, e_e, _ = _rise_errors(ds, tr)
     assert e_o < 0.02 and e_e < 0.05
+
+
+def test_spike_records_are_bounded(tmp_path, monkeypatch):
+    import processing.pipeline as pl
+
+    monkeypatch.setattr(pl, "MAX_SPIKES", 2)
+    spec = SynthSpec(duration_s=2.0, spikes_at_s=(0.3, 0.8, 1.3, 1.7))
+    ds, tr, s, msgs = _run(tmp_path, spec)
+    assert s["spikes"] >= 4 and ds.sizes["spike"] == 2 and any("only the first 2" in m for m in msgs)
+    assert ds.attrs["n_spikes"] == s["spikes"]
