@@ -231,17 +231,74 @@ def _measured_events(ds: xr.Dataset, cycles: align.MeasuredCycles) -> dict:
     return out
 
 
+def predicted_events(sim: xr.Dataset) -> dict | None:
+    """Cam angles (rad, in [0, 2 pi)) of the impacts and of the jumps (contact losses) in the
+    simulation's last whole revolution: ``{"impacts": array, "jumps": array}``.
+
+    Rigid model: ``event_phi1`` by ``event_kind`` (flag meanings ``impact_*`` = impact; a jump, i.e. a
+    free flight, starts at a ``liftoff`` and after every ``impact_rebound``); elastic model: ``event_kinds``/``event_times_s`` (``leave_*`` = jump, ``land_*`` =
+    impact), mapped to phi1 through the simulation's own phi1(time). None when the simulation records
+    no events (kinematic level)."""
+    out = None
+    if "event_phi1" in sim and "event_kind" in sim:
+        meanings = str(sim["event_kind"].attrs.get("flag_meanings", "")).split()
+        values = list(np.atleast_1d(sim["event_kind"].attrs.get("flag_values", range(1, len(meanings) + 1))))
+        kinds = np.asarray(sim["event_kind"].values)
+        phi = np.asarray(sim["event_phi1"].values, dtype=float)
+        flags = lambda word: [v for v, m in zip(values, meanings) if word in m]   # noqa: E731
+        # a flight (jump) starts at a lift-off and again after every rebounding impact
+        out = {"impacts": phi[np.isin(kinds, flags("impact"))],
+               "jumps": phi[np.isin(kinds, flags("liftoff") + flags("rebound"))]}
+    elif "event_times_s" in sim.attrs and "event_kinds" in sim.attrs and "time" in sim.variables:
+        times = np.atleast_1d(np.asarray(sim.attrs["event_times_s"], dtype=float))
+        kinds = [k for k in str(sim.attrs["event_kinds"]).split(",") if k]
+        if len(kinds) != times.size:
+            return None
+        phi = np.interp(times, np.asarray(sim["time"].values, float), np.asarray(sim["phi1"].values, float))
+        out = {"impacts": phi[np.array([k.startswith("land") for k in kinds], dtype=bool)],
+               "jumps": phi[np.array([k.startswith("leave") for k in kinds], dtype=bool)]}
+    if out is None:
+        return None
+    top = float(np.nanmax(np.asarray(sim["phi1"].values, float)))
+    k = max(int(math.floor(top / (2 * math.pi) + 1e-6)) - 1, 0)
+    a = 2 * math.pi * k
+    return {name: np.sort(v[np.isfinite(v) & (v >= a) & (v < a + 2 * math.pi)] - a) for name, v in out.items()}
+
+
+def _measured_first_impact_deg(ds: xr.Dataset, cycles: align.MeasuredCycles) -> float | None:
+    """Median over the whole revolutions of the cam angle (deg) of the first spike after phi1 = 0."""
+    if "spike_time" not in ds.variables and "impact_time" not in ds.variables:
+        return None
+    name = "impact_time" if "impact_time" in ds.variables else "spike_time"
+    times = np.asarray(ds[name].values, dtype=float)
+    firsts = []
+    for k in range(cycles.time.shape[0]):
+        row = cycles.time[k]
+        inside = times[(times >= row[0]) & (times <= row[-1])]
+        if inside.size:
+            firsts.append(math.degrees(float(np.interp(inside.min(), row, cycles.grid))))
+    return float(np.median(firsts)) if firsts else None
+
+
 def event_table(ds: xr.Dataset, cycles: align.MeasuredCycles, sims: list) -> list[dict]:
+    """Jumps and impacts per revolution, predicted (each simulation) and measured, and the cam angle
+    of the first impact of a revolution (deg)."""
     meas = _measured_events(ds, cycles)
+    first_meas = _measured_first_impact_deg(ds, cycles)
     rows = []
     for run in sims:
         ind = run.indicators
         row = {"label": run.label, "requested_model": run.requested, "model": run.model, "omega1": run.omega1}
+        ev = predicted_events(run.dataset)
         for kind in ("jumps", "impacts"):
-            pred = ind.get(kind)
-            # the models count over every simulated revolution: per revolution, like the measurement
-            row[f"{kind}_predicted_per_rev"] = None if pred is None else float(pred) / run.revolutions
+            # per revolution: the events of the last (steady) simulated revolution, like the measurement
+            row[f"{kind}_predicted_per_rev"] = None if ev is None else float(ev[kind].size)
             row[f"{kind}_measured_per_rev"] = meas[kind]
+            # the model's own indicator, counted as in the paper's tables (may cover the rise only)
+            row[f"{kind}_indicator"] = ind.get(kind)
+        angles = None if ev is None else ev["impacts"]
+        row["first_impact_deg_predicted"] = None if angles is None or not angles.size else math.degrees(angles[0])
+        row["first_impact_deg_measured"] = first_meas
         row["sign_change"] = ind.get("sign_change")
         row["MR13D_max_Nm"] = ind.get("MR13D_max_Nm")
         row["MR13D_min_Nm"] = ind.get("MR13D_min_Nm")

@@ -329,3 +329,24 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
     rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",), stand_in_on_failure=True)
     assert rep.sims[0].model == "kinematic" and rep.sims[0].requested == "elastic"
     assert any("elastic model failed (ValueError: step size too small)" in n for n in rep.notes)
+
+
+def test_predicted_events_of_the_last_revolution():
+    """Rigid-style events (flags) and elastic-style events (kinds + times) in the last revolution."""
+    import xarray as xr
+    two = 2 * math.pi
+    rigid = xr.Dataset(
+        {"phi1": ("time", np.linspace(0, 2 * two, 50)),
+         "event_phi1": ("event", np.array([0.5, 1.0, two + 0.3, two + 0.4, two + 0.9])),
+         "event_kind": ("event", np.array([1, 2, 1, 2, 3], dtype="int8"),
+                        {"flag_values": np.array([1, 2, 3], dtype="int8"),
+                         "flag_meanings": "liftoff impact_rebound impact_settle"})},
+        coords={"time": np.linspace(0, 1, 50)})
+    ev = pipeline.predicted_events(rigid)
+    assert np.allclose(ev["impacts"], [0.4, 0.9]) and np.allclose(ev["jumps"], [0.3, 0.4])
+    t = np.linspace(0, 2, 101)
+    elastic = xr.Dataset({"phi1": ("time", two * t)}, coords={"time": t},
+                         attrs={"event_times_s": np.array([0.1, 1.05, 1.25]), "event_kinds": "leave_interior,leave_exterior,land_exterior"})
+    ev = pipeline.predicted_events(elastic)
+    assert np.allclose(ev["jumps"], [two * 0.05]) and np.allclose(ev["impacts"], [two * 0.25])
+    assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
