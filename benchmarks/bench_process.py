@@ -23,6 +23,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+def _rss_mb(pid: int) -> float:
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
 def make_file(path: Path, minutes: float) -> int:
     import h5py
     import numpy as np
@@ -79,18 +90,27 @@ def main() -> None:
             cpu = sorted(os.sched_getaffinity(0))[0]
             cmd = ["taskset", "-c", str(cpu)] + cmd if Path("/usr/bin/taskset").exists() else cmd
         t1 = time.perf_counter()
-        res = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        rss = []  # (s, MB) of the child while it runs: is memory bounded, or does it grow?
+        while proc.poll() is None:
+            rss.append((time.perf_counter() - t1, _rss_mb(proc.pid)))
+            time.sleep(0.25)
+        stdout, stderr = proc.communicate()
         wall_outer = time.perf_counter() - t1
-        if res.returncode != 0:
-            print(res.stderr)
+        if proc.returncode != 0:
+            print(stderr)
             raise SystemExit(1)
-        wall = float(next(line.split()[1] for line in res.stdout.splitlines() if line.startswith("WALL")))
-        info = next(line for line in res.stdout.splitlines() if line.startswith("INFO")).split()[1:]
+        wall = float(next(line.split()[1] for line in stdout.splitlines() if line.startswith("WALL")))
+        info = next(line for line in stdout.splitlines() if line.startswith("INFO")).split()[1:]
         peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
         print(f"processing wall time: {wall:.1f} s (process incl. start-up {wall_outer:.1f} s)")
         print(f"throughput: {3 * n / wall / 1e6:.2f} M samples/s (samples x channels), "
               f"{n / wall / 1e6:.2f} M time steps/s, one core")
         print(f"peak memory (max RSS of the processing process): {peak_mb:.0f} MB")
+        rss = [(t, m) for t, m in rss if m > 0]
+        if rss:
+            marks = [rss[int(f * (len(rss) - 1))] for f in (0.2, 0.4, 0.6, 0.8, 1.0)]
+            print("resident memory while running: " + ", ".join(f"{m:.0f} MB at {t:.0f} s" for t, m in marks))
         print(f"output: {out.stat().st_size / 1e6:.0f} MB; cam {float(info[0]):.2f} rpm, {info[1]} revolutions averaged, "
               f"normal check {100 * float(info[2]):.2f} %")
         print("goal: >= 10 M samples/s and < 500 MB peak memory")
