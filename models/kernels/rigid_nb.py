@@ -33,6 +33,7 @@ INNER, OUTER, FREE = 1, -1, 0
 CONTACT_MODE, FREE_MODE = 0, 1
 LIFTOFF, REBOUND, SETTLE = 1, 2, 3
 MAX_STEPS = 2_000_000
+ANGLE_TIE = 1e-12      # rad: an event this close to the end of the simulated angle is the end
 # parameter vector layout (``_params``)
 I_PHI20, I_JT, I_JCAM, I_INVJ, I_CONST, I_M0, I_M1, I_FU, I_J, I_K = range(10)
 N_EVCOLS = 14   # time, phi1, kind, flank, v_b, v_a, P, w1b, w1a, w2b, w2a, phi2, Eb, Ea
@@ -323,6 +324,10 @@ def run(n1, h1, c1, n2, h2, c2, p, phi1_end, omega1_0, rtol, max_step, t_max, v_
             if hit >= 0:
                 t_hit = t + best * h
                 dp.dense_eval(y, h, Q, best, tmp)
+                if hit != 0 and tmp[0] >= phi1_end - ANGLE_TIE:
+                    # a force jump at the very end of the span (the end of the rise, where the
+                    # load is removed) ends the run: it is not a lift-off inside the span
+                    hit = 0
                 for i in range(n):
                     y_new[i] = tmp[i]
                 break
