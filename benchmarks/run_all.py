@@ -97,6 +97,7 @@ def table1_timing(repeat: int = 3) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description="all benchmarks")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--models-only", action="store_true", help="skip the other bench_*.py scripts")
     args = ap.parse_args(argv)
     RESULTS.mkdir(exist_ok=True)
     report = {"machine": machine()}
@@ -111,7 +112,7 @@ def main(argv=None):
     t0 = time.perf_counter()
     subprocess.run(wp, cwd=ROOT, check=True)
     report["work_precision_s"] = time.perf_counter() - t0
-    if not args.quick:
+    if not (args.quick or args.models_only):
         for script in sorted(HERE.glob("bench_*.py")):
             print(f"\n== {script.name}", flush=True)
             t0 = time.perf_counter()

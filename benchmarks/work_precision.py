@@ -189,14 +189,17 @@ def plot(rows, path):
                 if pts:
                     rt = sorted(pts)
                     ax.plot([pts[k][0] for k in rt], [max(pts[k][1], 1e-16) for k in rt], marker, label=solver, ms=4)
+            ladder_runs = {r["run"] for r in rows if r["model"] == model and not r["preset"]}
             for p, color in (("fast", "C3"), ("standard", "C2"), ("reference", "C4")):
-                pr = [r for r in rows if r["model"] == model and r["preset"] == p]
+                # the presets on the ladders' runs, so that the wall times add up over the same runs
+                pr = [r for r in rows if r["model"] == model and r["preset"] == p
+                      and (r["run"] in ladder_runs or not ladder_runs)]
                 if pr:
                     ax.plot(sum(r["loop_s"] for r in pr), max(max(float(r[key]) for r in pr), 1e-16), "*",
                             color=color, ms=12, label=f"preset {p}")
             ax.set_xscale("log")
             ax.set_yscale("log" if key != "d_events" else "symlog")
-            ax.set_xlabel("integration wall time over the runs (s)")
+            ax.set_xlabel(f"integration wall time, runs {sorted(ladder_runs)} (s)", fontsize=8)
             ax.set_title(f"{model}: {title}", fontsize=9)
             ax.grid(True, which="both", alpha=0.3)
             if i == 0 and j == 0:

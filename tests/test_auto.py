@@ -97,3 +97,22 @@ def test_auto_reason_is_in_the_dataset():
     assert res.dataset.attrs["model"] == res.model == "rigid"
     assert res.dataset.attrs["model_reason"] == res.reason
     assert "MR13D changes sign" in res.reason and "2-DOF" in res.reason
+
+
+@pytest.mark.parametrize("kw", [
+    dict(cam_speed_rpm=1000.0, jt_factor=0.25, backlash=1e-6, restitution=1.0),
+    dict(cam_speed_rpm=60.0, jt_factor=10.0, backlash=1e-3, restitution=0.5),
+    dict(cam_speed_rpm=500.0, Fu=500.0, backlash=0.128e-3, restitution=0.0),
+    dict(cam_speed_rpm=300.0, backlash=0.016e-3, restitution=0.8, omega1_mode="const"),
+])
+def test_auto_matches_the_full_model_at_the_extremes(kw):
+    scene = Scene(**kw)
+    full = accuracy.run_model(scene, "rigid").indicators
+    auto = simulate(scene, "auto")
+    if auto.model == "kinematic":       # exact only where the rigid model never leaves the flank
+        assert full["jumps"] == 0 and full["impacts"] == 0
+        assert auto.indicators["MR13D_max_Nm"] == pytest.approx(full["MR13D_max_Nm"], rel=2e-3)
+        return
+    assert auto.indicators["jumps"] == full["jumps"] and auto.indicators["impacts"] == full["impacts"]
+    for key in KEYS:
+        assert auto.indicators[key] == pytest.approx(full[key], rel=1e-6, abs=1e-9 * abs(full["MR13D_max_Nm"])), key
