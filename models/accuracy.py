@@ -1,6 +1,11 @@
 """Accuracy presets ``fast`` / ``standard`` / ``reference``: which solver runs, with which
 tolerances, and the error each one was MEASURED to make against an independent reference solution.
 
+A preset is defined by its accuracy, not by its tolerance: ``STATED`` is what a user may rely on
+(the worst relative error in omega2 over Table 1's runs, with no event lost or added), ``MEASURED``
+the figures that justify it and the tolerances they were measured with. A tolerance change in a
+model without a new measurement fails ``tests/test_accuracy.py``.
+
 The reference solution (``reference_run``) is scipy's DOP853 (8th order, a different method from
 the compiled Dormand-Prince 5(4)) at rtol 1e-12 on the model's own equations, with the step limits
 of the model's ``reference`` preset and its absolute tolerances scaled to rtol 1e-12.
@@ -25,7 +30,6 @@ other scenes than Table 1's), never below 1e-9.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import importlib
 import inspect
@@ -263,13 +267,3 @@ def compare(result, reference) -> dict:
         err_indicators=float(err_ind),
         n_events=int(te.size), n_events_ref=int(tr.size),
     )
-
-
-@dataclasses.dataclass
-class Measurement:
-    model: str
-    preset: str
-    run: int
-    errors: dict
-    wall_s: float
-    nfev: int
