@@ -171,7 +171,7 @@ def step_synthetic_measurement(out: Path, console: Console) -> Path:
 def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list[str]] | None:
     """The report: both models, both omega1 modes, 'fast' solver preset, one simulated revolution."""
     from labtool.output import atomic_write
-    from reports.pipeline import build_report, headline
+    from reports.pipeline import build_report, closest, headline
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
     missing = [m for m in ("rigid", "elastic") if not _have(f"models.{m}")]
@@ -202,5 +202,8 @@ def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list
         rows.append(f"{h['label']:36s} omega2: ISO {h['omega2_iso_rating']:.2f} ({h['omega2_iso_grade']}), "
                     f"S&G C {h['omega2_sg_comprehensive']:.2f}; epsilon2: ISO {h['epsilon2_iso_rating']:.2f} "
                     f"({h['epsilon2_iso_grade']}), S&G C {h['epsilon2_sg_comprehensive']:.2f}")
+    best = closest(rep)
+    if best is not None:
+        rows.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
     rows += [f"note: {n}" for n in rep.notes]
     return html_path, rows

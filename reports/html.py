@@ -15,7 +15,7 @@ import jinja2
 import numpy as np
 
 from reports.figures import all_figures, png_bytes
-from reports.pipeline import Report, headline
+from reports.pipeline import Report, closest, headline
 from reports.summary import build_summary
 
 TEMPLATES = Path(__file__).with_name("templates")
@@ -72,7 +72,7 @@ def render_html(report: Report, figures=None, dpi: int = 90) -> str:
     context = {
         "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "measured": summary["measured"], "op": report.scene, "notes": report.notes,
-        "headline": headline(report), "comparisons": report.comparisons, "metric_columns": METRIC_COLUMNS,
+        "headline": headline(report), "closest": closest(report), "comparisons": report.comparisons, "metric_columns": METRIC_COLUMNS,
         "events": report.events, "simulations": summary["simulations"], "conditioning": summary["conditioning"],
         "thresholds": {"file": report.thresholds_source, "rows": rows}, "passed": report.passed,
         "failed": [r for r in rows if not r["passed"]], "figures": figs,

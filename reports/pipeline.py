@@ -388,3 +388,11 @@ def headline(report: Report) -> list[dict]:
                             f"{s}_sg_comprehensive": o["sg_comprehensive"], f"{s}_nrmse": o["nrmse"]})
         rows.append(row)
     return rows
+
+
+def closest(report: Report) -> dict | None:
+    """The headline row with the highest mean of the omega2 and epsilon2 ISO ratings (None if none)."""
+    rows = headline(report)
+    if not rows:
+        return None
+    return max(rows, key=lambda h: 0.5 * (h["omega2_iso_rating"] + h["epsilon2_iso_rating"]))

@@ -4,7 +4,8 @@ Keys (stable): ``format`` ("labtool.report.summary"), ``format_version`` (1), ``
 cam speeds, Ka, whole revolutions), ``operating_point`` (what the models simulated, edge units),
 ``conditioning``, ``simulations`` (per model and omega1 mode: level used, note, wall time,
 indicators), ``comparisons`` (per model, mode and signal: ``overall`` metrics on the cycle average
-and ``per_revolution``), ``headline``, ``events``, ``thresholds`` (rows with ``passed``),
+and ``per_revolution``), ``headline``, ``closest`` (the simulation with the best mean ISO rating of
+omega2 and epsilon2), ``events``, ``thresholds`` (rows with ``passed``),
 ``passed`` (true when every threshold holds, also when there are none), ``notes``.
 Non-finite numbers become null so that the output is strict JSON.
 """
@@ -15,7 +16,7 @@ import math
 
 import numpy as np
 
-from reports.pipeline import Report, headline
+from reports.pipeline import Report, closest, headline
 
 FORMAT_VERSION = 1
 
@@ -101,6 +102,7 @@ def build_summary(report: Report) -> dict:
         "simulations": sims,
         "comparisons": comps,
         "headline": headline(report),
+        "closest": None if closest(report) is None else closest(report)["label"],
         "events": report.events,
         "thresholds": {"file": report.thresholds_source, "rows": report.threshold_rows},
         "passed": report.passed,

@@ -24,6 +24,8 @@ def test_demo_runs_the_whole_pipeline_and_prints_where_the_report_is(tmp_path, c
     for h in summary["headline"]:
         assert 0.0 <= h["omega2_iso_rating"] <= 1.0 and 0.0 <= h["epsilon2_iso_rating"] <= 1.0
         assert h["label"] in printed
+    assert summary["closest"] in {h["label"] for h in summary["headline"]}
+    assert f"closest to the measurement: {summary['closest']}" in printed
     html = (out / "report.html").read_text()
     assert "elastic, w1 = var." in html and "rigid, w1 = ct." in html
     if (out / "recording_180rpm.h5").exists():       # the stand and processing are installed
