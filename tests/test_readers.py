@@ -187,7 +187,7 @@ def good_v1(tmp_path_factory):
     return p.read_bytes()
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=int(__import__("os").environ.get("PROC_FUZZ_EXAMPLES", 60)), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_property_malformed_files_raise_only_labtool_errors(tmp_path, good_v1, data):
     """Truncated, bit-flipped or random files: the readers either read them or raise a LabtoolError."""
@@ -238,3 +238,21 @@ def test_killed_swmr_writer_reads_with_warnings(tmp_path):
         assert rec.n_samples == 1000 and not rec.complete
         assert any("SWMR" in w for w in rec.warnings) and any("incomplete" in w for w in rec.warnings)
         assert rec.read(0, 1000).shape == (1000, 2)
+
+
+def test_unwritten_rows_are_not_read_as_zeros(tmp_path):
+    p = tmp_path / "tail.h5"
+    write_v1(p, np.random.default_rng(0).normal(size=(20000, 3)), NAMES, 1000.0)
+    with h5py.File(p, "a") as f:
+        f["signals"].resize((10**9, 3))  # resized, never written (or a damaged shape)
+    with open_recording(p) as rec:
+        assert rec.n_samples == 24576 and any("never written" in w for w in rec.warnings)  # 3 chunks of 8192
+    q = tmp_path / "hole.h5"
+    with h5py.File(q, "w") as f:
+        f.attrs.update(dict(format="labtool.recording", format_version=1, sample_rate_hz=1000.0, complete=True))
+        d = f.create_dataset("signals", shape=(30000, 3), chunks=(8192, 3), dtype="f4")
+        d.attrs["channel_names"] = np.array(NAMES, dtype=h5py.string_dtype())
+        d[:8192] = 1.0
+        d[16384:] = 1.0
+    with pytest.raises(FileFormatError, match="never written"):
+        open_recording(q)

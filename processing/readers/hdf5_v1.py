@@ -25,14 +25,14 @@ def open_hdf5_v1(path) -> Recording:
     swmr_note = None
     try:
         f = h5py.File(path, "r")
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RuntimeError) as exc:
         # a recorder writing in SWMR mode that is still running, or was killed, leaves the file's
         # consistency flags set: a SWMR reader may still open it and read what was flushed
         try:
             f = h5py.File(path, "r", swmr=True)
             swmr_note = (f"{src}: the file is still marked open for writing (recorder running or killed); "
                          "read in SWMR mode, up to the last flushed block")
-        except (OSError, ValueError):
+        except Exception:  # h5py raises OSError, ValueError or RuntimeError on damaged superblocks
             raise FileFormatError(f"{src}: not a readable HDF5 file (truncated or corrupt?): {exc}") from None
     try:
         rec = _build(f, src)
@@ -97,6 +97,7 @@ def _build(f: h5py.File, src: str) -> Recording:
             warns.append(f"{src}: ignoring unusable cam_speed_rpm {a['cam_speed_rpm']!r}")
             rpm = math.nan
     events = _events(f, src, warns)
+    n = _written_rows(sig, src, warns)
 
     def read(start: int, stop: int) -> np.ndarray:
         try:
@@ -110,6 +111,44 @@ def _build(f: h5py.File, src: str) -> Recording:
     return Recording(source=src, format=f"{FORMAT} v{VERSION}", sample_rate_hz=fs, channel_names=names,
                      n_samples=int(n), read=read, ka_m_s2_per_v=ka, start_time_utc=as_text(a.get("start_time_utc", "")),
                      complete=complete, cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns, close=f.close)
+
+
+def _written_rows(sig: h5py.Dataset, src: str, warns: list[str]) -> int:
+    """Rows of ``signals`` that hold written data.
+
+    HDF5 returns the fill value (0) for chunks that were never written, so a dataset resized but
+    not filled (a recorder killed between the two) or a damaged shape would read as silent zeros.
+    Unwritten chunks at the end are cut off with a warning; unwritten chunks inside, or a
+    contiguous dataset shorter than its shape, make the file corrupt.
+    """
+    n, nch = sig.shape
+    if n == 0:
+        return 0
+    if sig.chunks is None:
+        if sig.compression is None and sig.id.get_storage_size() < n * nch * sig.dtype.itemsize:
+            raise FileFormatError(f"{src}: 'signals' holds fewer bytes than its shape {sig.shape} needs (truncated)")
+        return n
+    crow, ccol = sig.chunks
+    row_chunks = -(-n // crow)
+    expected = row_chunks * -(-nch // ccol)
+    have = sig.id.get_num_chunks()
+    if have >= expected:
+        return n
+    if have > 100_000:
+        raise FileFormatError(f"{src}: 'signals' has {expected - have} unwritten chunks; the file is damaged")
+    written = {sig.id.get_chunk_info(i).chunk_offset[0] // crow for i in range(have)}
+    last = max(written) if written else -1
+    missing_inside = [k for k in range(last + 1) if k not in written]
+    if missing_inside:
+        a = missing_inside[0] * crow
+        raise FileFormatError(f"{src}: samples from row {a} on were never written although later ones were; "
+                              "the file is damaged")
+    rows = min(n, (last + 1) * crow)
+    if rows == 0:
+        raise FileFormatError(f"{src}: 'signals' has a shape of {n} rows but none was written")
+    warns.append(f"{src}: rows {rows}..{n} of 'signals' were never written (recorder killed?); "
+                 f"reading the first {rows}")
+    return rows
 
 
 def _events(f: h5py.File, src: str, warns: list[str]) -> list[Event]:
