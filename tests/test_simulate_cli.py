@@ -27,9 +27,21 @@ def test_json_keys_and_rigid_values(capsys):
 
 
 def test_auto_picks_kinematic_without_sign_change(capsys):
-    out = _json(capsys, ["--fu", "65", "--accuracy", "fast"])       # run 9: MR13D > 0 on the rise
+    # run 9: MR13D > 0 over the rise; with the cam as input nothing dynamic is needed
+    out = _json(capsys, ["--fu", "65", "--omega1", "const", "--accuracy", "fast"])
     assert out["model"] == "kinematic"
+    from models.kinematics import analyze, rise_summary
+
+    assert out["MR13D_max_Nm"] == pytest.approx(rise_summary(analyze(rpm=180, Fu=65))["MR13D_max_Nm"], rel=1e-6)
+    assert out["jumps"] == 0
+
+
+def test_auto_runs_the_1dof_rigid_model_when_omega1_varies(capsys):
+    # run 9 with the motor characteristic: the speed variation needs the 1-DOF model, no jumps
+    out = _json(capsys, ["--fu", "65", "--omega1", "var", "--accuracy", "fast"])
+    assert out["model"] == "rigid"
     assert out["MR13D_max_Nm"] == pytest.approx(17.0, rel=0.1)
+    assert out["jumps"] == 0 and out["impacts"] == 0
 
 
 def test_netcdf_output_has_units_and_refuses_overwrite(tmp_path, capsys):
