@@ -7,6 +7,8 @@ Optional properties: ``ka_m_s2_per_v`` per channel, ``cam_speed_rpm`` on the fil
 """
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 
 import numpy as np
@@ -15,22 +17,61 @@ from models.errors import FileFormatError, InputError
 from processing.readers.base import Recording, as_text, check_finite, check_sample_rate
 
 
+@contextlib.contextmanager
+def _nptdms_quiet():
+    """Collect npTDMS's warnings instead of letting its console handler print them (one-line errors)."""
+    collect = _Collect()
+    parent = logging.getLogger("nptdms")
+    parent.addHandler(collect)
+    try:
+        from nptdms.log import log_manager
+        console = log_manager.console_handler
+    except (ImportError, AttributeError):  # pragma: no cover - other npTDMS versions
+        console = None
+    old_level = console.level if console is not None else None
+    if console is not None:
+        console.setLevel(logging.CRITICAL + 1)
+    try:
+        yield collect.messages
+    finally:
+        parent.removeHandler(collect)
+        if console is not None:
+            console.setLevel(old_level)
+
+
+class _Collect(logging.Handler):
+    """npTDMS logs damage (a truncated last segment) as warnings: collect them for one summary line."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(record.getMessage())
+
+
 def open_tdms(path, sample_rate_hz: float | None = None, group: str | None = None) -> Recording:
     from nptdms import TdmsFile
 
     src = str(path)
-    try:
-        tf = TdmsFile.open(path)
-    except Exception as exc:  # npTDMS raises ValueError/KeyError/struct.error on damaged files
-        raise FileFormatError(f"{src}: not a readable TDMS file (truncated or corrupt?): {type(exc).__name__}: {exc}") from None
-    try:
-        return _build(tf, src, sample_rate_hz, group)
-    except (FileFormatError, InputError):
-        tf.close()
-        raise
-    except Exception as exc:
-        tf.close()
-        raise FileFormatError(f"{src}: damaged TDMS file: {type(exc).__name__}: {exc}") from None
+    with _nptdms_quiet() as messages:
+        try:
+            tf = TdmsFile.open(path)
+        except Exception as exc:  # npTDMS raises ValueError/KeyError/struct.error on damaged files
+            raise FileFormatError(f"{src}: not a readable TDMS file (truncated or corrupt?): "
+                                  f"{type(exc).__name__}: {exc}") from None
+        try:
+            rec = _build(tf, src, sample_rate_hz, group)
+        except (FileFormatError, InputError):
+            tf.close()
+            raise
+        except Exception as exc:
+            tf.close()
+            raise FileFormatError(f"{src}: damaged TDMS file: {type(exc).__name__}: {exc}") from None
+    if messages:
+        rec.warnings.append(f"{src}: TDMS file looks damaged or truncated ({messages[0]}); "
+                            f"reading what is there")
+    return rec
 
 
 def _build(tf, src, sample_rate_hz, group_name) -> Recording:
@@ -71,10 +112,15 @@ def _build(tf, src, sample_rate_hz, group_name) -> Recording:
     rpm = float(tf.properties.get("cam_speed_rpm", g.properties.get("cam_speed_rpm", math.nan)))
 
     def read(start: int, stop: int) -> np.ndarray:
-        try:
-            block = np.column_stack([np.asarray(c[start:stop], dtype=np.float64) for c in chans])
-        except Exception as exc:
-            raise FileFormatError(f"{src}: cannot read TDMS samples {start}..{stop}: {exc}") from None
+        with _nptdms_quiet() as messages:
+            try:
+                cols = [np.asarray(c[start:stop], dtype=np.float64) for c in chans]
+            except Exception as exc:
+                raise FileFormatError(f"{src}: cannot read TDMS samples {start}..{stop}: {exc}") from None
+        if any(len(col) != stop - start for col in cols):
+            raise FileFormatError(f"{src}: TDMS samples {start}..{stop} are missing (truncated file"
+                                  + (f": {messages[0]}" if messages else "") + ")")
+        block = np.column_stack(cols)
         check_finite(block, start, names, src)
         return block
 
