@@ -79,7 +79,7 @@ def main():
         except ImportError:
             pass
         print("| recording | omega2 RMS error over the rise, % of peak | epsilon2 RMS error, % of peak | "
-              "| omega2 | vs sqrt(aE_n/DE), % |")
+              "\\|omega2\\| vs sqrt(aE_n/DE), % |")
         print("|---|---|---|---|")
         for r in rows:
             print(f"| {r[0]} | {r[1]:.2f} | {r[2]:.2f} | {r[3]:.2f} |")
