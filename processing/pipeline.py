@@ -155,6 +155,15 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     period = float(np.median(all_periods))
     regular = (all_periods > 0.8 * period) & (all_periods < 1.25 * period)
     rpm_measured = 60.0 * fs / float(np.mean(all_periods[regular]))
+    if rpm_hint and math.isfinite(rpm_hint):
+        ratio = rpm_measured / rpm_hint
+        if not (1 / 1.5 < ratio < 1.5):
+            raise InputError(
+                f"{rec.source}: the data give {rpm_measured:.1f} rpm at the stated {fs:g} Hz, but the cam turned at "
+                f"{rpm_hint:g} rpm: the sample rate (or the stated cam speed) is wrong; fix the file or give --rpm")
+        if abs(ratio - 1) > 0.2:
+            warn(f"measured cam speed {rpm_measured:.1f} rpm differs from the stated {rpm_hint:g} rpm by "
+                 f"{100 * abs(ratio - 1):.0f} %")
     # a revolution much longer or shorter than the others (missed or extra tacho pulse, a stall):
     # its cam angle is not known, so its samples are NaN and it stays out of the statistics
     irregular_by_seg = [~((np.diff(m) > 0.8 * period) & (np.diff(m) < 1.25 * period)) for m in marks_by_seg]

@@ -161,6 +161,10 @@ def _bad_inputs(tmp_path):
     write_synthetic(norate, SynthSpec(duration_s=1.0))
     with h5py.File(norate, "a") as f:
         del f.attrs["sample_rate_hz"]
+    wrong = tmp_path / "wrongrate.h5"
+    write_synthetic(wrong, SynthSpec(duration_s=2.0))
+    with h5py.File(wrong, "a") as f:
+        f.attrs["sample_rate_hz"] = 1000.0  # 10 kHz data labelled 1 kHz
     zero = tmp_path / "zerorate.h5"
     write_synthetic(zero, SynthSpec(duration_s=1.0))
     with h5py.File(zero, "a") as f:
@@ -178,6 +182,7 @@ def _bad_inputs(tmp_path):
         "other format": [str(other)],
         "missing rate": [str(norate)],
         "zero rate": [str(zero)],
+        "wrong rate": [str(wrong)],
         "NaN samples": [str(nan)],
         "missing channel": [str(miss)],
         "no cam motion": [str(flat)],
