@@ -289,7 +289,7 @@ def contact_period(kc: float, m: float, force: float) -> float:
     return 2.0 * math.pi * math.sqrt(m / k_lin)
 
 
-def simulate(scene: Scene, reading: str = "consistent") -> "SimulationResult":
+def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: dict | None = None) -> "SimulationResult":
     """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only)."""
     from models.simulate import INDICATORS, SimulationResult
 
@@ -305,7 +305,11 @@ def simulate(scene: Scene, reading: str = "consistent") -> "SimulationResult":
     n_grid = GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle)
     tab = build_tables(scene, t_end, n_grid)
     drive = tab.R31 if reading == "consistent" else -tab.R31
-    preset = PRESETS[scene.accuracy]
+    preset = PRESETS[scene.accuracy] if preset is None else preset
+    if integrate is None:
+        # compiled twin (models.kernels.elastic_nb) for fast/standard, solve_ivp for reference
+        from models.accuracy import integrator
+        integrate = integrator("elastic", scene.accuracy)
     f_scale = max(float(np.max(np.abs(tab.R31))), 1.0)
     period = contact_period(kc, float(np.min(tab.M)), f_scale)
     x_scale = float(static_penetration(f_scale, kc))

@@ -409,6 +409,10 @@ def integrate(P: Plant, phi1_end: float, omega1_0: float, preset: dict, t_rise: 
         which = min(hit, key=lambda i: sol.t_events[i][0])
         t_new = float(sol.t_events[which][0])
         y = sol.y_events[which][0]
+        if which != 0 and float(y[0]) >= phi1_end - 1e-12:
+            # a force jump at the very end of the span (the end of the rise, where the load is
+            # removed) ends the run: not a lift-off inside the span (docs/performance.md)
+            which = 0
         phases.append(Phase(mode, flank if mode == "contact" else FREE, t, t_new, sol.sol))
         short = short + 1 if t_new - t < 1e-13 else 0
         if short > 100:
@@ -495,12 +499,20 @@ def _in_rise(program: CamProgram, phi1):
     return np.mod(phi1, TWO_PI) < program.rise_angle
 
 
-def simulate(scene: Scene):
-    """Run the rigid model on a scene. Returns models.simulate.SimulationResult."""
+def simulate(scene: Scene, integrate=None, preset: dict | None = None):
+    """Run the rigid model on a scene. Returns models.simulate.SimulationResult.
+
+    ``integrate``: the integration loop (default: ``models.accuracy.integrator``: the compiled twin
+    ``models.kernels.rigid_nb.integrate`` for fast/standard, this module's solve_ivp loop for
+    reference); ``preset``: a preset dict instead of PRESETS[scene.accuracy] (benchmarks, tests).
+    """
+    if integrate is None:
+        from models.accuracy import integrator
+        integrate = integrator("rigid", scene.accuracy)
     from models.simulate import INDICATORS, SimulationResult
 
     t_start = _time.perf_counter()
-    preset = PRESETS[scene.accuracy]
+    preset = PRESETS[scene.accuracy] if preset is None else preset
     program, mech = scene.program, scene.mechanism
     span = simulated_span(scene)
     plant, info = build_plant(scene, phi1_hi=span)

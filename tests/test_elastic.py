@@ -243,7 +243,7 @@ def test_endless_chatter_is_a_solver_error(monkeypatch):
     monkeypatch.setattr(E, "BOUNDARY_NUDGE", 0.0)
     s = Scene(cam_speed_rpm=300, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
     with pytest.raises(SolverError, match="chatter"):
-        E.simulate(s)
+        E.simulate(s, integrate=E.integrate)     # the solve_ivp loop (fast runs compiled by default)
     monkeypatch.undo()
     assert E.simulate(s).indicators["jumps"] >= 1      # with the nudge it runs through
 

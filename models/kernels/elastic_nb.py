@@ -128,7 +128,7 @@ def _first_step(t0, y0, f0, t_bound, max_step, rtol, atol, phase, tg, drive, mg,
 
 @njit(cache=True)
 def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_step,
-        max_steps, max_segments, zeno_segments, zeno_dt):
+        max_steps, max_segments, zeno_segments, zeno_dt, nudge):
     """The phase-by-phase loop. Returns (status, t_fail, n_steps, n_seg, nfev, step arrays,
     segment arrays, event arrays); see ``integrate`` for their layout."""
     cap = min(max_steps, 4096)
@@ -247,7 +247,7 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
                 ev_to[nev] = new_phase
                 nev += 1
                 # restart a hair inside the new phase (models.elastic._restart_position)
-                eps = NUDGE if gap == 0.0 else min(NUDGE, 0.25 * gap)
+                eps = nudge if gap == 0.0 else min(nudge, 0.25 * gap)
                 boundary = 0.0 if at_zero else gap
                 if new_phase == INTERIOR:
                     inward = -1.0
@@ -311,7 +311,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     out = run(tg, drive_grid, np.ascontiguousarray(m_grid, dtype=float),
               float(kc), float(gap), float(damping), t_end, float(x0), float(v0), int(phase),
               float(rtol), np.asarray(atol, dtype=float), max_step, int(max_steps), int(max_segments),
-              zeno_n, zeno_dt)
+              zeno_n, zeno_dt, float(getattr(elastic, "BOUNDARY_NUDGE", NUDGE)))
     status, t_fail, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, sph, sfirst, send, ev_t, ev_v, ev_from, ev_to = out
     if stats is not None:
         stats["nfev"] = stats.get("nfev", 0) + int(nfev)
