@@ -96,23 +96,24 @@ class WelchAccumulator:
         return self.sum_pow / self.count * scale[:, None]
 
 
-def amplitude_spectrum(x: np.ndarray, fs: float, nperseg: int | None = None):
-    """(frequency Hz, amplitude) of a 1-D or (n, nch) array, whole-array convenience."""
+def _whole_array_welch(x: np.ndarray, fs: float, nperseg: int | None):
+    """Feed a 1-D or (n, nch) array to one WelchAccumulator; returns (accumulator, was 1-D)."""
     x = np.asarray(x, dtype=float)
     x2 = x[:, None] if x.ndim == 1 else x
-    nper = nperseg or default_nperseg(fs, len(x2))
-    acc = WelchAccumulator(fs, nper, x2.shape[1])
+    acc = WelchAccumulator(fs, nperseg or default_nperseg(fs, len(x2)), x2.shape[1])
     acc.feed(x2)
+    return acc, x.ndim == 1
+
+
+def amplitude_spectrum(x: np.ndarray, fs: float, nperseg: int | None = None):
+    """(frequency Hz, amplitude) of a 1-D or (n, nch) array, whole-array convenience."""
+    acc, one_d = _whole_array_welch(x, fs, nperseg)
     amp = acc.amplitude()
-    return acc.frequency, (amp[:, 0] if x.ndim == 1 else amp)
+    return acc.frequency, (amp[:, 0] if one_d else amp)
 
 
 def welch_psd(x: np.ndarray, fs: float, nperseg: int | None = None):
     """(frequency Hz, PSD unit^2/Hz) of a 1-D or (n, nch) array."""
-    x = np.asarray(x, dtype=float)
-    x2 = x[:, None] if x.ndim == 1 else x
-    nper = nperseg or default_nperseg(fs, len(x2))
-    acc = WelchAccumulator(fs, nper, x2.shape[1])
-    acc.feed(x2)
+    acc, one_d = _whole_array_welch(x, fs, nperseg)
     p = acc.psd()
-    return acc.frequency, (p[:, 0] if x.ndim == 1 else p)
+    return acc.frequency, (p[:, 0] if one_d else p)
