@@ -48,12 +48,6 @@ def _register_all() -> None:
 _register_all()
 
 
-def fail(message: str, code: int = 2) -> "typer.Exit":
-    """Print the one-line error and return the Exit to raise."""
-    typer.echo(f"labtool: error: {message}", err=True)
-    return typer.Exit(code)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the process exit code."""
     try:
