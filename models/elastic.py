@@ -18,6 +18,10 @@ eqs (12)-(14) read M x'' + Kc x^n = R31, i.e. the same with the sign of R31 reve
 (pushing) static reaction would then separate the follower from the flank that pushes it. That
 reading is kept selectable (``reading="literal"``) and documented, not used by default.
 
+The gap j between the flanks is the scene's backlash (``elastic_gap = "physical"``), or 0 with
+``elastic_gap = "closed"``: the convention the paper's Table 3 was computed with (its indicators do
+not depend on j and its xel max stays below j; docs/models.md, "The backlash in Table 3").
+
 The cam turns at constant speed: n1 (omega1 'const') or n1 * n_sync / n_nominal (omega1 'var',
 the speed the paper's variable-speed drive settles at; models.motor.no_load_cam_speed).
 
@@ -289,6 +293,15 @@ def contact_period(kc: float, m: float, force: float) -> float:
     return 2.0 * math.pi * math.sqrt(m / k_lin)
 
 
+def contact_gap(scene: Scene) -> float:
+    """Gap (m) between the flanks in the elastic model: the scene's backlash j, or 0 when
+    ``scene.elastic_gap == "closed"`` (the convention of the paper's Table 3, docs/models.md)."""
+    gap = scene.backlash
+    if not (math.isfinite(gap) and gap >= 0):
+        raise InputError(f"backlash must be >= 0 mm, got {gap * 1e3:g} mm")
+    return 0.0 if scene.elastic_gap == "closed" else gap
+
+
 def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: dict | None = None) -> "SimulationResult":
     """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only)."""
     from models.simulate import INDICATORS, SimulationResult
@@ -296,9 +309,7 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
     if reading not in READINGS:
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
     kc = contact_stiffness(scene.contact_length, scene.kc_factor)
-    gap = scene.backlash
-    if not (math.isfinite(gap) and gap >= 0):
-        raise InputError(f"backlash must be >= 0 mm, got {gap * 1e3:g} mm")
+    gap = contact_gap(scene)
     omega1 = cam_speed(scene)
     span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
     t_end = span / omega1
@@ -318,6 +329,7 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
                                  rtol=preset["rtol"], atol=atol,
                                  max_step=period / preset["steps_per_period"])
     ds = _dataset(scene, tab, segments, events, kc, gap, reading)
+    ds.attrs.update(elastic_gap=scene.elastic_gap, scene_backlash_m=scene.backlash)
     jumps, impacts = count_events(events)
     x = ds["x_el"].values
     ind = {k: None for k in INDICATORS}
@@ -327,7 +339,7 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
         MR13D_contact_max_Nm=float(ds["MR13D"].max()), MR13D_contact_min_Nm=float(ds["MR13D"].min()),
         deformation_max_mm=float(ds["deformation"].max() * 1e3),
         separations=sum(1 for e in events if e["kind"] in ("leave_exterior", "leave_interior")),
-        contact_phases=len(segments), reading=reading, contact_length_mm=scene.contact_length * 1e3,
+        contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap, contact_length_mm=scene.contact_length * 1e3,
         Kc_SI=kc,
     )
     return SimulationResult(ds, ind, "elastic")
@@ -413,10 +425,13 @@ def _force_vector(x, v, phase, kc, gap, damping):
     return F
 
 
-def compare_table3(accuracy: str = "standard", contact_length: float | None = None, law: str = "sine"):
+def compare_table3(accuracy: str = "standard", contact_length: float | None = None, law: str = "sine",
+                   elastic_gap: str = "closed"):
     """Table 1's 16 runs (omega1 variable) against the paper's Table 3: a DataFrame, one row a run.
 
     Columns: factors, our indicators, the paper's, and % differences for MR13D and xel.
+    ``elastic_gap`` "closed" (default) is the convention Table 3 was computed with, "physical"
+    lets the follower cross the backlash (docs/models.md, "the backlash in Table 3").
     """
     import pandas as pd
 
@@ -427,7 +442,8 @@ def compare_table3(accuracy: str = "standard", contact_length: float | None = No
     for run, ref in zip(table1_runs().itertuples(), t3.itertuples()):
         extra = {} if contact_length is None else {"contact_length": contact_length}
         scene = Scene(law=law, cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3,
-                      jt_factor=run.Jt_factor, omega1_mode="var", accuracy=accuracy, **extra)
+                      jt_factor=run.Jt_factor, omega1_mode="var", accuracy=accuracy,
+                      elastic_gap=elastic_gap, **extra)
         ind = simulate(scene).indicators
         pct = lambda ours, paper: 100.0 * (ours / paper - 1.0)
         rows.append({

@@ -13,6 +13,10 @@ from models.mechanism import Mechanism
 from models.motion_laws import CamProgram, get_law
 
 ACCURACY_PRESETS = ("fast", "standard", "reference")
+# how the backlash enters the elastic model (docs/models.md, "the backlash in Table 3"):
+# physical = the follower crosses the gap j between the flanks; closed = the flanks touch (j is not
+# used by the elastic model), the convention that reproduces the paper's Table 3
+ELASTIC_GAPS = ("physical", "closed")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,6 +33,8 @@ class Scene:
     contact_length lw, roller-groove contact length (m) for Kc = 8.05e4 lw^(8/9) (elastic model)
     kc_factor      multiplier of Kc (stability studies)
     contact_damping Hunt-Crossley damping coefficient (s/m); 0 = none, as in the paper
+    elastic_gap    how j enters the elastic model: "physical" (the follower crosses the gap) or
+                   "closed" (no gap, the convention of the paper's Table 3; docs/models.md)
     accuracy       solver preset: fast | standard | reference
     revolutions    cam revolutions to simulate (the first starts at the start of the rise)
     rise_only      simulate the rise only, as the paper's tables do
@@ -44,6 +50,7 @@ class Scene:
     contact_length: float = 6e-3     # fitted to Table 3's contact deformations (docs/models.md)
     kc_factor: float = 1.0
     contact_damping: float = 0.0
+    elastic_gap: str = "physical"
     accuracy: str = "standard"
     revolutions: float = 1.0
     rise_only: bool = True
@@ -61,6 +68,7 @@ class Scene:
             (math.isfinite(self.contact_length) and self.contact_length > 0, f"contact length lw must be > 0 mm, got {self.contact_length * 1e3:g} mm"),
             (math.isfinite(self.kc_factor) and self.kc_factor > 0, f"contact stiffness factor must be > 0, got {self.kc_factor}"),
             (math.isfinite(self.contact_damping) and self.contact_damping >= 0, f"contact damping must be >= 0, got {self.contact_damping}"),
+            (self.elastic_gap in ELASTIC_GAPS, f"elastic gap must be one of {', '.join(ELASTIC_GAPS)}, got '{self.elastic_gap}'"),
             (self.accuracy in ACCURACY_PRESETS, f"accuracy must be one of {', '.join(ACCURACY_PRESETS)}, got '{self.accuracy}'"),
             (math.isfinite(self.revolutions) and self.revolutions > 0, f"revolutions must be > 0, got {self.revolutions}"),
         ]

@@ -185,21 +185,52 @@ def test_eq19_follower_motion_and_dataset_contract():
 
 
 def test_table3_moments_jumps_and_counts():
-    """Table 1's 16 runs against Table 3 (docs/models.md): MR13D max/min within 10%; the follower
-    leaves the interior flank exactly in the runs the paper marks with a jump; with the gap closed
-    (j = 0) jumps = Table 3 and impacts = 0 in every run."""
+    """Table 1's 16 runs against Table 3 (docs/models.md): with Table 3's convention (gap closed)
+    MR13D max/min within 10 %, jumps and impacts equal to Table 3 in every run, and the indicators
+    do not depend on j (Table 3 repeats in pairs); with the physical gap the follower leaves the
+    interior flank exactly in the runs the paper marks with a jump, and lands on the other flank."""
     t3 = read_reference("table3_elastic")
+    closed_by_run = {}
     for run, ref in zip(range(1, 17), t3.itertuples()):
-        ind = simulate(_scene(run, accuracy="fast"), "elastic").indicators
-        assert ind["MR13D_max_Nm"] == pytest.approx(ref.MR13D_max_Nm, rel=0.10)
-        assert ind["MR13D_min_Nm"] == pytest.approx(ref.MR13D_min_Nm, rel=0.10)
-        assert (ind["jumps"] > 0) == (ref.jumps > 0)
-        closed = simulate(_scene(run, accuracy="fast").replace(backlash=0.0), "elastic").indicators
+        closed = simulate(_scene(run, accuracy="fast", elastic_gap="closed"), "elastic").indicators
+        closed_by_run[run] = closed
+        assert closed["MR13D_max_Nm"] == pytest.approx(ref.MR13D_max_Nm, rel=0.10)
+        assert closed["MR13D_min_Nm"] == pytest.approx(ref.MR13D_min_Nm, rel=0.10)
         assert closed["jumps"] == ref.jumps and closed["impacts"] == ref.impacts == 0
+        assert closed["elastic_gap"] == "closed"
         assert closed["MR13D_contact_max_Nm"] == pytest.approx(ref.MR13D_max_Nm, rel=0.15)
         assert closed["MR13D_contact_min_Nm"] == pytest.approx(ref.MR13D_min_Nm, rel=0.25)
-        if ref.jumps == 0 or run in (1, 2, 3, 4, 11, 12):
-            assert ind["xel_min_mm"] == pytest.approx(ref.xel_min_mm, rel=0.35)
+        assert closed["xel_min_mm"] == pytest.approx(ref.xel_min_mm, rel=0.25)
+        # Table 3's xel max is not reproduced (docs/models.md): ours is the exterior flank's static
+        # deflection, below the paper's in every run, and of the same sign
+        assert np.sign(closed["xel_max_mm"]) == np.sign(ref.xel_max_mm)
+        physical = simulate(_scene(run, accuracy="fast"), "elastic").indicators
+        assert physical["MR13D_max_Nm"] == pytest.approx(ref.MR13D_max_Nm, rel=0.10)
+        assert (physical["jumps"] > 0) == (ref.jumps > 0)
+        assert (physical["impacts"] > 0) == (ref.jumps > 0)      # the gap is crossed: landings
+        if ref.jumps:
+            assert physical["xel_max_mm"] > _scene(run).backlash * 1e3
+    for lo in (1, 2, 3, 4, 9, 10, 11, 12):                      # runs r and r + 4 differ in j only
+        a, b = closed_by_run[lo], closed_by_run[lo + 4]
+        for k in ("MR13D_max_Nm", "MR13D_min_Nm", "xel_max_mm", "xel_min_mm", "jumps", "impacts"):
+            assert a[k] == b[k]
+
+
+def test_elastic_gap_option_reaches_the_model_and_the_cli(tmp_path):
+    """--elastic-gap closed runs the elastic model without a gap; a bad value is one line, exit 2."""
+    from labtool.cli import main
+
+    s = _scene(1, accuracy="fast", elastic_gap="closed")
+    res = simulate(s, "elastic")
+    assert res.dataset.attrs["backlash_m"] == 0.0 and res.dataset.attrs["scene_backlash_m"] == s.backlash
+    assert res.dataset.attrs["elastic_gap"] == "closed"
+    zero = simulate(_scene(1, accuracy="fast").replace(backlash=0.0), "elastic").indicators
+    assert res.indicators["xel_max_mm"] == zero["xel_max_mm"]
+    with pytest.raises(InputError):
+        Scene(elastic_gap="half-open")
+    assert main(["simulate", "--model", "elastic", "--elastic-gap", "half-open", "--json"]) == 2
+    assert main(["simulate", "--model", "elastic", "--elastic-gap", "closed", "--accuracy", "fast",
+                 "-o", str(tmp_path / "s.nc")]) == 0
 
 
 def test_literal_reading_is_selectable_and_differs():

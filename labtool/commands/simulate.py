@@ -43,6 +43,8 @@ def simulate(
     contact_length_mm: float = typer.Option(6.0, help="roller-groove contact length lw [mm] for Kc = 8.05e4 lw^(8/9) (elastic model)"),
     kc_factor: float = typer.Option(1.0, help="multiplier of the contact stiffness Kc [-] (elastic model)"),
     contact_damping: float = typer.Option(0.0, help="Hunt-Crossley contact damping [s/m]; 0 = none, as in the paper (elastic model)"),
+    elastic_gap: str = typer.Option("physical", help="how the backlash enters the elastic model: physical (the follower "
+                                                     "crosses the gap j) or closed (no gap: the convention of the paper's Table 3)"),
     rise_only: bool = typer.Option(True, "--rise-only/--full-cycle",
                                    help="simulate the rise only (as the paper's tables) or whole revolutions"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
@@ -66,7 +68,7 @@ def simulate(
     scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * 1e-3, jt_factor=jt_factor,
                   omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
                   rise_only=rise_only, contact_length=contact_length_mm * 1e-3, kc_factor=kc_factor,
-                  contact_damping=contact_damping)
+                  contact_damping=contact_damping, elastic_gap=elastic_gap)
     try:
         result = run(scene, model)
     except ModuleNotFoundError as exc:  # a level whose module is not installed/written yet
