@@ -23,6 +23,9 @@ MODELS = ("rigid", "elastic")
 MODES = ("const", "var")
 # the paper's experiment (sec. 2.4, 3.3): sine law, no load, j = 0.128 mm, nominal inertia
 EXPERIMENT = {"law": "sine", "Fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0}
+# model options (not properties of the recording): the paper's idealisations unless the user sets
+# them (k = 1, no contact damping, lw = 6 mm, the follower crosses the backlash)
+MODEL_OPTIONS = {"restitution": 1.0, "contact_damping": 0.0, "contact_length_mm": 6.0, "elastic_gap": "physical"}
 
 
 @dataclasses.dataclass
@@ -140,6 +143,8 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
                 b = _attr_float(ds, "backlash_m")
                 v = None if b is None else b * 1e3
             out[key] = EXPERIMENT[key] if v is None else v
+    for key, default in MODEL_OPTIONS.items():
+        out[key] = default if overrides.get(key) is None else overrides[key]
     return out
 
 
@@ -166,7 +171,10 @@ def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutio
 
     scene = Scene(law=op["law"], cam_speed_rpm=op["cam_speed_rpm"], Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
                   jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
-                  rise_only=False)
+                  rise_only=False, restitution=op.get("restitution", 1.0),
+                  contact_damping=op.get("contact_damping", 0.0),
+                  contact_length=op.get("contact_length_mm", 6.0) * 1e-3,
+                  elastic_gap=op.get("elastic_gap", "physical"))
     level, note = requested, ""
     if not model_available(requested):
         level = "kinematic"

@@ -350,3 +350,33 @@ def test_predicted_events_of_the_last_revolution():
     ev = pipeline.predicted_events(elastic)
     assert np.allclose(ev["jumps"], [two * 0.05]) and np.allclose(ev["impacts"], [two * 0.25])
     assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
+
+
+def test_model_options_reach_the_simulations_and_the_page(files, capsys, tmp_path):
+    """--restitution / --contact-damping / --contact-length-mm / --elastic-gap set the models' scene
+    (not the paper's idealisations), are shown on the page and in the JSON; bad values exit 2."""
+    op = pipeline.operating_point(pipeline.load_measured(files["exact"]), 180.0,
+                                  {"restitution": 0.3, "contact_damping": 20.0, "elastic_gap": "closed"})
+    assert (op["restitution"], op["contact_damping"], op["contact_length_mm"], op["elastic_gap"]) == (0.3, 20.0, 6.0, "closed")
+    cond = align.Conditioning()
+    paper = pipeline.run_simulation({**op, "restitution": 1.0}, "rigid", "const", "fast", 1.0, cond)
+    damped = pipeline.run_simulation(op, "rigid", "const", "fast", 1.0, cond)
+    assert damped.indicators["impacts"] != paper.indicators["impacts"]
+    el = pipeline.run_simulation(op, "elastic", "const", "fast", 1.0, cond)
+    assert el.dataset.attrs["elastic_gap"] == "closed" and el.dataset.attrs["contact_damping_s_per_m"] == 20.0
+
+    html, js = tmp_path / "r.html", tmp_path / "r.json"
+    rc = main(["report", str(files["exact"]), "--models", "rigid", "--omega1", "const", "--accuracy", "fast",
+               "--restitution", "0.5", "--revolutions", "1", "-o", str(html), "--json", str(js)])
+    assert rc == 0
+    assert json.loads(js.read_text())["operating_point"]["restitution"] == 0.5
+    assert "restitution k" in html.read_text()
+    for bad in (["--restitution", "2"], ["--elastic-gap", "ajar"], ["--contact-damping", "-1"],
+                ["--contact-length-mm", "nan"]):
+        capsys.readouterr()
+        out = tmp_path / "bad.html"
+        assert main(["report", str(files["exact"]), "--models", "rigid,elastic", "--omega1", "const",
+                     "--accuracy", "fast", "--revolutions", "1", "-o", str(out), *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("labtool: error:"), err
+        assert not out.exists()

@@ -5,6 +5,7 @@ threshold failed; exit 2: bad input (one line on stderr), nothing written.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Optional
 
@@ -47,6 +48,10 @@ def report(
     fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0, the paper's experiment)"),
     backlash_mm: Optional[float] = typer.Option(None, help="groove backlash j [mm] (default: the file's, else 0.128)"),
     jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt [-] (default: the file's, else 1)"),
+    restitution: Optional[float] = typer.Option(None, help="rigid model: Newton's restitution k in [0, 1] (default 1, the paper's)"),
+    contact_damping: Optional[float] = typer.Option(None, help="elastic model: Hunt-Crossley damping [s/m] (default 0, the paper's)"),
+    contact_length_mm: Optional[float] = typer.Option(None, help="elastic model: contact length lw [mm] (default 6)"),
+    elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
     accuracy: str = typer.Option("standard", help="solver preset of the models: fast, standard, reference"),
     revolutions: float = typer.Option(2.0, help="cam revolutions to simulate; the last one is compared [-]"),
     harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
@@ -69,7 +74,13 @@ def report(
         check_output_path(p, force)
     th = load_thresholds(thresholds) if thresholds else None
     cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
-    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor}
+    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
+                 "restitution": restitution, "contact_damping": contact_damping,
+                 "contact_length_mm": contact_length_mm, "elastic_gap": elastic_gap}
+    for name, value in (("--restitution", restitution), ("--contact-damping", contact_damping),
+                        ("--contact-length-mm", contact_length_mm)):
+        if value is not None and not math.isfinite(value):
+            raise InputError(f"{name} must be a finite number, got {value}")
     err = Console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
     with (err.status("report") if err.is_terminal else _Quiet()) as status:
