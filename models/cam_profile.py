@@ -30,9 +30,10 @@ def _cross(a, b):
     return a[0] * b[1] - a[1] * b[0]
 
 
-def roller_centre(mech: Mechanism, program: CamProgram, phi1):
-    """C and its first two derivatives wrt phi1 in the fixed frame, arrays (2, n) in m."""
-    psi, dpsi, ddpsi, _ = program(phi1)
+def roller_centre(mech: Mechanism, program: CamProgram, phi1, motion=None):
+    """C and its first two derivatives wrt phi1 in the fixed frame, arrays (2, n) in m.
+    ``motion`` = program(phi1) when the caller has it already."""
+    psi, dpsi, ddpsi, _ = program(phi1) if motion is None else motion
     phi2 = mech.phiD + mech.psi0 + psi
     r = mech.l * np.stack([np.cos(phi2), np.sin(phi2)])
     C = mech.D[:, None] + r
@@ -41,8 +42,8 @@ def roller_centre(mech: Mechanism, program: CamProgram, phi1):
     return C, dC, ddC, phi2
 
 
-def _geometry(mech, program, phi1, sense):
-    C, dC, ddC, phi2 = roller_centre(mech, program, phi1)
+def _geometry(mech, program, phi1, sense, motion=None):
+    C, dC, ddC, phi2 = roller_centre(mech, program, phi1, motion)
     t_fixed = dC - sense * _perp(C)               # pitch-curve tangent, seen in the fixed frame
     second = ddC - 2.0 * sense * _perp(dC) - C    # second derivative, fixed-frame components
     speed = np.hypot(t_fixed[0], t_fixed[1])
@@ -71,14 +72,30 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
     return min(peaks, key=peaks.get)
 
 
+_SENSES: dict = {}
+
+
+def cached_sense(mech: Mechanism, program: CamProgram) -> int:
+    """``choose_sense`` remembered per (mechanism, program): it costs two 721-point geometry passes
+    and every contact-geometry call needs it."""
+    key = (repr(mech), program)
+    sense = _SENSES.get(key)
+    if sense is None:
+        if len(_SENSES) > 64:
+            _SENSES.clear()
+        sense = _SENSES[key] = choose_sense(mech, program)
+    return sense
+
+
 def contact_geometry(mech: Mechanism, program: CamProgram, phi1, sense: int | None = None,
-                     backlash: float = 0.0) -> dict:
+                     backlash: float = 0.0, motion=None) -> dict:
     """Pressure angle (rad), Db1, Db2 (m), radii of curvature of pitch curve and flanks (m, signed:
-    positive where the curve is convex seen from outside the cam) at cam angles phi1."""
-    sense = choose_sense(mech, program) if sense is None else int(sense)
+    positive where the curve is convex seen from outside the cam) at cam angles phi1.
+    ``motion`` = program(phi1) when the caller has it already."""
+    sense = cached_sense(mech, program) if sense is None else int(sense)
     if sense not in (1, -1):
         raise InputError("cam sense of rotation must be +1 (counter-clockwise) or -1 (clockwise)")
-    g = _geometry(mech, program, np.asarray(phi1, dtype=float), sense)
+    g = _geometry(mech, program, np.asarray(phi1, dtype=float), sense, motion)
     rho = g["rho_pitch"]
     g["rho_inner"] = rho - mech.R
     g["rho_outer"] = rho + mech.R + backlash

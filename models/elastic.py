@@ -38,10 +38,9 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from models.cam_profile import contact_geometry
+from models.cam_tables import angle_terms, grid_terms
 from models.contact import contact_force, contact_stiffness, hunt_crossley_force, static_penetration
 from models.errors import InputError, SolverError
-from models.kinematics import follower_motion, kinetostatic_moment, load_force_x
 from models.motor import cam_inertia, no_load_cam_speed, transmission_ratio
 from models.scene import Scene
 
@@ -105,27 +104,45 @@ def reduced_masses(J_cam, J_follower, Db1, Db2):
     return M1, M2, M
 
 
-def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None) -> Tables:
+def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None,
+                 linkage: str = "exact") -> Tables:
     """Kinematic tables over 0 <= t <= t_end at the scene's cam speed (phi1 = 0 at rise start);
-    ``t`` (s, array) overrides the uniform grid."""
-    mech, program = scene.mechanism, scene.program
+    ``t`` (s, array) overrides the uniform grid, evaluated at those instants (the linkage exactly
+    or from its stroke spline, ``linkage="spline"``: models.cam_tables.angle_terms)."""
     omega1 = cam_speed(scene)
-    t = np.linspace(0.0, t_end, n_points) if t is None else np.asarray(t, dtype=float)
-    phi1 = omega1 * t
-    phi2, omega2, epsilon2, _ = follower_motion(program, mech, phi1, omega1)
+    if t is not None:
+        t = np.asarray(t, dtype=float)
+        terms = angle_terms(scene.mechanism, scene.program, omega1 * t, _load_until(scene), linkage=linkage)
+        return _tables(scene, terms, t, omega1)
+    return grid_tables(scene, omega1 * t_end, n_points)
+
+
+def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Tables:
+    """Tables on the uniform cam-angle grid linspace(0, span, n_points) (rad), t = phi1/omega1.
+
+    The speed-independent terms of the grid are shared with every run of the same mechanism, law
+    and span (models.cam_tables): only the combination with the operating point is per run.
+    """
+    omega1 = cam_speed(scene)
+    terms = grid_terms(scene.mechanism, scene.program, span, n_points, _load_until(scene))
+    return _tables(scene, terms, terms.phi1 / omega1, omega1)
+
+
+def _load_until(scene: Scene):
     # the load acts over the closed rise [0, rise]: at phi1 = rise exactly the dwell (no load) would
     # begin and put a step into R31 at the last instant of a rise-only run
-    phi_load = np.minimum(phi1, np.nextafter(program.rise_angle, 0.0)) if scene.rise_only else phi1
-    load_x = load_force_x(mech, program, phi_load, phi2, scene.Fu)
-    MR13D, red = kinetostatic_moment(mech, phi2, omega2, epsilon2, load_x, scene.jt_factor)
-    geo = contact_geometry(mech, program, phi1)
-    alpha = geo["pressure_angle"]
-    arm = mech.l * np.cos(alpha)
+    return float(np.nextafter(scene.program.rise_angle, 0.0)) if scene.rise_only else None
+
+
+def _tables(scene: Scene, terms, t, omega1: float) -> Tables:
+    mech = scene.mechanism
+    op = terms.at_speed(omega1, scene.Fu, scene.jt_factor)
+    arm = mech.l * np.cos(terms.alpha)
     it = transmission_ratio(mech, scene.omega1_nominal)
-    M1, M2, M = reduced_masses(cam_inertia(mech, it), red.J, geo["Db1"], geo["Db2"])
-    return Tables(t=t, phi1=phi1, R31=MR13D / arm, M=M, M1=M1, M2=M2, arm=arm, phi2=phi2,
-                  omega2=omega2, epsilon2=epsilon2, MR13D=MR13D, alpha=alpha, Db1=geo["Db1"],
-                  Db2=geo["Db2"], omega1=omega1)
+    M1, M2, M = reduced_masses(cam_inertia(mech, it), op["J_follower"], terms.Db1, terms.Db2)
+    return Tables(t=t, phi1=terms.phi1, R31=op["MR13D"] / arm, M=M, M1=M1, M2=M2, arm=arm,
+                  phi2=terms.phi2, omega2=op["omega2"], epsilon2=op["epsilon2"], MR13D=op["MR13D"],
+                  alpha=terms.alpha, Db1=terms.Db1, Db2=terms.Db2, omega1=omega1)
 
 
 # ---------------------------------------------------------------- pure kernels (numba-ready)
@@ -314,7 +331,7 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
     span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
     t_end = span / omega1
     n_grid = GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle)
-    tab = build_tables(scene, t_end, n_grid)
+    tab = grid_tables(scene, span, n_grid)
     drive = tab.R31 if reading == "consistent" else -tab.R31
     preset = PRESETS[scene.accuracy] if preset is None else preset
     if integrate is None:
@@ -331,13 +348,13 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
     ds = _dataset(scene, tab, segments, events, kc, gap, reading)
     ds.attrs.update(elastic_gap=scene.elastic_gap, scene_backlash_m=scene.backlash)
     jumps, impacts = count_events(events)
-    x = ds["x_el"].values
+    x, m_static, m_contact = (ds[k].values for k in ("x_el", "MR13D_static", "MR13D"))
     ind = {k: None for k in INDICATORS}
     ind.update(
-        MR13D_max_Nm=float(ds["MR13D_static"].max()), MR13D_min_Nm=float(ds["MR13D_static"].min()),
+        MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
         xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3), jumps=jumps, impacts=impacts,
-        MR13D_contact_max_Nm=float(ds["MR13D"].max()), MR13D_contact_min_Nm=float(ds["MR13D"].min()),
-        deformation_max_mm=float(ds["deformation"].max() * 1e3),
+        MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
+        deformation_max_mm=float(ds["deformation"].values.max() * 1e3),
         separations=sum(1 for e in events if e["kind"] in ("leave_exterior", "leave_interior")),
         contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap, contact_length_mm=scene.contact_length * 1e3,
         Kc_SI=kc,
@@ -350,21 +367,29 @@ def _dataset(scene, tab: Tables, segments, events, kc, gap, reading) -> xr.Datas
     t_end = tab.t[-1]
     n = max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2)
     t_uniform = np.linspace(0.0, t_end, n)
-    ts, xs, vs, ph = [], [], [], []
+    times = []
     for k, (phase, sol) in enumerate(segments):
         lo, hi = sol.t[0], sol.t[-1]
-        last = k == len(segments) - 1
-        sel = (t_uniform >= lo) & ((t_uniform < hi) | (last & (t_uniform <= hi)))
-        tt = np.union1d(t_uniform[sel], sol.t)       # keep the solver's steps: extremes are not lost
-        y = sol.sol(tt)
-        ts.append(tt); xs.append(y[0]); vs.append(y[1]); ph.append(np.full(tt.size, phase))
-    t = np.concatenate(ts)
+        a = np.searchsorted(t_uniform, lo, side="left")
+        b = np.searchsorted(t_uniform, hi, side="right" if k == len(segments) - 1 else "left")
+        times.append(np.concatenate([t_uniform[a:b], sol.t]))   # the solver's steps: extremes are not lost
+    runs = [sol for _, sol in segments]
+    from models.kernels.dopri5 import DenseRun, evaluate_runs   # numba only when a run needs it
+    if all(isinstance(r, DenseRun) for r in runs):
+        y = evaluate_runs(runs, times)                          # compiled loop: one pass over all phases
+    else:
+        y = np.concatenate([sol.sol(tt) for sol, tt in zip(runs, times)], axis=1)
+    t = np.concatenate(times)
+    phase = np.repeat([ph for ph, _ in segments], [tt.size for tt in times])
+    # in time order; an instant shared by two phases (an event) keeps the value of the phase that ends
     order = np.argsort(t, kind="stable")
-    t, x, v, phase = (np.concatenate(a)[order] for a in ([t], xs, vs, ph))
+    t, x, v, phase = t[order], y[0][order], y[1][order], phase[order]
     keep = np.concatenate([[True], np.diff(t) > 0])
     t, x, v, phase = t[keep], x[keep], v[keep], phase[keep]
 
-    exact = build_tables(scene, t_end, t=t)          # kinematics at the output instants, not interpolated
+    # kinematics at the output instants, not interpolated in time (the linkage from its stroke
+    # spline, accurate to rounding)
+    exact = build_tables(scene, t_end, t=t, linkage="spline")
     arm, R31, M = exact.arm, exact.R31, exact.M
     F = _force_vector(x, v, phase, kc, gap, scene.contact_damping)
     drive = R31 if reading == "consistent" else -R31

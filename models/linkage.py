@@ -130,15 +130,18 @@ class ReducedFollower:
     M_load: np.ndarray
 
 
-def reduced_follower(mech: Mechanism, phi2, load_force=None, jt_factor: float = 1.0) -> ReducedFollower:
+def reduced_follower(mech: Mechanism, phi2, load_force=None, jt_factor: float = 1.0,
+                     unit: LinkageState | None = None) -> ReducedFollower:
     """Reduce elements 2-5 to the follower at angles phi2.
 
     ``load_force`` is the x component (N) of the load Fu at N, an array matching phi2 (the paper
     applies Fux = +-Fu, Fuy = 0, opposing the rod's sliding in the block). ``jt_factor`` scales
     every inertia (masses' kinetic terms and moments of inertia) of elements 2-5 as the paper's
-    factor D (Jt); gravity keeps the true masses.
+    factor D (Jt); gravity keeps the true masses. ``unit`` is ``linkage_state(mech, phi2, 1, 0)``
+    when the caller has it already.
     """
-    unit = linkage_state(mech, phi2, 1.0, 0.0)  # velocities = velocity coefficients (per omega2)
+    if unit is None:
+        unit = linkage_state(mech, phi2, 1.0, 0.0)  # velocities = velocity coefficients (per omega2)
     bodies = [
         (mech.m2, mech.J2, unit.vK2, unit.aK2, 1.0, 0.0),
         (mech.m3, 0.0, unit.vC, unit.aC, 1.0, 0.0),   # roller: translation of C only (sec. 2.1.1)

@@ -143,6 +143,28 @@ def evaluate_steps(t0s, hs, y0s, Qs, times):
     return (y0s[i] + h[:, None] * poly).T
 
 
+def evaluate_runs(runs, times):
+    """Dense output of several ``DenseRun``s in one vectorised pass: ``times[k]`` on ``runs[k]``.
+
+    The runs must follow each other in time (the phases of one integration). A time is evaluated
+    on a step of its own run only, so an instant shared by two runs (a phase boundary) takes each
+    run's own value. Returns an array (n_state, sum of len(times[k])) in the order given.
+    """
+    counts = np.array([np.size(tk) for tk in times])
+    sizes = np.array([r.t0s.size for r in runs])
+    first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    t0s = np.concatenate([r.t0s for r in runs])
+    tt = np.concatenate([np.atleast_1d(np.asarray(tk, dtype=float)) for tk in times])
+    i = np.searchsorted(t0s, tt, side="right") - 1
+    i = np.clip(i, np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
+    hs = np.concatenate([r.hs for r in runs])[i]
+    y0s = np.concatenate([r.y0s for r in runs])[i]
+    Q = np.concatenate([r.Qs for r in runs])[i]
+    s = np.where(hs > 0, (tt - t0s[i]) / np.where(hs > 0, hs, 1.0), 0.0)[:, None]
+    poly = s * (Q[:, :, 0] + s * (Q[:, :, 1] + s * (Q[:, :, 2] + s * Q[:, :, 3])))
+    return (y0s + hs[:, None] * poly).T
+
+
 class DenseRun:
     """A stretch of steps with the interface the models read from scipy: ``.t`` (step times, s) and
     ``.sol(times)`` / ``__call__`` -> array (n_state, n_times), ``.nfev``."""

@@ -1,0 +1,153 @@
+"""Speed-independent kinematic terms over the cam angle, computed once per mechanism and program.
+
+With the cam turning at a constant speed omega1 every kinematic quantity the dynamic models need
+is a function of the cam angle phi1 times a power of omega1, plus the load Fu and the inertia
+factor Jt as scalar multipliers (sec. 2.1.1):
+
+    omega2   = omega1 psi'(phi1)                  epsilon2 = omega1^2 psi''(phi1)
+    MR13D    = Jt (J0 epsilon2 + 1/2 dJ0 omega2^2) - M_gravity - Fu m_load
+    J''red   = Jt J0
+
+with J0, dJ0 the follower-side inertia reduced to the follower at Jt = 1 (models.linkage), m_load
+the moment about D of a unit load (N m per N, its sign opposing the rod's sliding, zero in the
+dwells: models.kinematics.load_force_x), and the contact geometry (pressure angle, Db1, Db2:
+models.cam_profile) a function of phi1 alone. So the expensive part (the linkage and the cam
+geometry, ~0.7 us per angle) is evaluated once on an angle grid and shared by every speed, load
+and inertia factor: the 16 runs of Table 1 share one table. ``at_speed`` combines a table with an
+operating point in a handful of array operations.
+
+Values agree with models.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
+models.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import threading
+
+import numpy as np
+
+from models.cam_profile import cached_sense, contact_geometry
+from models.linkage import linkage_state, reduced_follower
+from models.mechanism import Mechanism
+from models.motion_laws import CamProgram
+
+CACHE_SIZE = 8          # grids kept per process (one rise grid of 4001 angles is ~0.4 MB)
+
+_cache: "collections.OrderedDict[tuple, AngleTerms]" = collections.OrderedDict()
+_lock = threading.Lock()
+
+
+@dataclasses.dataclass(frozen=True)
+class AngleTerms:
+    """Kinematic terms at cam angles ``phi1`` (rad), independent of the cam speed, load and Jt."""
+
+    phi1: np.ndarray        # rad, cam angle from the start of the rise
+    psi: np.ndarray         # rad, follower stroke
+    dpsi: np.ndarray        # rad/rad, dpsi/dphi1
+    ddpsi: np.ndarray       # rad/rad^2
+    phi2: np.ndarray        # rad, absolute follower angle
+    J0: np.ndarray          # kg m^2, J''red at Jt = 1
+    dJ0: np.ndarray         # kg m^2/rad, dJ''red/dphi2 at Jt = 1
+    M_gravity: np.ndarray   # N m, moment of gravity on elements 2-5 about D
+    m_load: np.ndarray      # N m per N, moment about D of the load per N of Fu (signed)
+    alpha: np.ndarray       # rad, pressure angle
+    Db1: np.ndarray         # m
+    Db2: np.ndarray         # m
+
+    def at_speed(self, omega1: float, Fu: float, jt_factor: float) -> dict:
+        """The operating point's kinematics at these angles (cam at constant omega1 rad/s, load Fu
+        N, inertia factor Jt): dict of arrays omega2 (rad/s), epsilon2 (rad/s^2), MR13D (N m),
+        J_follower (kg m^2, J''red with Jt applied)."""
+        omega2 = self.dpsi * omega1
+        epsilon2 = self.ddpsi * omega1**2
+        J = jt_factor * self.J0
+        MR13D = J * epsilon2 + 0.5 * (jt_factor * self.dJ0) * omega2**2 - self.M_gravity - Fu * self.m_load
+        return dict(omega2=omega2, epsilon2=epsilon2, MR13D=MR13D, J_follower=J)
+
+
+def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | None = None,
+                linkage: str = "exact") -> AngleTerms:
+    """The terms at any cam angles ``phi1`` (rad).
+
+    ``load_until`` (rad): the load's direction is taken at min(phi1, load_until), so that a run
+    ending at the end of the rise keeps the rise's load at its last instant (models.elastic).
+    ``linkage``: "exact" evaluates the linkage at every angle; "spline" reads J0, dJ0, M_gravity
+    and the load's arm from a cubic spline over the follower's stroke (``stroke_spline``: the
+    linkage depends on phi2 alone, analytically; 1e-13 relative, 1e-11 for dJ0), 4x cheaper for
+    thousands of arbitrary instants. The motion law and the contact geometry are always exact.
+    """
+    phi1 = np.asarray(phi1, dtype=float)
+    motion = program(phi1)
+    psi, dpsi, ddpsi, _ = motion
+    phi2 = mech.phiD + mech.psi0 + psi
+    spline = stroke_spline(mech) if linkage == "spline" else None
+    if spline is not None and phi2.size and spline.x[0] <= phi2.min() and phi2.max() <= spline.x[-1]:
+        J0, dJ0, M_gravity, vNx, slide = spline(phi2).T
+    else:
+        unit = linkage_state(mech, phi2, 1.0, 0.0)
+        red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
+        J0, dJ0, M_gravity, vNx, slide = red.J, red.dJ, red.M_gravity, unit.vN[0], unit.ds * np.cos(unit.phi4)
+    phi_load = phi1 if load_until is None else np.minimum(phi1, load_until)
+    # models.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
+    # arm (the x velocity coefficient of N)
+    m_load = np.sign(slide) * program.direction(phi_load) * vNx
+    geo = contact_geometry(mech, program, phi1, sense=cached_sense(mech, program), motion=motion)
+    return AngleTerms(phi1=phi1, psi=psi, dpsi=dpsi, ddpsi=ddpsi, phi2=phi2, J0=J0, dJ0=dJ0,
+                      M_gravity=M_gravity, m_load=m_load, alpha=geo["pressure_angle"],
+                      Db1=geo["Db1"], Db2=geo["Db2"])
+
+
+STROKE_POINTS = 2049    # spline knots over the stroke (+-5 %): h = 1.3e-4 rad
+_splines: dict = {}
+
+
+def stroke_spline(mech: Mechanism):
+    """Cubic spline phi2 (rad) -> (J0, dJ0, M_gravity, vN_x, ds cos(phi4)) over the follower's
+    stroke widened by 5 % either side, per mechanism (``scipy.interpolate.CubicSpline``)."""
+    from scipy.interpolate import CubicSpline
+
+    key = repr(mech)
+    with _lock:
+        sp = _splines.get(key)
+    if sp is None:
+        lo = mech.phiD + mech.psi0 - 0.05 * mech.psi_a
+        phi2 = np.linspace(lo, lo + 1.10 * mech.psi_a, STROKE_POINTS)
+        unit = linkage_state(mech, phi2, 1.0, 0.0)
+        red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
+        sp = CubicSpline(phi2, np.column_stack([red.J, red.dJ, red.M_gravity, unit.vN[0],
+                                                unit.ds * np.cos(unit.phi4)]))
+        with _lock:
+            if len(_splines) >= CACHE_SIZE:
+                _splines.clear()
+            _splines[key] = sp
+    return sp
+
+
+def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
+               load_until: float | None = None) -> AngleTerms:
+    """The terms on the uniform grid ``linspace(0, span, n_points)`` (rad), cached per process.
+
+    The arrays of a cached table are read-only: they are shared by every caller.
+    """
+    key = (repr(mech), program, float(span), int(n_points), load_until)
+    with _lock:
+        hit = _cache.get(key)
+        if hit is not None:
+            _cache.move_to_end(key)
+            return hit
+    terms = angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), load_until)
+    for f in dataclasses.fields(terms):
+        getattr(terms, f.name).flags.writeable = False
+    with _lock:
+        _cache[key] = terms
+        while len(_cache) > CACHE_SIZE:
+            _cache.popitem(last=False)
+    return terms
+
+
+def clear_cache() -> None:
+    """Forget the cached grids (benchmarks that time a first call use it)."""
+    with _lock:
+        _cache.clear()
+        _splines.clear()

@@ -1,0 +1,133 @@
+"""models.cam_tables: the speed-independent terms reproduce models.kinematics and the cam geometry,
+the stroke spline reproduces the exact linkage, the grid cache is shared and read-only; and the
+batched dense output of the compiled loop equals the per-run one."""
+import math
+
+import numpy as np
+import pytest
+
+from models import cam_tables, elastic
+from models.cam_profile import contact_geometry
+from models.kinematics import follower_motion, kinetostatic_moment, load_force_x
+from models.scene import Scene
+from models.simulate import simulate
+
+
+def _reference(scene, phi1, omega1):
+    """The operating point's kinematics the way models.kinematics computes them."""
+    mech, prog = scene.mechanism, scene.program
+    phi2, omega2, epsilon2, _ = follower_motion(prog, mech, phi1, omega1)
+    load_x = load_force_x(mech, prog, phi1, phi2, scene.Fu)
+    MR13D, red = kinetostatic_moment(mech, phi2, omega2, epsilon2, load_x, scene.jt_factor)
+    return phi2, omega2, epsilon2, MR13D, red.J
+
+
+@pytest.mark.parametrize("law", ["sine", "cosine", "modtrap"])
+@pytest.mark.parametrize("rpm,Fu,jt", [(180.0, 0.0, 1.0), (300.0, 65.0, 4.0), (60.0, 500.0, 0.25)])
+def test_terms_at_speed_equal_the_kinematic_analysis(law, rpm, Fu, jt):
+    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, jt_factor=jt)
+    phi1 = np.linspace(0.0, 2.0 * math.pi, 1441)            # rise, dwell, return, dwell
+    omega1 = scene.omega1_nominal
+    terms = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
+    op = terms.at_speed(omega1, Fu, jt)
+    phi2, omega2, epsilon2, MR13D, J = _reference(scene, phi1, omega1)
+    np.testing.assert_allclose(terms.phi2, phi2, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(op["omega2"], omega2, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(op["epsilon2"], epsilon2, rtol=1e-14, atol=1e-12)
+    scale = np.abs(MR13D).max()
+    np.testing.assert_allclose(op["MR13D"], MR13D, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(op["J_follower"], J, rtol=1e-14)
+    geo = contact_geometry(scene.mechanism, scene.program, phi1)
+    np.testing.assert_array_equal(terms.alpha, geo["pressure_angle"])
+    np.testing.assert_array_equal(terms.Db1, geo["Db1"])
+    np.testing.assert_array_equal(terms.Db2, geo["Db2"])
+
+
+def test_load_until_holds_the_rise_load_at_its_last_instant():
+    scene = Scene(Fu=65.0)
+    rise = scene.program.rise_angle
+    phi1 = np.array([0.5 * rise, rise, rise + 0.01])
+    free = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
+    held = cam_tables.angle_terms(scene.mechanism, scene.program, phi1, load_until=np.nextafter(rise, 0.0))
+    assert free.m_load[1] == 0.0 and free.m_load[2] == 0.0          # the dwell: no load
+    assert held.m_load[1] == pytest.approx(held.m_load[0], rel=0.2) and held.m_load[1] != 0.0
+
+
+def test_stroke_spline_reproduces_the_exact_linkage():
+    scene = Scene(Fu=65.0, jt_factor=4.0)
+    rng = np.random.default_rng(7)
+    phi1 = np.sort(rng.uniform(0.0, 2.0 * math.pi, 4000))
+    exact = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
+    spl = cam_tables.angle_terms(scene.mechanism, scene.program, phi1, linkage="spline")
+    for name, tol in (("J0", 1e-11), ("dJ0", 1e-9), ("M_gravity", 1e-11), ("m_load", 1e-11)):
+        a, b = getattr(exact, name), getattr(spl, name)
+        assert np.abs(a - b).max() <= tol * np.abs(a).max(), name
+    # the motion law and the contact geometry are exact in both
+    np.testing.assert_array_equal(exact.alpha, spl.alpha)
+    np.testing.assert_array_equal(exact.ddpsi, spl.ddpsi)
+
+
+def test_spline_falls_back_to_the_exact_linkage_outside_the_stroke():
+    mech = Scene().mechanism
+    sp = cam_tables.stroke_spline(mech)
+    prog = Scene(law="sine").program.__class__.rise_dwell_return_dwell("sine", stroke=2.0 * mech.psi_a)
+    phi1 = np.linspace(0.0, prog.rise_angle, 50)       # a stroke twice the tabulated one
+    assert mech.phiD + mech.psi0 + prog(phi1)[0].max() > sp.x[-1]
+    a = cam_tables.angle_terms(mech, prog, phi1)
+    b = cam_tables.angle_terms(mech, prog, phi1, linkage="spline")
+    np.testing.assert_array_equal(a.J0, b.J0)
+
+
+def test_one_cached_grid_serves_every_speed_load_and_inertia():
+    cam_tables.clear_cache()
+    runs = [Scene(cam_speed_rpm=n, Fu=f, jt_factor=j) for n, f, j in ((180, 0, 1), (300, 65, 4), (500, 0, 1))]
+    span = runs[0].program.rise_angle
+    tabs = [elastic.grid_tables(s, span) for s in runs]
+    key_terms = cam_tables.grid_terms(runs[0].mechanism, runs[0].program, span, elastic.GRID_POINTS,
+                                      float(np.nextafter(span, 0.0)))
+    assert all(t.phi1 is key_terms.phi1 for t in tabs)           # the same arrays, not copies
+    assert not key_terms.J0.flags.writeable
+    with pytest.raises(ValueError):
+        key_terms.J0[0] = 0.0
+    # each run's tables equal an uncached exact evaluation at its own speed
+    for s, tab in zip(runs, tabs):
+        fresh = elastic.build_tables(s, span / elastic.cam_speed(s), t=tab.t)
+        np.testing.assert_allclose(tab.R31, fresh.R31, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(tab.M, fresh.M, rtol=1e-12)
+
+
+def test_cache_is_bounded():
+    cam_tables.clear_cache()
+    s = Scene()
+    for n in range(cam_tables.CACHE_SIZE + 3):
+        cam_tables.grid_terms(s.mechanism, s.program, s.program.rise_angle, 101 + n)
+    assert len(cam_tables._cache) == cam_tables.CACHE_SIZE
+
+
+def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
+    from models.kernels.dopri5 import evaluate_runs
+    from models.kernels.elastic_nb import integrate
+
+    s = Scene(backlash=0.016e-3, omega1_mode="var")           # run 1: several phases
+    tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
+    kc = 8.53e8
+    segs, events = integrate(tab.t, tab.R31, tab.M, kc, s.backlash, rtol=1e-8, atol=(1e-13, 1e-9), max_step=5e-5)
+    assert len(segs) >= 3 and events
+    runs = [sol for _, sol in segs]
+    times = [np.concatenate([np.linspace(r.t[0], r.t[-1], 17), [r.t[-1]]]) for r in runs]
+    batched = evaluate_runs(runs, times)
+    each = np.concatenate([r(tt) for r, tt in zip(runs, times)], axis=1)
+    np.testing.assert_array_equal(batched, each)
+    # the boundary instant belongs to both runs, each with its own state (the restart is nudged)
+    end0 = runs[0](np.array([runs[0].t[-1]]))[0, 0]
+    start1 = runs[1](np.array([runs[1].t[0]]))[0, 0]
+    assert runs[0].t[-1] == runs[1].t[0] and end0 != start1
+
+
+def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
+    scene = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.016e-3, omega1_mode="var")
+    ds = simulate(scene, "elastic").dataset
+    phi1 = ds["phi1"].values
+    *_, MR13D, _ = _reference(scene, np.minimum(phi1, np.nextafter(scene.program.rise_angle, 0.0)),
+                              elastic.cam_speed(scene))
+    np.testing.assert_allclose(ds["MR13D_static"].values, MR13D, rtol=0, atol=1e-10 * np.abs(MR13D).max())
