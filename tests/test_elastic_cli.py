@@ -26,7 +26,10 @@ def test_simulate_elastic_json_and_netcdf(tmp_path, capsys):
     ds.close()
 
 
-@pytest.mark.parametrize("args", [["--backlash-mm", "-0.01"], ["--rpm", "-5"], ["--jt-factor", "0"]])
+@pytest.mark.parametrize("args", [["--backlash-mm", "-0.01"], ["--rpm", "-5"], ["--jt-factor", "0"],
+                                  ["--contact-length-mm", "0"], ["--contact-length-mm", "-2"],
+                                  ["--contact-length-mm", "nan"], ["--kc-factor", "-1"], ["--kc-factor", "0"],
+                                  ["--contact-damping", "-0.5"], ["--elastic-gap", "open"]])
 def test_bad_input_is_one_line_exit_2(args, capsys):
     code = main(["simulate", "--model", "elastic", *args])
     err = capsys.readouterr().err.strip().splitlines()
