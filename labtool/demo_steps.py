@@ -23,7 +23,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from labtool.output import write_netcdf
+from labtool.output import console as new_console, write_netcdf
 
 # the paper's experiment (sec. 2.4 and 3.3)
 EXPERIMENT_RPM = 180.0
@@ -34,7 +34,7 @@ SAMPLE_DATA = Path(__file__).resolve().parent.parent / "sample_data"
 
 
 def run_demo(out: Path) -> None:
-    console = Console()
+    console = new_console()
     t0 = time.perf_counter()
     kin_path = step_kinematics(out, console)
     table_path = step_table1_kinematic(out, console)

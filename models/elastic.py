@@ -327,9 +327,7 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
     kc = contact_stiffness(scene.contact_length, scene.kc_factor)
     gap = contact_gap(scene)
-    omega1 = cam_speed(scene)
     span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
-    t_end = span / omega1
     n_grid = GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle)
     tab = grid_tables(scene, span, n_grid)
     drive = tab.R31 if reading == "consistent" else -tab.R31

@@ -148,11 +148,11 @@ def _sim_device(opts, realtime, faults, dur):
 
 
 def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
-    from rich.console import Console
+    from labtool.output import console
 
     from acquisition import session
 
-    console = Console(stderr=True)
+    console = console(stderr=True)
     live = None
     progress = None
     if console.is_terminal:

@@ -56,7 +56,7 @@ def accuracy(
     one_core: bool = typer.Option(True, "--one-core/--all-cores", help="pin the process to one core while measuring"),
 ) -> None:
     """Work-precision data of every model x solver x tolerance (CSV, PNG) and the presets' errors."""
-    from rich.console import Console
+    from labtool.output import console
     from rich.table import Table
 
     names = [m.strip() for m in models.split(",") if m.strip()]
@@ -78,7 +78,7 @@ def accuracy(
         for preset, e in summary[model]["presets"].items():
             table.add_row(model, preset, f"{e['err_omega2']:.1e}", f"{e['err_MR13D']:.1e}", f"{e['err_event_time']:.1e}",
                           f"{e['d_events']:g}", f"{e['err_indicators']:.1e}", f"{e['loop_s_total']:.3f}")
-    console = Console()
+    console = console()
     console.print(table)
     for model in names:
         sp = summary[model]["speedup_vs_DOP853"]

@@ -27,7 +27,7 @@ def calibrate(
     force: bool = typer.Option(False, help="overwrite an existing output file"),
 ) -> None:
     """Fit a sine at the reference frequency (least squares, frequency refined) and write Ka with its uncertainty."""
-    from rich.console import Console
+    from labtool.output import console
     from rich.table import Table
 
     from acquisition.calibration import calibrate_recording, calibration_toml
@@ -53,5 +53,5 @@ def calibrate(
         table.add_row(c.channel, f"{c.ka_m_s2_per_v:.4f}", f"{c.ka_std_m_s2_per_v:.4f}",
                       f"{100 * (c.ka_m_s2_per_v / PAPER_KA - 1):+.2f} %", f"{c.fit.freq_hz:.4f}",
                       f"{c.fit.amplitude:.5f}", f"{c.fit.residual_rms:.2e}")
-    Console().print(table)
+    console().print(table)
     typer.echo(f"wrote {output}")

@@ -59,9 +59,9 @@ def run(
     base = Scene(law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
     n_runs = math.prod(len(f.levels) for f in fset)
 
-    from rich.console import Console
+    from labtool.output import console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-    err = Console(stderr=True)
+    err = console(stderr=True)
     with Progress(TextColumn(f"doe run ({model})"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=err, disable=not err.is_terminal, transient=True) as bar:
         task = bar.add_task("runs", total=n_runs)
@@ -93,15 +93,16 @@ def run(
 
 
 def _print_results(table, title: str) -> None:
-    from rich.console import Console
     from rich.table import Table
+
+    from labtool.output import console
 
     t = Table(title=title, title_justify="left")
     for c in table.columns:
         t.add_column(c, justify="right")
     for row in table.itertuples(index=False):
         t.add_row(*["" if v != v else (f"{v:.5g}" if isinstance(v, float) else str(v)) for v in row])
-    Console().print(t)
+    console().print(t)
 
 
 @doe_app.command("analyze")
@@ -138,12 +139,12 @@ def analyze(
 
 
 def _print_text(data, out, digits: int) -> None:
-    from rich.console import Console
     from rich.table import Table
 
+    from labtool.output import console
     from models.anova import matrix_form
 
-    con = Console()
+    con = console()
     names = ", ".join(f"{f.name} = {f.symbol} ({len(f.levels)} levels)" for f in data.factors)
     con.print(f"{data.source}: {len(data.frame)} runs, full factorial of {names}, "
               f"{data.replicates} run(s) per level combination", highlight=False, soft_wrap=True)

@@ -29,7 +29,7 @@ def kinematics(
 ) -> None:
     """Kinematics over one cam revolution: phi2, omega2, epsilon2, points C/E/N, aE_t/aE_n,
     reduced inertias, pressure angle, groove curvature and the kinetostatic MR13D."""
-    from rich.console import Console
+    from labtool.output import console
     from rich.table import Table
 
     from models.cam_profile import export_groove_csv, undercut
@@ -65,7 +65,7 @@ def kinematics(
     ]
     for r in rows:
         table.add_row(*r)
-    Console().print(table)
+    console().print(table)
     if groove_csv is not None:
         n = export_groove_csv(groove_csv, mech, program)
         typer.echo(f"wrote {groove_csv} ({n} points, mm)")

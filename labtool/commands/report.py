@@ -60,7 +60,7 @@ def report(
 ) -> None:
     """Compare a measurement with the rigid and elastic models (omega1 constant and variable):
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
-    from rich.console import Console
+    from labtool.output import console
 
     from models.errors import InputError
     from reports.align import Conditioning
@@ -81,7 +81,7 @@ def report(
                         ("--contact-length-mm", contact_length_mm)):
         if value is not None and not math.isfinite(value):
             raise InputError(f"{name} must be a finite number, got {value}")
-    err = Console(stderr=True)
+    err = console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
     with (err.status("report") if err.is_terminal else _Quiet()) as status:
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,

@@ -106,7 +106,7 @@ _LABELS = {
 
 
 def _print(result, scene) -> None:
-    from rich.console import Console
+    from labtool.output import console
     from rich.table import Table
 
     table = Table(title=f"simulate ({result.model}): {scene.law} law, {scene.cam_speed_rpm:g} rpm, Fu = {scene.Fu:g} N, "
@@ -119,6 +119,6 @@ def _print(result, scene) -> None:
         if v is None:
             continue
         table.add_row(label, fmt.format(int(v)) if fmt == "{:d}" else fmt.format(v), unit)
-    console = Console()
+    console = console()
     console.print(table)
     console.print(f"model: {result.model} ({result.reason}); accuracy {scene.accuracy}; {result.wall_s:.2f} s")
