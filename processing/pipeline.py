@@ -97,14 +97,17 @@ def _calibration(rec: Recording, opts: ProcessOptions, warn, hist: History) -> d
         if opts.calibration is not None:
             cal = opts.calibration.get(name) or next(
                 (v for k, v in opts.calibration.items() if k.lower() == name.lower()), None)
-            if cal is None:
-                warn(f"calibration file {opts.calibration_source} has no entry for channel {name}")
         if cal is not None:
             out[name] = (cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, f"calibration file {opts.calibration_source}")
-        elif math.isfinite(rec.ka_m_s2_per_v[j]) and rec.ka_m_s2_per_v[j] != 0:
+            continue
+        if math.isfinite(rec.ka_m_s2_per_v[j]) and rec.ka_m_s2_per_v[j] != 0:
             out[name] = (float(rec.ka_m_s2_per_v[j]), math.nan, "recording attribute ka_m_s2_per_v")
         else:
             out[name] = (PAPER_KA_M_S2_PER_V, math.nan, "paper default (Ka = 86.43 m/s^2/V)")
+        if opts.calibration is not None:
+            # say what is used instead, so the user can tell whether to calibrate that channel too
+            warn(f"calibration file {opts.calibration_source} has no entry for channel {name}; "
+                 f"using the {out[name][2]} (Ka = {out[name][0]:.4g} m/s^2/V)")
     hist.add("apply_ka", **{f"{k}_ka_m_s2_per_v": v[0] for k, v in out.items()},
              **{f"{k}_uncertainty_m_s2_per_v": v[1] for k, v in out.items()},
              **{f"{k}_source": v[2] for k, v in out.items()})

@@ -312,3 +312,15 @@ def test_spike_records_are_bounded(tmp_path, monkeypatch):
     ds, tr, s, msgs = _run(tmp_path, spec)
     assert s["spikes"] >= 4 and ds.sizes["spike"] == 2 and any("only the first 2" in m for m in msgs)
     assert ds.attrs["n_spikes"] == s["spikes"]
+
+
+def test_a_channel_missing_from_the_calibration_names_its_fallback(tmp_path):
+    from processing.calibration_file import ChannelCalibration
+
+    cal = {"aE_t": ChannelCalibration(90.0, 0.01)}
+    opts = ProcessOptions(calibration=cal, calibration_source="cal.toml")
+    ds, _, _, msgs = _run(tmp_path, SynthSpec(rpm=180.0, duration_s=1.5), opts=opts)
+    missing = [m for m in msgs if "no entry for channel aE_n" in m]
+    assert len(missing) == 1
+    assert "using the" in missing[0] and f"Ka = {ds.attrs['ka_aE_n_m_s2_per_v']:.4g}" in missing[0]
+    assert not any("aE_t" in m for m in msgs if "no entry" in m)

@@ -47,8 +47,8 @@ def kinematics(
     s = rise_summary(ds)
     cut = undercut(mech, program)
 
-    table = Table(title=f"Kinematics: {program.segments[0].law.description}, {rpm:g} rpm, "
-                        f"Fu = {fu:g} N, Jt x{jt_factor:g}")
+    title = f"Kinematics: {program.segments[0].law.description}, {rpm:g} rpm, Fu = {fu:g} N, Jt x{jt_factor:g}"
+    table = Table(title=title, min_width=len(title))     # a title wider than the table would wrap
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_column("unit")

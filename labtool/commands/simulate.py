@@ -109,8 +109,9 @@ def _print(result, scene) -> None:
     from labtool.output import console
     from rich.table import Table
 
-    table = Table(title=f"simulate ({result.model}): {scene.law} law, {scene.cam_speed_rpm:g} rpm, Fu = {scene.Fu:g} N, "
-                        f"j = {scene.backlash * 1e3:g} mm, Jt x{scene.jt_factor:g}, omega1 {scene.omega1_mode}")
+    title = (f"simulate ({result.model}): {scene.law} law, {scene.cam_speed_rpm:g} rpm, Fu = {scene.Fu:g} N, "
+             f"j = {scene.backlash * 1e3:g} mm, Jt x{scene.jt_factor:g}, omega1 {scene.omega1_mode}")
+    table = Table(title=title, min_width=len(title))     # a title wider than the table would wrap
     table.add_column("indicator")
     table.add_column("value", justify="right")
     table.add_column("unit")
