@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape  # paths are the user's, not markup
 from rich.table import Table
 
 from labtool.output import console as new_console, write_netcdf
@@ -43,11 +44,11 @@ def run_demo(out: Path) -> None:
     if measured is None:
         measured = step_synthetic_measurement(out, console)
     report = step_report(out, console, measured)
-    console.print(f"\n[bold]demo done[/bold] in {time.perf_counter() - t0:.0f} s: kinematics {kin_path}, "
-                  f"Table 1 comparison {table_path}")
+    console.print(f"\n[bold]demo done[/bold] in {time.perf_counter() - t0:.0f} s: kinematics {escape(str(kin_path))}, "
+                  f"Table 1 comparison {escape(str(table_path))}")
     if report is not None:
         html, rows = report
-        console.print(f"[bold]report: {html.resolve()}[/bold]  (open it in a browser; summary.json and report.pdf "
+        console.print(f"[bold]report: {escape(str(html.resolve()))}[/bold]  (open it in a browser; summary.json and report.pdf "
                       "beside it)", soft_wrap=True)
         for line in rows:
             console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
@@ -132,7 +133,7 @@ def step_acquire(out: Path, console: Console) -> Path | None:
         _skip(console, step, "the acquisition package (labtool acquire --device sim) is not installed yet")
     samples = sorted(SAMPLE_DATA.glob("*180*rpm*.h5")) or sorted(SAMPLE_DATA.glob("*.h5"))
     if samples:
-        console.print(f"using the recording {samples[0]} from sample_data/")
+        console.print(f"using the recording {escape(str(samples[0]))} from sample_data/")
         return samples[0]
     _skip(console, "sample recording", "sample_data/ holds no recording (*.h5)")
     return None
@@ -148,7 +149,7 @@ def step_process(out: Path, console: Console, recording: Path | None) -> Path | 
         return None
     path = out / "measured_180rpm.nc"
     path.unlink(missing_ok=True)
-    console.print(f"[bold]{step}[/bold]: {recording.name} -> {path.name}")
+    console.print(f"[bold]{step}[/bold]: {escape(recording.name)} -> {escape(path.name)}")
     try:
         rc = _cli(["process", str(recording), "-o", str(path)])
     except Exception as exc:
@@ -164,7 +165,7 @@ def step_synthetic_measurement(out: Path, console: Console) -> Path:
 
     path = out / "measured_synthetic_180rpm.nc"
     write_netcdf(synthetic_measured(rpm=EXPERIMENT_RPM, noise=0.03, gain=1.0, seed=1), path)
-    console.print(f"[yellow]using a SYNTHETIC measurement[/yellow] (kinematics + 3 % noise, not a recording): {path}")
+    console.print(f"[yellow]using a SYNTHETIC measurement[/yellow] (kinematics + 3 % noise, not a recording): {escape(str(path))}")
     return path
 
 
@@ -178,7 +179,7 @@ def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list
     if missing:
         _skip(console, f"the {' and '.join(missing)} model(s)", "not installed yet: the kinematic level stands in, "
               "and the report says so")
-    console.print(f"[bold]report[/bold]: {measured.name} against the rigid and elastic models, omega1 constant and variable")
+    console.print(f"[bold]report[/bold]: {escape(measured.name)} against the rigid and elastic models, omega1 constant and variable")
     try:
         from reports.figures import all_figures
         from reports.html import render_html

@@ -37,6 +37,14 @@ def test_cli_recovers_the_ka_that_made_the_recording_within_half_a_percent(tmp_p
     assert load_calibration(out)[channel]["ka_m_s2_per_v"] == c["ka_m_s2_per_v"]
 
 
+def test_printed_table_keeps_its_units(tmp_path, capsys):
+    # "[m/s^2/V]" looks like rich markup and was silently dropped from the header
+    rec = cal_recording(tmp_path / "ref.h5", ka=86.43)
+    assert main(["calibrate", str(rec), "-o", str(tmp_path / "cal.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "Ka [m/s^2/V]" in out and "u(Ka) [m/s^2/V]" in out and "fitted f [Hz]" in out
+
+
 def test_frequency_refinement_and_rms_convention(tmp_path):
     # the exciter runs at 80.4 Hz, not the nominal 79.6; its 9.81 is given as rms
     rec = cal_recording(tmp_path / "ref.h5", ka=90.0, freq=80.4, accel=9.81 * math.sqrt(2))

@@ -56,8 +56,10 @@ def accuracy(
     one_core: bool = typer.Option(True, "--one-core/--all-cores", help="pin the process to one core while measuring"),
 ) -> None:
     """Work-precision data of every model x solver x tolerance (CSV, PNG) and the presets' errors."""
-    from labtool.output import console
+    from rich.markup import escape
     from rich.table import Table
+
+    from labtool.output import console
 
     names = [m.strip() for m in models.split(",") if m.strip()]
     bad = [m for m in names if m not in ("rigid", "elastic")]
@@ -73,7 +75,7 @@ def accuracy(
     table = Table(title=f"Work-precision ({output}/work_precision.csv, .png)")
     for col in ("model", "preset", "err omega2", "err MR13D", "err t_event [s]", "d events", "err indicators",
                 "loop [s]"):
-        table.add_column(col, justify="right")
+        table.add_column(escape(col), justify="right")     # "[s]" is not rich markup
     for model in names:
         for preset, e in summary[model]["presets"].items():
             table.add_row(model, preset, f"{e['err_omega2']:.1e}", f"{e['err_MR13D']:.1e}", f"{e['err_event_time']:.1e}",

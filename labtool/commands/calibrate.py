@@ -27,8 +27,10 @@ def calibrate(
     force: bool = typer.Option(False, help="overwrite an existing output file"),
 ) -> None:
     """Fit a sine at the reference frequency (least squares, frequency refined) and write Ka with its uncertainty."""
-    from labtool.output import console
+    from rich.markup import escape
     from rich.table import Table
+
+    from labtool.output import console
 
     from acquisition.calibration import calibrate_recording, calibration_toml
 
@@ -48,7 +50,7 @@ def calibrate(
 
     table = Table(title=f"Calibration from {recording.name}: {reference_accel:g} m/s^2 {convention} at {reference_freq:g} Hz")
     for col in ("channel", "Ka [m/s^2/V]", "u(Ka) [m/s^2/V]", "vs paper 86.43", "fitted f [Hz]", "amplitude [V peak]", "residual rms [V]"):
-        table.add_column(col, justify="right")
+        table.add_column(escape(col), justify="right")     # "[m/s^2/V]" is not rich markup
     for c in cals:
         table.add_row(c.channel, f"{c.ka_m_s2_per_v:.4f}", f"{c.ka_std_m_s2_per_v:.4f}",
                       f"{100 * (c.ka_m_s2_per_v / PAPER_KA - 1):+.2f} %", f"{c.fit.freq_hz:.4f}",

@@ -122,4 +122,5 @@ def _print(result, scene) -> None:
         table.add_row(label, fmt.format(int(v)) if fmt == "{:d}" else fmt.format(v), unit)
     console = console()
     console.print(table)
-    console.print(f"model: {result.model} ({result.reason}); accuracy {scene.accuracy}; {result.wall_s:.2f} s")
+    console.print(f"model: {result.model} ({result.reason}); accuracy {scene.accuracy}; {result.wall_s:.2f} s",
+                  markup=False, highlight=False)
