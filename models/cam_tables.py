@@ -18,6 +18,9 @@ operating point in a handful of array operations.
 
 Values agree with models.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
 models.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
+
+``cached`` is the one per-process cache of such speed-independent tables: the elastic model's
+grids (``grid_terms``) and the rigid model's cam and follower tables (models.rigid.build_plant).
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ from models.linkage import linkage_state, reduced_follower
 from models.mechanism import Mechanism
 from models.motion_laws import CamProgram
 
-CACHE_SIZE = 8          # grids kept per process (one rise grid of 4001 angles is ~0.4 MB)
+CACHE_SIZE = 16         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB)
 
 _cache: "collections.OrderedDict[tuple, AngleTerms]" = collections.OrderedDict()
 _lock = threading.Lock()
@@ -130,20 +133,30 @@ def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
 
     The arrays of a cached table are read-only: they are shared by every caller.
     """
-    key = (repr(mech), program, float(span), int(n_points), load_until)
+    key = ("angle_terms", repr(mech), program, float(span), int(n_points), load_until)
+    return cached(key, lambda: angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), load_until))
+
+
+def cached(key: tuple, build):
+    """``build()`` once per ``key`` per process (the CACHE_SIZE most recent kept): for tables that
+    depend on the mechanism and the cam program only (this module's grids, the rigid model's cam
+    and follower tables). The numpy arrays among the result's dataclass fields are made read-only,
+    since every caller shares them."""
     with _lock:
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
             return hit
-    terms = angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), load_until)
-    for f in dataclasses.fields(terms):
-        getattr(terms, f.name).flags.writeable = False
+    value = build()
+    for f in dataclasses.fields(value):
+        arr = getattr(value, f.name)
+        if isinstance(arr, np.ndarray):
+            arr.flags.writeable = False
     with _lock:
-        _cache[key] = terms
+        _cache[key] = value
         while len(_cache) > CACHE_SIZE:
             _cache.popitem(last=False)
-    return terms
+    return value
 
 
 def clear_cache() -> None:

@@ -231,17 +231,21 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
 
 def build_plant(scene: Scene, backlash: float | None = None, phi1_hi: float | None = None) -> tuple[Plant, dict]:
     """The plant of a scene (backlash overrides scene.backlash, e.g. 0 for the no-backlash run)."""
-    from models.cam_profile import choose_sense
+    from models.cam_profile import cached_sense
+    from models.cam_tables import cached
 
     mech, program = scene.mechanism, scene.program
-    sense = choose_sense(mech, program)
+    sense = cached_sense(mech, program)
     it = transmission_ratio(mech, scene.omega1_nominal)
     Jcam = cam_inertia(mech, it)
     span = simulated_span(scene)
     hi = (span if phi1_hi is None else phi1_hi) + 0.2
-    tab1 = cam_table(mech, program, sense, -0.05, hi)
-    margin = 0.05
-    tab2 = follower_table(mech, mech.phiD + mech.psi0 - margin, mech.phiD + mech.psi0 + program.stroke + margin)
+    # both tables depend on the mechanism and the cam program only: built once per process and
+    # shared by every speed, load, inertia factor and backlash (models.cam_tables.cached)
+    tab1 = cached(("rigid_cam_table", repr(mech), program, sense, -0.05, hi),
+                  lambda: cam_table(mech, program, sense, -0.05, hi))
+    lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
+    tab2 = cached(("rigid_follower_table", repr(mech), lo2, hi2), lambda: follower_table(mech, lo2, hi2))
     j = scene.backlash if backlash is None else backlash
     if not (Jcam > 0 and math.isfinite(Jcam)):
         raise InputError(f"the cam's reduced inertia must be > 0 kg m^2, got {Jcam}")

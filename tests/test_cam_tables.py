@@ -131,3 +131,18 @@ def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
     *_, MR13D, _ = _reference(scene, np.minimum(phi1, np.nextafter(scene.program.rise_angle, 0.0)),
                               elastic.cam_speed(scene))
     np.testing.assert_allclose(ds["MR13D_static"].values, MR13D, rtol=0, atol=1e-10 * np.abs(MR13D).max())
+
+
+def test_rigid_plant_tables_are_shared_and_a_warm_run_equals_a_cold_one():
+    from models import rigid
+
+    a = Scene(cam_speed_rpm=180, Fu=0.0, jt_factor=1.0, backlash=0.016e-3)
+    b = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.128e-3)
+    cam_tables.clear_cache()
+    cold = simulate(b, "rigid").indicators
+    pa, _ = rigid.build_plant(a)
+    pb, _ = rigid.build_plant(b)
+    assert pa.tab1 is pb.tab1 and pa.tab2 is pb.tab2          # one table for every operating point
+    assert not pa.tab1.coef.flags.writeable
+    warm = simulate(b, "rigid").indicators
+    assert warm == cold                                        # bit for bit

@@ -423,8 +423,11 @@ def integrate(P, phi1_end: float, omega1_0: float, preset: dict, t_rise: float, 
         smode, sflank, s = CONTACT_MODE, int(start[3]), (float(start[1]), float(start[2]), 0.0, 0.0)
     else:
         smode, sflank, s = FREE_MODE, FREE, tuple(float(v) for v in start[1:5])
-    out = run(P.tab1.nodes, P.tab1.inv_h, np.ascontiguousarray(P.tab1.coef), P.tab2.nodes, P.tab2.inv_h,
-              np.ascontiguousarray(P.tab2.coef), _params(P), float(phi1_end), float(omega1_0), rtol, max_step,
+    # the tables are shared read-only arrays (models.cam_tables.cached); numba would compile a
+    # second specialisation for read-only arrays, so the loop gets writeable copies (~1 MB)
+    rw = lambda a: np.require(a, dtype=np.float64, requirements=["C", "W"])  # noqa: E731
+    out = run(rw(P.tab1.nodes), rw(P.tab1.inv_h), rw(P.tab1.coef), rw(P.tab2.nodes), rw(P.tab2.inv_h),
+              rw(P.tab2.coef), _params(P), float(phi1_end), float(omega1_0), rtol, max_step,
               float(t_max), float(preset["v_settle"]), int(preset["max_events"]), int(max_steps),
               smode, sflank, s[0], s[1], s[2], s[3], float(t_start))
     (status, t, phi1, nst, nph, nev, nfev, st_t, st_h, st_y, st_Q, ph_mode, ph_flank, ph_t0, ph_t1,
