@@ -5,7 +5,9 @@ The ladder (DESIGN.md): kinematic -> rigid (1 DOF, the motor's speed variation) 
 
 1. Contact outputs requested (x_el, contact force, deformation): the elastic model, the only
    level that has them.
-2. Otherwise the kinematic level first (cam as input, kinetostatic MR13D over the simulated span).
+2. Otherwise the kinematic level first (cam as input, kinetostatic MR13D over the rise, read from
+   the shared cam-angle table of models.cam_tables; the kinematic dataset is built only when it is
+   the answer).
    MR13D keeps its sign (by more than SIGN_MARGIN of its range) and omega1 is constant: the follower
    never leaves the flank, so the rigid model *is* the kinematic model; no dynamic model runs, and
    the jump indicators are exact zeros (no contact loss: the backlash run is the no-backlash run).
@@ -56,20 +58,32 @@ def _choose(scene: Scene, contact: bool):
     if contact:
         return "elastic", "contact outputs (x_el, contact force) were requested: only the elastic model has them", None
     from models.simulate import _kinematic
-    kin = _kinematic(scene)
-    mx, mn = kin.indicators["MR13D_max_Nm"], kin.indicators["MR13D_min_Nm"]
+    mn, mx = rise_moment_range(scene)
     change = _sign_change(mn, mx)
     if scene.omega1_mode == "const" and (not change or scene.backlash == 0.0):
+        kin = _kinematic(scene)          # the answer: only now is the kinematic dataset built
+        mn, mx = kin.indicators["MR13D_min_Nm"], kin.indicators["MR13D_max_Nm"]
         why = (f"MR13D keeps its sign over the rise ({mn:.3g} to {mx:.3g} N m)" if not change else
                f"MR13D changes sign ({mn:.3g} to {mx:.3g} N m) but the groove has no backlash")
         return "kinematic", (f"{why} and omega1 is constant: the follower never leaves the flank, the "
                              "kinematic level is the rigid model's exact solution"), kin
     if change and scene.backlash > 0.0:
         return "rigid", (f"MR13D changes sign over the rise ({mn:.3g} to {mx:.3g} N m) with backlash "
-                         f"{scene.backlash * 1e3:g} mm: jumps and impacts need the rigid model with backlash"), kin
+                         f"{scene.backlash * 1e3:g} mm: jumps and impacts need the rigid model with backlash"), None
     why = (f"MR13D keeps its sign ({mn:.3g} to {mx:.3g} N m)" if not change else
            f"MR13D changes sign ({mn:.3g} to {mx:.3g} N m) but the groove has no backlash")
-    return "rigid", f"{why}; omega1 is variable: the motor's speed variation needs the 1-DOF rigid model", kin
+    return "rigid", f"{why}; omega1 is variable: the motor's speed variation needs the 1-DOF rigid model", None
+
+
+def rise_moment_range(scene: Scene) -> tuple[float, float]:
+    """(min, max) of the kinetostatic MR13D (N m) over the rise at the cam speed the kinematic level
+    runs at, from the shared cam-angle table (models.cam_tables: the grid the elastic model uses,
+    4001 angles over the rise, computed once per mechanism and law): the decision costs ~0.1 ms
+    instead of a whole kinematic analysis."""
+    from models import elastic
+
+    tab = elastic.grid_tables(scene.replace(rise_only=True), scene.program.rise_angle)
+    return float(tab.MR13D.min()), float(tab.MR13D.max())
 
 
 class SharedPrefixLoop:

@@ -116,3 +116,22 @@ def test_auto_matches_the_full_model_at_the_extremes(kw):
     assert auto.indicators["jumps"] == full["jumps"] and auto.indicators["impacts"] == full["impacts"]
     for key in KEYS:
         assert auto.indicators[key] == pytest.approx(full[key], rel=1e-6, abs=1e-9 * abs(full["MR13D_max_Nm"])), key
+
+
+def test_the_decision_reads_the_same_moment_range_as_the_kinematic_analysis():
+    """auto decides from the shared cam-angle table (4001 angles over the rise) instead of a whole
+    kinematic analysis (1441 over the revolution): the MR13D range is the same to the coarser
+    grid's resolution, on every run of Table 1 at both omega1 modes."""
+    from models.auto import rise_moment_range
+    from models.simulate import _kinematic
+
+    for r in table1_runs().itertuples():
+        for mode in ("const", "var"):
+            s = Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
+                      omega1_mode=mode)
+            mn, mx = rise_moment_range(s)
+            kin = _kinematic(s).indicators
+            scale = max(abs(mn), abs(mx))
+            assert mn <= kin["MR13D_min_Nm"] + 1e-9 * scale and mx >= kin["MR13D_max_Nm"] - 1e-9 * scale
+            assert mn == pytest.approx(kin["MR13D_min_Nm"], abs=3e-3 * scale)
+            assert mx == pytest.approx(kin["MR13D_max_Nm"], abs=3e-3 * scale)
