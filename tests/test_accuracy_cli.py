@@ -38,3 +38,27 @@ def test_small_run_writes_csv_png_and_summary(tmp_path):
     # the presets are ordered by their measured error in omega2
     assert e["standard"]["err_omega2"] < e["fast"]["err_omega2"]
     assert (out / "work_precision.png").stat().st_size > 1000
+
+
+def _work_precision_module():
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "work_precision.py"
+    spec = importlib.util.spec_from_file_location("work_precision", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_cost_at_error_reads_a_power_law_exactly_and_never_extrapolates():
+    wp = _work_precision_module()
+    # a solver of order 5: error = cost^-5 (log-log straight line), ladder of 4 tolerances
+    ladder = [(c ** -5.0, c) for c in (1.0, 2.0, 4.0, 8.0)]
+    assert wp.cost_at_error(ladder, 3.0 ** -5.0) == pytest.approx(3.0, rel=1e-12)
+    assert wp.cost_at_error(ladder, 1.0) == pytest.approx(1.0)          # the cheapest point
+    assert wp.cost_at_error(ladder, 10.0) == 1.0                       # even the cheapest is as accurate
+    assert wp.cost_at_error(ladder, 8.0 ** -5.0 / 2) is None           # beyond the ladder
+    assert wp.cost_at_error([], 1e-6) is None
+    # unsorted input, a zero error ignored
+    assert wp.cost_at_error(ladder[::-1] + [(0.0, 0.5)], 3.0 ** -5.0) == pytest.approx(3.0, rel=1e-12)
