@@ -61,6 +61,9 @@ OUTPUT_STEP = 2e-5        # s, output sampling (>= 25 samples per contact period
 GRID_POINTS = 4001        # cam-angle grid for the kinematic tables (linear interpolation in time)
 ZENO_SEGMENTS = 200       # this many phases in a row, each shorter than ZENO_DT, is endless chatter
 ZENO_DT = 1e-9            # s
+# the event functions' sign is read at this many points of every step (its dense output), not at
+# the step's ends only: a micro-bounce that leaves a flank and returns within one step is an event
+EVENT_SUBSTEPS = 8
 
 
 @dataclass(frozen=True)
@@ -242,12 +245,19 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
                         dense_output=True, rtol=rtol, atol=list(atol), max_step=max_step)
         if sol.status == -1:
             raise SolverError(f"elastic model: integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
+        hidden = _hidden_crossing(sol, specs, args, phase)
+        if hidden is not None:
+            hit, t_hit = hidden
+            sol = _Truncated(sol, t_hit)
         segments.append((phase, sol))
         short = short + 1 if sol.t[-1] - t0 < ZENO_DT else 0
         if sol.status != 1:
             break
-        hit = next(i for i, te in enumerate(sol.t_events) if len(te))
-        t_hit, y_hit = sol.t_events[hit][0], sol.y_events[hit][0].copy()
+        if hidden is not None:
+            y_hit = np.asarray(sol.sol(t_hit), dtype=float).copy()
+        else:
+            hit = next(i for i, te in enumerate(sol.t_events) if len(te))
+            t_hit, y_hit = sol.t_events[hit][0], sol.y_events[hit][0].copy()
         new_phase = specs[hit][2]
         events.append({"t": float(t_hit), "kind": _event_kind(phase, new_phase), "v": float(y_hit[1]),
                        "from": PHASE_NAMES[phase], "to": PHASE_NAMES[new_phase]})
@@ -256,6 +266,52 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
         y_hit[0] = _restart_position(specs[hit][0] is ev_zero, new_phase, gap)
         t0, y, phase = float(t_hit), y_hit, new_phase
     return segments, events
+
+
+def _hidden_crossing(sol, specs, args, phase):
+    """(spec index, t) of a boundary crossing that solve_ivp did not see, or None.
+
+    solve_ivp reads an event's sign at the ends of each step only, so a crossing and its return
+    within one step (a micro-bounce off a flank) is missed. The dense output is read at
+    EVENT_SUBSTEPS points of every step; a crossing in the event's direction before the last
+    sub-interval (which ends at solve_ivp's own event, if any) is the phase's real end, located by
+    brentq on the dense output. The compiled twin
+    (models.kernels.elastic_nb._crossing) applies the same rule.
+    """
+    from scipy.optimize import brentq
+
+    ts = sol.t
+    if ts.size < 2:
+        return None
+    frac = np.arange(1, EVENT_SUBSTEPS + 1) / EVENT_SUBSTEPS
+    tt = np.concatenate([[ts[0]], (ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel()])
+    tt[EVENT_SUBSTEPS::EVENT_SUBSTEPS] = ts[1:]             # the step ends exactly
+    x = sol.sol(tt)[0]
+    best = None
+    for i, (func, direction, _) in enumerate(specs):
+        g = x if func is ev_zero else x - args[4]
+        a, b = g[:-1], g[1:]
+        cross = (a <= 0) & (b >= 0) if direction > 0 else (a >= 0) & (b <= 0)
+        k = np.flatnonzero(cross)
+        if not k.size:
+            continue
+        k = int(k[0])
+        if sol.status == 1 and k + 1 >= tt.size - 1:
+            continue                 # the last sub-interval ends at solve_ivp's own event: its root stands
+        f = (lambda t: sol.sol(t)[0]) if func is ev_zero else (lambda t: sol.sol(t)[0] - args[4])
+        t_hit = tt[k + 1] if f(tt[k + 1]) == 0 else brentq(f, tt[k], tt[k + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
+        if best is None or t_hit < best[1]:
+            best = (i, float(t_hit))
+    return best
+
+
+class _Truncated:
+    """A solve_ivp result cut at t_hit (a crossing found inside a step): .t, .sol, .status = 1."""
+
+    def __init__(self, sol, t_hit: float):
+        self.t = np.append(sol.t[sol.t < t_hit], t_hit)
+        self.sol = sol.sol
+        self.status = 1
 
 
 class _AtRest:

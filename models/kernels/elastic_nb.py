@@ -87,12 +87,12 @@ def _active(g0, g1, direction):
     return (up and direction > 0) or (down and direction < 0)
 
 
+NSUB = 8    # sign checks per step (models.elastic.EVENT_SUBSTEPS)
+
+
 @njit(cache=True)
-def _root(which, gap, y0, h, Q, tmp):
-    """Step fraction s in (0, 1] where the event changes sign, by bisection on the dense output."""
-    lo, hi = 0.0, 1.0
-    dp.dense_eval(y0, h, Q, 0.0, tmp)
-    g_lo = _event_value(which, tmp, gap)
+def _bisect(which, gap, y0, h, Q, lo, hi, g_lo, tmp):
+    """Step fraction in (lo, hi] where the event changes sign, by bisection on the dense output."""
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
@@ -104,6 +104,28 @@ def _root(which, gap, y0, h, Q, tmp):
         else:
             hi = mid
     return hi
+
+
+@njit(cache=True)
+def _crossing(which, direction, gap, y0, h, Q, g0, g1, nsub, tmp):
+    """First step fraction s in (0, 1] where the event changes sign in its direction, 2.0 if none.
+
+    The sign is read at ``nsub`` points of the step's dense output, not at its two ends only: a
+    brief separation that leaves the flank and comes back within one step (a micro-bounce) is an
+    event too, not a contact phase with x outside the contact range.
+    """
+    s_prev, g_prev = 0.0, g0
+    for k in range(1, nsub + 1):
+        s = k / nsub
+        if k == nsub:
+            g = g1
+        else:
+            dp.dense_eval(y0, h, Q, s, tmp)
+            g = _event_value(which, tmp, gap)
+        if _active(g_prev, g, direction):
+            return _bisect(which, gap, y0, h, Q, s_prev, s, g_prev, tmp)
+        s_prev, g_prev = s, g
+    return 2.0
 
 
 @njit(cache=True)
@@ -128,7 +150,7 @@ def _first_step(t0, y0, f0, t_bound, max_step, rtol, atol, phase, tg, drive, mg,
 
 @njit(cache=True)
 def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_step,
-        max_steps, max_segments, zeno_segments, zeno_dt, nudge):
+        max_steps, max_segments, zeno_segments, zeno_dt, nudge, nsub):
     """The phase-by-phase loop. Returns (status, t_fail, n_steps, n_seg, nfev, step arrays,
     segment arrays, event arrays); see ``integrate`` for their layout."""
     cap = min(max_steps, 4096)
@@ -229,8 +251,8 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
             nst += 1
             g1a = _event_value(w0, y_new, gap)
             g1b = _event_value(w1, y_new, gap) if ne == 2 else 0.0
-            sa = _root(w0, gap, y, h, Q, tmp) if _active(g0a, g1a, d0) else 2.0
-            sb = _root(w1, gap, y, h, Q, tmp) if (ne == 2 and _active(g0b, g1b, d1)) else 2.0
+            sa = _crossing(w0, d0, gap, y, h, Q, g0a, g1a, nsub, tmp)
+            sb = _crossing(w1, d1, gap, y, h, Q, g0b, g1b, nsub, tmp) if ne == 2 else 2.0
             if sa <= 1.0 or sb <= 1.0:
                 hit = 0 if sa <= sb else 1
                 s_hit = sa if hit == 0 else sb
@@ -311,7 +333,8 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     out = run(tg, drive_grid, np.ascontiguousarray(m_grid, dtype=float),
               float(kc), float(gap), float(damping), t_end, float(x0), float(v0), int(phase),
               float(rtol), np.asarray(atol, dtype=float), max_step, int(max_steps), int(max_segments),
-              zeno_n, zeno_dt, float(getattr(elastic, "BOUNDARY_NUDGE", NUDGE)))
+              zeno_n, zeno_dt, float(getattr(elastic, "BOUNDARY_NUDGE", NUDGE)),
+              int(getattr(elastic, "EVENT_SUBSTEPS", NSUB)))
     status, t_fail, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, sph, sfirst, send, ev_t, ev_v, ev_from, ev_to = out
     if stats is not None:
         stats["nfev"] = stats.get("nfev", 0) + int(nfev)
