@@ -178,14 +178,12 @@ def summarize(rows):
             # whole-call cost interpolated on its work-precision curve (log-log), for omega2 and for
             # the event times; DOP853 has to reach both, so the dearer of the two counts
             interp = {}
-            for cost_key in ("loop_s", "wall_s"):
-                need = []
-                for err_key, floor in (("err_omega2", 0.0), ("err_event_time", 1e-15)):
-                    pts = [(d[err_key], d[cost_key]) for d in dop.values()]
-                    need.append(cost_at_error(pts, max(std[err_key], floor)))
+            for cost_key, label in (("loop_s", "loop"), ("wall_s", "wall")):
+                need = [cost_at_error([(d[err_key], d[cost_key]) for d in dop.values()], max(std[err_key], floor))
+                        for err_key, floor in (("err_omega2", 0.0), ("err_event_time", 1e-15))]
                 if all(c is not None for c in need):
                     interp[f"dop853_{cost_key}"] = max(need)
-                    interp[f"{'loop' if cost_key == 'loop_s' else 'wall'}_speedup"] = max(need) / std[cost_key]
+                    interp[f"{label}_speedup"] = max(need) / std[cost_key]
             m["speedup_vs_DOP853_interpolated"] = interp or dict(
                 note="the DOP853 ladder does not bracket the standard preset's errors (no extrapolation)")
     return out

@@ -19,7 +19,7 @@ def console(stderr: bool = False):
 
     con = Console(stderr=stderr)
     if not con.is_terminal and "COLUMNS" not in os.environ:
-        con = Console(stderr=stderr, width=PIPE_WIDTH)
+        con.width = PIPE_WIDTH
     return con
 
 

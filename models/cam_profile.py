@@ -72,19 +72,12 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
     return min(peaks, key=peaks.get)
 
 
-_SENSES: dict = {}
-
-
 def cached_sense(mech: Mechanism, program: CamProgram) -> int:
-    """``choose_sense`` remembered per (mechanism, program): it costs two 721-point geometry passes
-    and every contact-geometry call needs it."""
-    key = (repr(mech), program)
-    sense = _SENSES.get(key)
-    if sense is None:
-        if len(_SENSES) > 64:
-            _SENSES.clear()
-        sense = _SENSES[key] = choose_sense(mech, program)
-    return sense
+    """``choose_sense`` remembered per (mechanism, program) (models.cam_tables.cached): it costs
+    two 721-point geometry passes and every contact-geometry call needs it."""
+    from models.cam_tables import cached      # cam_tables imports this module
+
+    return cached(("cam_sense", repr(mech), program), lambda: choose_sense(mech, program))
 
 
 def contact_geometry(mech: Mechanism, program: CamProgram, phi1, sense: int | None = None,

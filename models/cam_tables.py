@@ -20,7 +20,9 @@ Values agree with models.kinematics (follower_motion, load_force_x, kinetostatic
 models.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
 
 ``cached`` is the one per-process cache of such speed-independent tables: the elastic model's
-grids (``grid_terms``) and the rigid model's cam and follower tables (models.rigid.build_plant).
+grids (``grid_terms``), the stroke spline, the cam's sense of rotation
+(models.cam_profile.cached_sense) and the rigid model's cam and follower tables
+(models.rigid.build_plant).
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ from models.motion_laws import CamProgram
 
 CACHE_SIZE = 16         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB)
 
-_cache: "collections.OrderedDict[tuple, AngleTerms]" = collections.OrderedDict()
+_cache: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
 _lock = threading.Lock()
 
 
@@ -88,9 +90,7 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | 
     if spline is not None and phi2.size and spline.x[0] <= phi2.min() and phi2.max() <= spline.x[-1]:
         J0, dJ0, M_gravity, vNx, slide = spline(phi2).T
     else:
-        unit = linkage_state(mech, phi2, 1.0, 0.0)
-        red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
-        J0, dJ0, M_gravity, vNx, slide = red.J, red.dJ, red.M_gravity, unit.vN[0], unit.ds * np.cos(unit.phi4)
+        J0, dJ0, M_gravity, vNx, slide = linkage_columns(mech, phi2)
     phi_load = phi1 if load_until is None else np.minimum(phi1, load_until)
     # models.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
     # arm (the x velocity coefficient of N)
@@ -102,29 +102,30 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | 
 
 
 STROKE_POINTS = 2049    # spline knots over the stroke (+-5 %): h = 1.3e-4 rad
-_splines: dict = {}
+
+
+def linkage_columns(mech: Mechanism, phi2):
+    """(J0, dJ0, M_gravity, vN_x, ds cos(phi4)) at follower angles phi2 (rad), from one evaluation
+    of the unit-velocity linkage: J''red and dJ''red/dphi2 at Jt = 1 (kg m^2, kg m^2/rad), the
+    moment of gravity about D (N m), the x velocity coefficient of N (m/rad, the load's arm) and the
+    x component of the rod's sliding per unit omega2 (its sign opposes the load,
+    models.kinematics.load_force_x)."""
+    unit = linkage_state(mech, phi2, 1.0, 0.0)
+    red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
+    return red.J, red.dJ, red.M_gravity, unit.vN[0], unit.ds * np.cos(unit.phi4)
 
 
 def stroke_spline(mech: Mechanism):
-    """Cubic spline phi2 (rad) -> (J0, dJ0, M_gravity, vN_x, ds cos(phi4)) over the follower's
-    stroke widened by 5 % either side, per mechanism (``scipy.interpolate.CubicSpline``)."""
+    """Cubic spline phi2 (rad) -> ``linkage_columns`` over the follower's stroke widened by 5 %
+    either side, per mechanism (``scipy.interpolate.CubicSpline``, cached)."""
     from scipy.interpolate import CubicSpline
 
-    key = repr(mech)
-    with _lock:
-        sp = _splines.get(key)
-    if sp is None:
+    def build():
         lo = mech.phiD + mech.psi0 - 0.05 * mech.psi_a
         phi2 = np.linspace(lo, lo + 1.10 * mech.psi_a, STROKE_POINTS)
-        unit = linkage_state(mech, phi2, 1.0, 0.0)
-        red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
-        sp = CubicSpline(phi2, np.column_stack([red.J, red.dJ, red.M_gravity, unit.vN[0],
-                                                unit.ds * np.cos(unit.phi4)]))
-        with _lock:
-            if len(_splines) >= CACHE_SIZE:
-                _splines.clear()
-            _splines[key] = sp
-    return sp
+        return CubicSpline(phi2, np.column_stack(linkage_columns(mech, phi2)))
+
+    return cached(("stroke_spline", repr(mech)), build)
 
 
 def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
@@ -138,17 +139,17 @@ def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
 
 
 def cached(key: tuple, build):
-    """``build()`` once per ``key`` per process (the CACHE_SIZE most recent kept): for tables that
-    depend on the mechanism and the cam program only (this module's grids, the rigid model's cam
-    and follower tables). The numpy arrays among the result's dataclass fields are made read-only,
-    since every caller shares them."""
+    """``build()`` once per ``key`` per process (the CACHE_SIZE most recent kept): for what depends
+    on the mechanism and the cam program only (this module's grids and stroke spline, the cam's
+    sense of rotation, the rigid model's cam and follower tables). When the result is a dataclass
+    its numpy arrays are made read-only, since every caller shares them."""
     with _lock:
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
             return hit
     value = build()
-    for f in dataclasses.fields(value):
+    for f in dataclasses.fields(value) if dataclasses.is_dataclass(value) else ():
         arr = getattr(value, f.name)
         if isinstance(arr, np.ndarray):
             arr.flags.writeable = False
@@ -160,7 +161,6 @@ def cached(key: tuple, build):
 
 
 def clear_cache() -> None:
-    """Forget the cached grids (benchmarks that time a first call use it)."""
+    """Forget every cached table (benchmarks that time a first call use it)."""
     with _lock:
         _cache.clear()
-        _splines.clear()

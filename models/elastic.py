@@ -245,16 +245,16 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
                         dense_output=True, rtol=rtol, atol=list(atol), max_step=max_step)
         if sol.status == -1:
             raise SolverError(f"elastic model: integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
-        hidden = _hidden_crossing(sol, specs, args, phase)
+        hidden = _hidden_crossing(sol, specs, gap)
         if hidden is not None:
-            hit, t_hit = hidden
-            sol = _Truncated(sol, t_hit)
+            sol = _Truncated(sol, hidden[1])
         segments.append((phase, sol))
         short = short + 1 if sol.t[-1] - t0 < ZENO_DT else 0
         if sol.status != 1:
             break
         if hidden is not None:
-            y_hit = np.asarray(sol.sol(t_hit), dtype=float).copy()
+            hit, t_hit = hidden
+            y_hit = np.array(sol.sol(t_hit), dtype=float)
         else:
             hit = next(i for i, te in enumerate(sol.t_events) if len(te))
             t_hit, y_hit = sol.t_events[hit][0], sol.y_events[hit][0].copy()
@@ -268,7 +268,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     return segments, events
 
 
-def _hidden_crossing(sol, specs, args, phase):
+def _hidden_crossing(sol, specs, gap: float):
     """(spec index, t) of a boundary crossing that solve_ivp did not see, or None.
 
     solve_ivp reads an event's sign at the ends of each step only, so a crossing and its return
@@ -289,7 +289,8 @@ def _hidden_crossing(sol, specs, args, phase):
     x = sol.sol(tt)[0]
     best = None
     for i, (func, direction, _) in enumerate(specs):
-        g = x if func is ev_zero else x - args[4]
+        boundary = 0.0 if func is ev_zero else gap            # x of the event's flank
+        g = x - boundary
         a, b = g[:-1], g[1:]
         cross = (a <= 0) & (b >= 0) if direction > 0 else (a >= 0) & (b <= 0)
         k = np.flatnonzero(cross)
@@ -298,7 +299,7 @@ def _hidden_crossing(sol, specs, args, phase):
         k = int(k[0])
         if sol.status == 1 and k + 1 >= tt.size - 1:
             continue                 # the last sub-interval ends at solve_ivp's own event: its root stands
-        f = (lambda t: sol.sol(t)[0]) if func is ev_zero else (lambda t: sol.sol(t)[0] - args[4])
+        f = lambda t, b=boundary: sol.sol(t)[0] - b  # noqa: E731
         t_hit = tt[k + 1] if f(tt[k + 1]) == 0 else brentq(f, tt[k], tt[k + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
         if best is None or t_hit < best[1]:
             best = (i, float(t_hit))

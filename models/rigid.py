@@ -51,7 +51,7 @@ from scipy.integrate import solve_ivp
 
 from models.errors import InputError, SolverError
 from models.impact import impact, kinetic_energy
-from models.linkage import linkage_state, reduced_follower
+from models.cam_tables import cached, linkage_columns
 from models.mechanism import Mechanism
 from models.motion_laws import CamProgram
 from models.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam, no_load_cam_speed, transmission_ratio
@@ -215,12 +215,10 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
     phi2 = np.linspace(lo, hi, n)
 
     def cols(x):
-        red = reduced_follower(mech, x, None, 1.0)
-        unit = linkage_state(mech, x, 1.0, 0.0)
+        J, dJ, Mg, vNx, slide = linkage_columns(mech, x)
         # load per N of Fu and per unit direction (models.kinematics.load_force_x): Fu_x = Fu *
         # sign(ds ux) * direction; its moment about D is Fu_x * vN_x (vN per unit omega2)
-        ml = np.sign(unit.ds * np.cos(unit.phi4)) * unit.vN[0]
-        return np.stack([red.J, red.dJ, red.M_gravity, ml])
+        return np.stack([J, dJ, Mg, np.sign(slide) * vNx])
 
     h = 1e-6
     v = cols(phi2)
@@ -232,7 +230,6 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
 def build_plant(scene: Scene, backlash: float | None = None, phi1_hi: float | None = None) -> tuple[Plant, dict]:
     """The plant of a scene (backlash overrides scene.backlash, e.g. 0 for the no-backlash run)."""
     from models.cam_profile import cached_sense
-    from models.cam_tables import cached
 
     mech, program = scene.mechanism, scene.program
     sense = cached_sense(mech, program)

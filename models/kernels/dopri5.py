@@ -129,13 +129,16 @@ def rms(v, scale):
     return np.sqrt(acc / v.size)
 
 
-def evaluate_steps(t0s, hs, y0s, Qs, times):
+def evaluate_steps(t0s, hs, y0s, Qs, times, first=0, last=None):
     """Dense output of a run of steps at ``times`` (numpy, vectorised): array (n_state, n_times).
 
     t0s, hs (n_steps,), y0s (n_steps, n), Qs (n_steps, n, 4); times inside [t0s[0], t0s[-1] + hs[-1]].
+    ``first``, ``last`` (int or one per time): the step index each time is clipped to, so that a
+    time is read on the steps of its own run only (``evaluate_runs``).
     """
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    i = np.clip(np.searchsorted(t0s, times, side="right") - 1, 0, t0s.size - 1)
+    last = t0s.size - 1 if last is None else last
+    i = np.clip(np.searchsorted(t0s, times, side="right") - 1, first, last)
     h = hs[i]
     s = np.where(h > 0, (times - t0s[i]) / np.where(h > 0, h, 1.0), 0.0)
     Q = Qs[i]                                            # (m, n, 4)
@@ -153,16 +156,10 @@ def evaluate_runs(runs, times):
     counts = np.array([np.size(tk) for tk in times])
     sizes = np.array([r.t0s.size for r in runs])
     first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-    t0s = np.concatenate([r.t0s for r in runs])
     tt = np.concatenate([np.atleast_1d(np.asarray(tk, dtype=float)) for tk in times])
-    i = np.searchsorted(t0s, tt, side="right") - 1
-    i = np.clip(i, np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
-    hs = np.concatenate([r.hs for r in runs])[i]
-    y0s = np.concatenate([r.y0s for r in runs])[i]
-    Q = np.concatenate([r.Qs for r in runs])[i]
-    s = np.where(hs > 0, (tt - t0s[i]) / np.where(hs > 0, hs, 1.0), 0.0)[:, None]
-    poly = s * (Q[:, :, 0] + s * (Q[:, :, 1] + s * (Q[:, :, 2] + s * Q[:, :, 3])))
-    return (y0s + hs[:, None] * poly).T
+    return evaluate_steps(np.concatenate([r.t0s for r in runs]), np.concatenate([r.hs for r in runs]),
+                          np.concatenate([r.y0s for r in runs]), np.concatenate([r.Qs for r in runs]), tt,
+                          np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
 
 
 class DenseRun:
