@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 
 CAL_FORMAT = "labtool.calibration"
 CAL_VERSION = 1

@@ -31,7 +31,7 @@ import time
 import numpy as np
 
 from acquisition.device import Block, Device, DeviceDisconnected, Event
-from models.errors import InputError
+from common.errors import InputError
 
 OVERRUN_ERROR = -200279  # DAQmxErrors.SAMPLES_NO_LONGER_AVAILABLE
 DEFAULT_NAMES = ("aE_t", "aE_n", "tacho")

@@ -247,7 +247,7 @@ def read_recording(path) -> dict:
     """
     with h5py.File(path, "r", libver="latest", swmr=True) as f:
         if f.attrs.get("format") != FORMAT:
-            from models.errors import FileFormatError
+            from common.errors import FileFormatError
             raise FileFormatError(f"{path} is not a labtool recording (format attribute missing)")
         names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["signals"].attrs["channel_names"]]
         ev = f["events"][...]

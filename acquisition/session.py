@@ -15,7 +15,7 @@ import time
 
 from acquisition.device import Device, DeviceDisconnected, Event
 from acquisition.recorder import DiskFull, Recorder, _classify
-from models.errors import InputError
+from common.errors import InputError
 
 
 @dataclasses.dataclass

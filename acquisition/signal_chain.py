@@ -1,6 +1,6 @@
 """The measuring chain of the stand as pure functions: truth -> sensor -> conditioner -> ADC.
 
-What the simulated stand records is the follower's true motion (models.kinematics, cam as input,
+What the simulated stand records is the follower's true motion (models.mechanism.kinematics, cam as input,
 plus a motor speed ripple) seen through everything a real chain adds and the models do not:
 
 1. gravity: a piezoelectric accelerometer measures specific force, so a sensor riding on the
@@ -28,10 +28,10 @@ import math
 import numpy as np
 from scipy import signal
 
-from models.errors import InputError
-from models.kinematics import follower_motion
+from common.errors import InputError
+from models.mechanism.kinematics import follower_motion
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
+from models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
 PAPER_KA = 86.43  # m/s^2 per V, paper sec. 2.4
@@ -43,7 +43,7 @@ MAX_MODEL_REVOLUTIONS = 200
 
 @dataclasses.dataclass(frozen=True)
 class StandScene:
-    """What the simulated stand does (SI except cam_speed_rpm, as in models.scene.Scene).
+    """What the simulated stand does (SI except cam_speed_rpm, as in models.dynamics.scene.Scene).
 
     mode            "run": the cam drives the follower; "calibration": the sensor sits on a
                     shaker (B&K 4291) giving cal_accel (m/s^2 peak) at cal_freq (Hz) along
@@ -105,8 +105,8 @@ class StandScene:
             "stand_mode": self.mode, "law": self.law, "cam_speed_rpm": float(self.cam_speed_rpm),
             "Fu_N": float(self.Fu), "backlash_mm": float(self.backlash * 1e3),
             "jt_factor": float(self.jt_factor),
-            "truth_model": "kinematic (models.kinematics.follower_motion)" if self.truth_model == "kinematic" else
-            f"{self.truth_model} (models.simulate, omega1 const, accuracy fast, {self.truth_revolutions} revolutions)",
+            "truth_model": "kinematic (models.mechanism.kinematics.follower_motion)" if self.truth_model == "kinematic" else
+            f"{self.truth_model} (models.dynamics.simulate, omega1 const, accuracy fast, {self.truth_revolutions} revolutions)",
             "truth_revolutions": int(self.truth_revolutions),
             "truth_omega1_ripple": float(self.ripple),
             "truth_omega1_ripple_form": "omega1 = Omega*(1 + ripple*sin(Omega*t)), phi1 = Omega*t + ripple*(1 - cos(Omega*t))",
@@ -222,15 +222,15 @@ _MODEL_TABLES: dict = {}
 
 def model_table(scene: StandScene) -> dict:
     """The dynamic model's run behind a rigid/elastic truth: time (s) and phi1, omega1, phi2, omega2,
-    epsilon2 over ``truth_revolutions`` cam turns at constant cam speed (models.simulate, accuracy
+    epsilon2 over ``truth_revolutions`` cam turns at constant cam speed (models.dynamics.simulate, accuracy
     fast). Cached per scene: the model runs once per run, not per block. Points at repeated times
     (impacts of the rigid model) keep the later state, so omega2 steps across them.
     """
     key = (scene.truth_model, scene.law, scene.cam_speed_rpm, scene.Fu, scene.backlash, scene.jt_factor,
            scene.truth_revolutions, repr(scene.mechanism))
     if key not in _MODEL_TABLES:
-        from models.scene import Scene
-        from models.simulate import simulate
+        from models.dynamics.scene import Scene
+        from models.dynamics.simulate import simulate
         ms = Scene(law=scene.law, cam_speed_rpm=scene.cam_speed_rpm, Fu=scene.Fu, backlash=scene.backlash,
                    jt_factor=scene.jt_factor, omega1_mode="const", revolutions=float(scene.truth_revolutions),
                    rise_only=False, accuracy="fast", mechanism=scene.mechanism)

@@ -25,7 +25,7 @@ import numpy as np
 
 from acquisition import signal_chain as sc
 from acquisition.device import Block, Device, DeviceDisconnected, Event
-from models.errors import InputError
+from common.errors import InputError
 
 BOARD_CLOCK_HZ = 12.8e6  # the simulated board divides a 12.8 MHz timebase (as NI DSA boards do)
 MIN_RATE_HZ = 1000.0

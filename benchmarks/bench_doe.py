@@ -21,8 +21,8 @@ def main() -> None:
 
     from distributed import LocalCluster
 
-    from models.doe import run_design, table1_factors
-    from models.scene import Scene
+    from models.study.doe import run_design, table1_factors
+    from models.dynamics.scene import Scene
 
     factors, base = table1_factors(), Scene(accuracy=args.accuracy)
     runs = [("in-process", dict(workers=1)), (f"{args.workers} processes", dict(workers=args.workers))]

@@ -10,10 +10,10 @@ import time
 
 import numpy as np
 
-from models.elastic import compare_table3
-from models.paper import read_reference, table1_runs
-from models.scene import Scene
-from models.simulate import simulate
+from models.dynamics.elastic import compare_table3
+from models.study.paper import read_reference, table1_runs
+from models.dynamics.scene import Scene
+from models.dynamics.simulate import simulate
 
 
 def _runs(accuracy, backlash=None, **kw):

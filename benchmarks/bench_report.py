@@ -38,7 +38,7 @@ def bench_metrics() -> None:
 
 
 def bench_report() -> None:
-    from labtool.output import write_netcdf
+    from common.files import write_netcdf
     from reports.figures import all_figures
     from reports.html import render_html
     from reports.pipeline import build_report

@@ -15,7 +15,7 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from models.errors import LabtoolError
+from common.errors import LabtoolError
 
 app = typer.Typer(
     name="labtool",

@@ -24,7 +24,8 @@ from rich.console import Console
 from rich.markup import escape  # paths are the user's, not markup
 from rich.table import Table
 
-from labtool.output import console as new_console, write_netcdf
+from labtool.output import console as new_console
+from common.files import write_netcdf
 
 # the paper's experiment (sec. 2.4 and 3.3)
 EXPERIMENT_RPM = 180.0
@@ -74,7 +75,7 @@ def _cli(args: list[str]) -> int:
 def step_kinematics(out: Path, console: Console) -> Path:
     from matplotlib.figure import Figure
 
-    from models.kinematics import analyze, rise_summary
+    from models.mechanism.kinematics import analyze, rise_summary
 
     ds = analyze(rpm=180.0)
     s = rise_summary(ds)
@@ -97,7 +98,7 @@ def step_kinematics(out: Path, console: Console) -> Path:
 
 
 def step_table1_kinematic(out: Path, console: Console) -> Path:
-    from models.paper import kinematic_vs_table3
+    from models.study.paper import kinematic_vs_table3
 
     df = kinematic_vs_table3()
     path = out / "table1_kinematic_vs_table3.csv"
@@ -171,11 +172,11 @@ def step_synthetic_measurement(out: Path, console: Console) -> Path:
 
 def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list[str]] | None:
     """The report: both models, both omega1 modes, 'fast' solver preset, one simulated revolution."""
-    from labtool.output import atomic_write
+    from common.files import atomic_write
     from reports.pipeline import build_report, closest, headline
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
-    missing = [m for m in ("rigid", "elastic") if not _have(f"models.{m}")]
+    missing = [m for m in ("rigid", "elastic") if not _have(f"models.dynamics.{m}")]
     if missing:
         _skip(console, f"the {' and '.join(missing)} model(s)", "not installed yet: the kinematic level stands in, "
               "and the report says so")

@@ -1,4 +1,5 @@
-"""Mechanism geometry, motion laws, kinematics, rigid and elastic dynamic models, DOE/ANOVA.
+"""The physics: ``mechanism`` (geometry, motion laws, kinematics), ``dynamics`` (rigid and elastic
+models and their solvers) and ``study`` (the paper's DOE, ANOVA and table comparisons).
 
-Imports none of labtool's other layers.
+Imports only the bottom layer ``common``; none of labtool's other layers.
 """

@@ -17,7 +17,7 @@ import math
 import tomllib
 from pathlib import Path
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 
 # The paper's calibration (sec. 3, Figure 6): B&K 4291 exciter, 9.81 m/s^2 at 79.6 Hz.
 PAPER_KA_M_S2_PER_V = 86.43

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from models.errors import InputError
+from common.errors import InputError
 
 TWO_PI = 2.0 * math.pi
 

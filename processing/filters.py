@@ -17,7 +17,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from models.errors import InputError
+from common.errors import InputError
 
 DEFAULT_HARMONICS = 100.0
 DEFAULT_ORDER = 4

@@ -29,10 +29,10 @@ from typing import Callable
 import numpy as np
 import xarray as xr
 
-from models.errors import InputError
+from common.errors import InputError
 from processing import cam_angle, cycles, events, filters, follower, spectra
 from processing.calibration_file import PAPER_KA_M_S2_PER_V, ChannelCalibration
-from processing.history import History
+from common.history import History
 from processing.readers import Recording
 
 REQUIRED = ("aE_t", "aE_n")
@@ -76,7 +76,7 @@ def process_recording(rec: Recording, output: Path, options: ProcessOptions | No
                       progress: Callable[[int], None] | None = None,
                       warn: Callable[[str], None] | None = None) -> dict:
     """Process ``rec`` into the NetCDF file ``output`` (written atomically); returns a summary dict."""
-    from labtool.output import atomic_write
+    from common.files import atomic_write
 
     opts = options or ProcessOptions()
     warn = warn or (lambda msg: warnings.warn(msg, ProcessingWarning, stacklevel=3))
@@ -118,7 +118,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     import h5netcdf
 
     from models.mechanism import Mechanism
-    from models.motion_laws import CamProgram
+    from models.mechanism.motion_laws import CamProgram
 
     hist = History()
     for w in rec.warnings:

@@ -1,6 +1,6 @@
 """Synthetic recordings with a known truth, for tests, docs and benchmarks (not the simulated stand).
 
-The truth is the kinematics of the paper's mechanism (models.kinematics.follower_motion: omega2 =
+The truth is the kinematics of the paper's mechanism (models.mechanism.kinematics.follower_motion: omega2 =
 psi' omega1, epsilon2 = psi'' omega1^2 + psi' epsilon1; aE_t = epsilon2 DE, aE_n = omega2^2 DE) at a
 cam speed that may vary slowly. The chain applied to it, in order: gravity as the sensor reads it
 (tangential + g cos phi2, normal - g sin phi2), a lightly damped mount resonance, the AC coupling of
@@ -44,9 +44,9 @@ class SynthSpec:
 def truth(spec: SynthSpec, n: int | None = None, start: int = 0):
     """Per-sample truth for samples [start, start + n): dict of time, phi1 (unwrapped), omega1,
     epsilon1, omega2, epsilon2, aE_t, aE_n, phi2 (SI)."""
-    from models.kinematics import follower_motion
+    from models.mechanism.kinematics import follower_motion
     from models.mechanism import Mechanism
-    from models.motion_laws import CamProgram
+    from models.mechanism.motion_laws import CamProgram
 
     mech = Mechanism.default()
     program = CamProgram.for_mechanism(mech, law=spec.law)

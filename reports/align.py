@@ -21,7 +21,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from models.errors import InputError
+from common.errors import InputError
 
 TWO_PI = 2.0 * math.pi
 FINE_FACTOR = 4

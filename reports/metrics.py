@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 
 # ISO/TS 18571:2014 default parameters (section 6; docs/reports.md)
 ISO_DEFAULTS = {

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from models.errors import FileFormatError, InputError, LabtoolError
+from common.errors import FileFormatError, InputError, LabtoolError
 from reports import align, metrics
 from reports.thresholds import Thresholds, evaluate
 
@@ -152,7 +152,7 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
 
 def model_available(name: str) -> bool:
     """Whether the model level's module can be imported (rigid and elastic land separately)."""
-    from models.simulate import LEVELS
+    from models.dynamics.simulate import LEVELS
     if name not in LEVELS:
         return False
     try:
@@ -166,8 +166,8 @@ def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutio
                    cond: align.Conditioning, time_filter: align.TimeFilter | None = None) -> SimRun:
     """One model at one omega1 mode over whole revolutions; a model that is not there yet is
     replaced by the kinematic level, and the note says so."""
-    from models.scene import Scene
-    from models.simulate import simulate
+    from models.dynamics.scene import Scene
+    from models.dynamics.simulate import simulate
 
     scene = Scene(law=op["law"], cam_speed_rpm=op["cam_speed_rpm"], Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
                   jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,

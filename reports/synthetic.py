@@ -20,9 +20,9 @@ def synthetic_measured(rpm: float = 180.0, revolutions: float = 4.3, fs: float =
     scaled by ``gain``, delayed by ``lag_deg`` of cam angle, plus white noise of ``noise`` times the
     signal's peak. The recording starts at cam angle ``start_deg`` so that its first and last
     revolutions are partial, as on the stand."""
-    from models.kinematics import analyze
+    from models.mechanism.kinematics import analyze
     from models.mechanism import Mechanism
-    from models.motion_laws import CamProgram
+    from models.mechanism.motion_laws import CamProgram
 
     mech = mechanism or Mechanism.default()
     program = CamProgram.for_mechanism(mech, law=law)

@@ -24,7 +24,7 @@ import math
 import tomllib
 from pathlib import Path
 
-from models.errors import InputError
+from common.errors import InputError
 from reports.metrics import METRICS
 
 SIGNALS = ("omega2", "epsilon2")

@@ -1,6 +1,6 @@
 """Accuracy presets: defined by their measured error against the reference solution.
 
-The figures in models.accuracy.MEASURED come from benchmarks/work_precision.py on Table 1; here a
+The figures in models.dynamics.accuracy.MEASURED come from benchmarks/work_precision.py on Table 1; here a
 preset is run again on Table 1 runs and held to them, the tolerances they were measured with are
 checked against the models' presets (a changed tolerance must be measured again), and the error
 metrics are checked on known cases.
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from models import accuracy, elastic, rigid
-from models.errors import InputError
-from models.paper import table1_runs
-from models.scene import Scene
-from models.simulate import SimulationResult
+from models.dynamics import accuracy, elastic, rigid
+from common.errors import InputError
+from models.study.paper import table1_runs
+from models.dynamics.scene import Scene
+from models.dynamics.simulate import SimulationResult
 
 
 def _scene(run, **kw):
@@ -28,8 +28,8 @@ def test_measured_with_the_models_current_tolerances(model, mod, preset):
     for key, value in measured.items():
         now = mod.PRESETS[preset].get(key)
         same = now == pytest.approx(value, rel=1e-12) if isinstance(value, float) else now == value
-        assert same, (f"models.{model}.PRESETS['{preset}']['{key}'] is {now}, measured with {value}: run "
-                      "benchmarks/work_precision.py and update models.accuracy.MEASURED")
+        assert same, (f"models.dynamics.{model}.PRESETS['{preset}']['{key}'] is {now}, measured with {value}: run "
+                      "benchmarks/work_precision.py and update models.dynamics.accuracy.MEASURED")
 
 
 @pytest.mark.parametrize("model", accuracy.MODELS)
@@ -42,7 +42,7 @@ def test_presets_are_ordered_by_measured_error(model):
 
 
 def test_solver_choice():
-    from models.kernels import elastic_nb, rigid_nb
+    from models.dynamics.kernels import elastic_nb, rigid_nb
     assert accuracy.integrator("rigid", "standard") is rigid_nb.integrate
     assert accuracy.integrator("elastic", "fast") is elastic_nb.integrate
     assert accuracy.integrator("rigid", "reference") is rigid.integrate

@@ -8,7 +8,7 @@ from acquisition import session
 from acquisition.device import DeviceDisconnected
 from acquisition.nidaqmx_driver import OVERRUN_ERROR, NIDAQmxDevice, expand_channels
 from acquisition.recorder import read_recording
-from models.errors import InputError
+from common.errors import InputError
 
 
 class FakeTask:

@@ -8,11 +8,11 @@ from scipy import signal
 from acquisition import signal_chain as sc
 from acquisition.device import Event, parse_device
 from acquisition.sim_stand import Fault, SimStand, board_rate, parse_fault
-from models.errors import InputError
-from models.kinematics import analyze
-from models.linkage import linkage_state
+from common.errors import InputError
+from models.mechanism.kinematics import analyze
+from models.mechanism.linkage import linkage_state
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
+from models.mechanism.motion_laws import CamProgram
 
 
 def record(scene=None, params=None, seed=1, duration=2.0, rate=10000.0, faults=()):

@@ -12,7 +12,7 @@ from acquisition import signal_chain as sc
 from acquisition.calibration import fit_sine, ka_from_fit, load_calibration
 from acquisition.sim_stand import Fault, SimStand
 from labtool.cli import main
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 
 
 def cal_recording(path, ka=86.43, freq=79.6, accel=9.81, channel="aE_t", seed=3, duration=2.0, faults=()):

@@ -1,4 +1,4 @@
-"""models.cam_tables: the speed-independent terms reproduce models.kinematics and the cam geometry,
+"""models.mechanism.cam_tables: the speed-independent terms reproduce models.mechanism.kinematics and the cam geometry,
 the stroke spline reproduces the exact linkage, the grid cache is shared and read-only; and the
 batched dense output of the compiled loop equals the per-run one."""
 import math
@@ -6,15 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from models import cam_tables, elastic
-from models.cam_profile import contact_geometry
-from models.kinematics import follower_motion, kinetostatic_moment, load_force_x
-from models.scene import Scene
-from models.simulate import simulate
+from models.mechanism import cam_tables
+from models.dynamics import elastic
+from models.mechanism.cam_profile import contact_geometry
+from models.mechanism.kinematics import follower_motion, kinetostatic_moment, load_force_x
+from models.dynamics.scene import Scene
+from models.dynamics.simulate import simulate
 
 
 def _reference(scene, phi1, omega1):
-    """The operating point's kinematics the way models.kinematics computes them."""
+    """The operating point's kinematics the way models.mechanism.kinematics computes them."""
     mech, prog = scene.mechanism, scene.program
     phi2, omega2, epsilon2, _ = follower_motion(prog, mech, phi1, omega1)
     load_x = load_force_x(mech, prog, phi1, phi2, scene.Fu)
@@ -105,8 +106,8 @@ def test_cache_is_bounded():
 
 
 def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
-    from models.kernels.dopri5 import evaluate_runs
-    from models.kernels.elastic_nb import integrate
+    from models.dynamics.kernels.dopri5 import evaluate_runs
+    from models.dynamics.kernels.elastic_nb import integrate
 
     s = Scene(backlash=0.016e-3, omega1_mode="var")           # run 1: several phases
     tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
@@ -134,7 +135,7 @@ def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
 
 
 def test_rigid_plant_tables_are_shared_and_a_warm_run_equals_a_cold_one():
-    from models import rigid
+    from models.dynamics import rigid
 
     a = Scene(cam_speed_rpm=180, Fu=0.0, jt_factor=1.0, backlash=0.016e-3)
     b = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.128e-3)

@@ -38,7 +38,7 @@ def test_demo_skips_missing_pieces_and_says_so(tmp_path, capsys, monkeypatch):
     synthetic measurement and the kinematic level, and says which steps it skipped."""
     real_have = demo_steps._have
     monkeypatch.setattr(demo_steps, "_have", lambda m: False if m.split(".")[0] in ("acquisition", "processing") or
-                        m in ("labtool.commands.acquire", "labtool.commands.process", "models.rigid", "models.elastic")
+                        m in ("labtool.commands.acquire", "labtool.commands.process", "models.dynamics.rigid", "models.dynamics.elastic")
                         else real_have(m))
     monkeypatch.setattr(demo_steps, "SAMPLE_DATA", tmp_path / "no_samples")
     monkeypatch.setattr(pipeline, "model_available", lambda name: name == "kinematic")

@@ -6,21 +6,21 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from models import elastic as E
-from models.cam_profile import contact_geometry
-from models.contact import (MM_TO_SI, contact_force, contact_potential, contact_stiffness,
+from models.dynamics import elastic as E
+from models.mechanism.cam_profile import contact_geometry
+from models.dynamics.contact import (MM_TO_SI, contact_force, contact_potential, contact_stiffness,
                             hunt_crossley_force, static_penetration)
-from models.errors import InputError
-from models.paper import read_reference
-from models.scene import Scene
-from models.simulate import INDICATORS, simulate
+from common.errors import InputError
+from models.study.paper import read_reference
+from models.dynamics.scene import Scene
+from models.dynamics.simulate import INDICATORS, simulate
 
 KC = contact_stiffness(6e-3)
 
 
 def _scene(run, **kw):
     """Table 1 run number -> Scene (omega1 variable, as Table 3)."""
-    from models.paper import table1_runs
+    from models.study.paper import table1_runs
     r = table1_runs().iloc[run - 1]
     return Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
 
@@ -270,7 +270,7 @@ def test_contact_stiffness_rejects_bad_values(lw, f):
 def test_endless_chatter_is_a_solver_error(monkeypatch):
     """Restarting exactly on a boundary (no nudge) makes a boundary event re-fire from rounding; the
     guard turns that into a SolverError (one line, exit 2) instead of an endless loop."""
-    from models.errors import SolverError
+    from common.errors import SolverError
     monkeypatch.setattr(E, "BOUNDARY_NUDGE", 0.0)
     s = Scene(cam_speed_rpm=300, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
     with pytest.raises(SolverError, match="chatter"):
@@ -332,9 +332,9 @@ def test_a_run_starting_unloaded_starts_on_the_flank_about_to_be_loaded(sign):
 
 def test_stiff_contact_approaches_the_rigid_model():
     """j = 0, omega1 const: as Kc grows the elastic MR13D and omega2 converge on the rigid model's
-    (models.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
+    (models.dynamics.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
     drops the load of the dwell, is left out)."""
-    pytest.importorskip("models.rigid")
+    pytest.importorskip("models.dynamics.rigid")
     s = Scene(Fu=65.0, backlash=0.0, omega1_mode="const")
     rig = simulate(s, "rigid").dataset
     errs = []
@@ -355,7 +355,7 @@ def test_a_micro_bounce_inside_one_step_is_an_event_in_both_loops():
     for ~80 us (0.13 um) and came back within one solver step; both loops read the event sign at
     the step ends only and kept it an 'exterior' phase with x < j. The sign is now read at
     EVENT_SUBSTEPS points of every step, in the compiled loop and the scipy loop alike."""
-    from models.kernels import elastic_nb
+    from models.dynamics.kernels import elastic_nb
 
     s = Scene(law="sine", cam_speed_rpm=408.0, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
               contact_length=0.009765625, contact_damping=1.0, accuracy="fast")

@@ -1,14 +1,14 @@
-"""Compiled loops (models.kernels): the same numerics as the scipy path, closed forms, caching."""
+"""Compiled loops (models.dynamics.kernels): the same numerics as the scipy path, closed forms, caching."""
 import math
 
 import numpy as np
 import pytest
 
-from models import elastic, rigid
-from models.contact import contact_potential, contact_stiffness
-from models.kernels import dopri5, elastic_nb, rigid_nb
-from models.paper import table1_runs
-from models.scene import Scene
+from models.dynamics import elastic, rigid
+from models.dynamics.contact import contact_potential, contact_stiffness
+from models.dynamics.kernels import dopri5, elastic_nb, rigid_nb
+from models.study.paper import table1_runs
+from models.dynamics.scene import Scene
 
 
 def _scene(run, **kw):
@@ -113,7 +113,7 @@ def test_kernels_are_compiled_with_an_on_disk_cache():
 
 
 def test_start_on_a_flank_at_a_later_time_continues_the_run():
-    # the escalation in time of models.auto: restarting the contact run from its own state later
+    # the escalation in time of models.dynamics.auto: restarting the contact run from its own state later
     # gives the same run
     s = _scene(1)
     P, _ = rigid.build_plant(s)

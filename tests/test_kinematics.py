@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from models.cam_profile import contact_geometry, groove, undercut
-from models.kinematics import analyze, rise_summary
-from models.linkage import linkage_state
+from models.mechanism.cam_profile import contact_geometry, groove, undercut
+from models.mechanism.kinematics import analyze, rise_summary
+from models.mechanism.linkage import linkage_state
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
-from models.paper import kinematic_vs_table3
+from models.mechanism.motion_laws import CamProgram
+from models.study.paper import kinematic_vs_table3
 
 MECH = Mechanism.default()
 PROG = CamProgram.for_mechanism(MECH)

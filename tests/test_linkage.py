@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from models.linkage import linkage_state
+from models.mechanism.linkage import linkage_state
 from models.mechanism import Mechanism
 
 MECH = Mechanism.default()

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from labtool.cli import main
-from models.errors import InputError
+from common.errors import InputError
 from models.mechanism import Mechanism
 
 TEXT = resources.files("models.data").joinpath("stb216.toml").read_text()

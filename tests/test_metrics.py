@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models.errors import InputError
+from common.errors import InputError
 from reports import metrics
 
 N = 720

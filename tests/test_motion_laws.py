@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from models.errors import InputError
-from models.motion_laws import LAWS, CamProgram, get_law
+from common.errors import InputError
+from models.mechanism.motion_laws import LAWS, CamProgram, get_law
 
 U = np.linspace(0.0, 1.0, 400001)
 

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from models.errors import InputError
+from common.errors import InputError
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
+from models.mechanism.motion_laws import CamProgram
 from processing import cam_angle, cycles, events, filters, follower, spectra
 from processing.calibration_file import read_calibration
-from processing.history import History
+from common.history import History
 
 
 def test_lowpass_rule_and_gain():

@@ -250,7 +250,7 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
 def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
     """Gaps, overruns and clips anywhere: the run ends cleanly (or with a LabtoolError), never
     integrates across a cut, and whatever omega2 it gives over complete motion intervals is right."""
-    from models.errors import LabtoolError
+    from common.errors import LabtoolError
 
     tmp = tmp_path_factory.mktemp("ev")
     spec = SynthSpec(rpm=300.0, duration_s=3.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from models.errors import FileFormatError, InputError, LabtoolError
+from common.errors import FileFormatError, InputError, LabtoolError
 from processing.readers import open_recording, sniff
 from processing.synthetic import write_v1
 

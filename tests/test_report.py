@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from labtool.cli import main
-from labtool.output import write_netcdf
-from models.errors import InputError
+from common.files import write_netcdf
+from common.errors import InputError
 from reports import align, pipeline
 from reports.synthetic import synthetic_measured
 
@@ -314,7 +314,7 @@ def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
 
 
 def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_stand_in(files, monkeypatch):
-    import models.simulate as ms
+    import models.dynamics.simulate as ms
     real = ms.simulate
 
     def broken(scene, model="auto"):

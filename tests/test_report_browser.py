@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from labtool.cli import main
-from labtool.output import write_netcdf
+from common.files import write_netcdf
 from reports.synthetic import synthetic_measured
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "", shutil.which("chromium-browser") or "")

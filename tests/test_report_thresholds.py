@@ -3,7 +3,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models.errors import InputError
+from common.errors import InputError
 from reports.metrics import METRICS
 from reports.thresholds import evaluate, load_thresholds, parse_thresholds
 

@@ -7,14 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models import rigid
-from models.cam_profile import contact_geometry
-from models.errors import InputError
-from models.impact import impact, kinetic_energy, paper_eq10
-from models.kinematics import analyze, load_force_x
-from models.linkage import reduced_follower
-from models.motor import motor_moment_on_cam, no_load_cam_speed
-from models.scene import Scene
+from models.dynamics import rigid
+from models.mechanism.cam_profile import contact_geometry
+from common.errors import InputError
+from models.dynamics.impact import impact, kinetic_energy, paper_eq10
+from models.mechanism.kinematics import analyze, load_force_x
+from models.mechanism.linkage import reduced_follower
+from models.mechanism.motor import motor_moment_on_cam, no_load_cam_speed
+from models.dynamics.scene import Scene
 
 finite = dict(allow_nan=False, allow_infinity=False)
 
@@ -67,12 +67,12 @@ def geo_a2(sc, phi):
 
 # --- the 1-DOF model (j = 0) -------------------------------------------------------------------
 def test_const_speed_contact_is_the_kinetostatic_model():
-    """omega1 const, j = 0: the follower follows the law and MR13D is models.kinematics' value."""
+    """omega1 const, j = 0: the follower follows the law and MR13D is models.mechanism.kinematics' value."""
     sc = Scene(omega1_mode="const", backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300)
     ds = rigid.simulate(sc).dataset
     assert np.all(ds["contact"].values != 0) and ds.sizes["event"] == 0
     np.testing.assert_allclose(ds["omega1"], sc.omega1_nominal, rtol=1e-12)
-    phi1 = ds["phi1"].values[:-1]     # the rise's end belongs to the dwell in models.kinematics
+    phi1 = ds["phi1"].values[:-1]     # the rise's end belongs to the dwell in models.mechanism.kinematics
     kin = analyze(sc.mechanism, sc.program, 300, 65.0, 4.0, phi1=phi1)
     np.testing.assert_allclose(ds["phi2"].values[:-1], kin["phi2"], atol=1e-10)
     np.testing.assert_allclose(ds["omega2"].values[:-1], kin["omega2"], atol=1e-8)
@@ -81,7 +81,7 @@ def test_const_speed_contact_is_the_kinetostatic_model():
 
 def test_variable_speed_power_balance():
     """omega1 var, j = 0: d/dt(1/2 J' w1^2 + 1/2 J'' w2^2) = motor + cam gravity + gravity + load power,
-    each term from models.motor / models.linkage (not from the model's tables)."""
+    each term from models.mechanism.motor / models.mechanism.linkage (not from the model's tables)."""
     sc = Scene(backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300, accuracy="reference")
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism
@@ -145,7 +145,7 @@ def test_k1_conserves_energy_and_reverses_normal_velocity(backlash_mm, jt):
                                 dict(Fu=65.0, backlash=0.128e-3, cam_speed_rpm=300, restitution=0.8)])
 def test_energy_balance_through_flights_and_impacts(kw):
     """Whole hybrid run (contact, flights, impacts): T(t) - T(0) = work of motor, cam gravity,
-    follower gravity and load - the impacts' losses, all recomputed from models.motor/linkage."""
+    follower gravity and load - the impacts' losses, all recomputed from models.mechanism.motor/linkage."""
     sc = Scene(**kw)
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from labtool.cli import main
-from models.simulate import INDICATORS
+from models.dynamics.simulate import INDICATORS
 
 
 def _json(capsys, args):
@@ -30,7 +30,7 @@ def test_auto_picks_kinematic_without_sign_change(capsys):
     # run 9: MR13D > 0 over the rise; with the cam as input nothing dynamic is needed
     out = _json(capsys, ["--fu", "65", "--omega1", "const", "--accuracy", "fast"])
     assert out["model"] == "kinematic"
-    from models.kinematics import analyze, rise_summary
+    from models.mechanism.kinematics import analyze, rise_summary
 
     assert out["MR13D_max_Nm"] == pytest.approx(rise_summary(analyze(rpm=180, Fu=65))["MR13D_max_Nm"], rel=1e-6)
     assert out["jumps"] == 0

@@ -88,7 +88,7 @@ def main():
         t = ds["time"].values
         sel = (t >= 1.0) & (t < 1.7)
         fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-        ax[0].plot(t[sel], tr["omega2"][sel], "k", lw=2, label="truth (models.kinematics)")
+        ax[0].plot(t[sel], tr["omega2"][sel], "k", lw=2, label="truth (models.mechanism.kinematics)")
         ax[0].plot(t[sel], ds["omega2"].values[sel], "C1", lw=1, label="recovered omega2")
         ax[0].plot(t[sel], np.sqrt(np.maximum(ds["aE_n"].values[sel], 0) / ds.attrs["DE_m"]), "C2", lw=0.7,
                    label="sqrt(aE_n/DE) (check)")

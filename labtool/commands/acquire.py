@@ -9,8 +9,8 @@ from typing import List, Optional
 
 import typer
 
-from labtool.output import check_output_path
-from models.errors import InputError
+from common.files import check_output_path
+from common.errors import InputError
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {

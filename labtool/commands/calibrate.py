@@ -6,8 +6,8 @@ from typing import List
 
 import typer
 
-from labtool.output import atomic_write, check_output_path
-from models.errors import InputError
+from common.files import atomic_write, check_output_path
+from common.errors import InputError
 
 PAPER_KA = 86.43
 

@@ -13,7 +13,7 @@ from typing import List, Optional
 
 import typer
 
-from labtool.output import atomic_write, check_output_path, write_netcdf
+from common.files import atomic_write, check_output_path, write_netcdf
 
 doe_app = typer.Typer(
     help="Simulated experiments: full factorial runs (Tables 2-3) and their ANOVA (eqs 20-28).",
@@ -43,9 +43,9 @@ def run(
     force: bool = typer.Option(False, help="overwrite existing output files"),
 ) -> None:
     """Simulate the full factorial of the factors and write the results table and its NetCDF."""
-    from models.doe import read_factors, responses_for, run_design, table1_factors
-    from models.errors import SolverError
-    from models.scene import Scene
+    from models.study.doe import read_factors, responses_for, run_design, table1_factors
+    from common.errors import SolverError
+    from models.dynamics.scene import Scene
 
     responses_for(model)
     nc_path = netcdf if netcdf is not None else output.with_suffix(".nc")
@@ -119,7 +119,7 @@ def analyze(
     force: bool = typer.Option(False, help="overwrite an existing plot file"),
 ) -> None:
     """Effects in the paper's +-1 coding, ANOVA with Fisher's F, reduced models (eqs 20-28)."""
-    from models import anova
+    from models.study import anova
 
     anova.check_alpha(alpha)
     if not 1 <= digits <= 17:
@@ -142,7 +142,7 @@ def _print_text(data, out, digits: int) -> None:
     from rich.table import Table
 
     from labtool.output import console
-    from models.anova import matrix_form
+    from models.study.anova import matrix_form
 
     con = console()
     names = ", ".join(f"{f.name} = {f.symbol} ({len(f.levels)} levels)" for f in data.factors)
@@ -183,7 +183,7 @@ def plot_effects(data, out, path: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from models.anova import RESPONSE_UNITS, cell_means
+    from models.study.anova import RESPONSE_UNITS, cell_means
 
     factors = data.factors
     pairs = list(itertools.combinations(range(len(factors)), 2))

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from labtool.output import check_output_path, write_netcdf
+from common.files import check_output_path, write_netcdf
 
 
 def register(app: typer.Typer) -> None:
@@ -32,10 +32,10 @@ def kinematics(
     from labtool.output import console
     from rich.table import Table
 
-    from models.cam_profile import export_groove_csv, undercut
-    from models.kinematics import analyze, rise_summary
+    from models.mechanism.cam_profile import export_groove_csv, undercut
+    from models.mechanism.kinematics import analyze, rise_summary
     from models.mechanism import Mechanism
-    from models.motion_laws import CamProgram
+    from models.mechanism.motion_laws import CamProgram
 
     for path in (output, groove_csv):
         if path is not None:

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from labtool.output import check_output_path
+from common.files import check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -30,7 +30,7 @@ def process(
 ) -> None:
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
     averages and spikes, with every step in the processing history (docs/processing.md)."""
-    from models.errors import InputError
+    from common.errors import InputError
     from processing.calibration_file import read_calibration
     from processing.pipeline import ProcessOptions, process_recording
     from processing.readers import open_recording
@@ -80,7 +80,7 @@ def process(
 
 def _channel_map(text: str) -> dict[str, str]:
     """'aE_t=ai0,aE_n=ai1' -> {"aE_t": "ai0", "aE_n": "ai1"}; InputError on anything else."""
-    from models.errors import InputError
+    from common.errors import InputError
 
     out = {}
     for part in text.split(","):

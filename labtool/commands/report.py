@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from labtool.output import atomic_write, check_output_path
+from common.files import atomic_write, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -62,7 +62,7 @@ def report(
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
     from labtool.output import console
 
-    from models.errors import InputError
+    from common.errors import InputError
     from reports.align import Conditioning
     from reports.pipeline import build_report, headline
     from reports.thresholds import load_thresholds

@@ -1,6 +1,6 @@
 """``labtool simulate``: one scene through any model level (kinematic, rigid, elastic, auto).
 
-Dispatches through ``models.simulate.simulate(scene, model)``; prints the paper's indicators as a
+Dispatches through ``models.dynamics.simulate.simulate(scene, model)``; prints the paper's indicators as a
 table, or with ``--json`` one JSON object (DESIGN.md: the indicator keys of Tables 2-3, then
 ``model``, ``accuracy``, ``wall_s``); writes the time series as NetCDF with ``-o``.
 """
@@ -13,7 +13,7 @@ from typing import Optional
 
 import typer
 
-from labtool.output import check_output_path, write_netcdf
+from common.files import check_output_path, write_netcdf
 
 
 def register(app: typer.Typer) -> None:
@@ -52,10 +52,10 @@ def simulate(
     force: bool = typer.Option(False, help="overwrite an existing output file"),
 ) -> None:
     """Simulate the mechanism at one operating point and report the jump indicators."""
-    from models.errors import InputError
-    from models.scene import Scene
-    from models.simulate import INDICATORS
-    from models.simulate import simulate as run
+    from common.errors import InputError
+    from models.dynamics.scene import Scene
+    from models.dynamics.simulate import INDICATORS
+    from models.dynamics.simulate import simulate as run
 
     if output is not None:
         check_output_path(output, force)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 from processing.readers.base import Event, Recording
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"

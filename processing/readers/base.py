@@ -13,7 +13,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 
 EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
 # events that mean the samples before and after the index are not contiguous in time

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 from processing.readers.base import Recording, check_finite, check_sample_rate
 
 

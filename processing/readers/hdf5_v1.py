@@ -13,7 +13,7 @@ import math
 import h5py
 import numpy as np
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 from processing.readers.base import Event, Recording, as_text, check_finite, check_sample_rate
 
 FORMAT = "labtool.recording"

@@ -11,7 +11,7 @@ Equation of motion (the "consistent" reading, default):
 
     M(t) x'' = F_int(x) - F_ext(x - j) - R31(t)
 
-with F = Kc p^(10/9) (models.contact), R31 = MR13D_kin / (l cos alpha) the normal force the cam
+with F = Kc p^(10/9) (models.dynamics.contact), R31 = MR13D_kin / (l cos alpha) the normal force the cam
 must exert to impose the kinematic motion (positive: pushes in the rise direction), and
 M = M1 M2 / (M1 + M2), M1 = 4 Jcam / Db1^2, M2 = 4 J''red / Db2^2 (eqs 16-18). The paper's literal
 eqs (12)-(14) read M x'' + Kc x^n = R31, i.e. the same with the sign of R31 reversed: a positive
@@ -23,7 +23,7 @@ The gap j between the flanks is the scene's backlash (``elastic_gap = "physical"
 not depend on j and its xel max stays below j; docs/models.md, "The backlash in Table 3").
 
 The cam turns at constant speed: n1 (omega1 'const') or n1 * n_sync / n_nominal (omega1 'var',
-the speed the paper's variable-speed drive settles at; models.motor.no_load_cam_speed).
+the speed the paper's variable-speed drive settles at; models.mechanism.motor.no_load_cam_speed).
 
 Contact onset and separation are solve_ivp events (terminal, then restart in the new phase), so
 every phase integrates a smooth right-hand side. ``rhs`` and the event functions are small pure
@@ -38,11 +38,11 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from models.cam_tables import angle_terms, grid_terms
-from models.contact import contact_force, contact_stiffness, hunt_crossley_force, static_penetration
-from models.errors import InputError, SolverError
-from models.motor import cam_inertia, no_load_cam_speed, transmission_ratio
-from models.scene import Scene
+from models.mechanism.cam_tables import angle_terms, grid_terms
+from models.dynamics.contact import contact_force, contact_stiffness, hunt_crossley_force, static_penetration
+from common.errors import InputError, SolverError
+from models.mechanism.motor import cam_inertia, no_load_cam_speed, transmission_ratio
+from models.dynamics.scene import Scene
 
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
 PHASE_NAMES = ("interior", "flight", "exterior")
@@ -111,7 +111,7 @@ def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None
                  linkage: str = "exact") -> Tables:
     """Kinematic tables over 0 <= t <= t_end at the scene's cam speed (phi1 = 0 at rise start);
     ``t`` (s, array) overrides the uniform grid, evaluated at those instants (the linkage exactly
-    or from its stroke spline, ``linkage="spline"``: models.cam_tables.angle_terms)."""
+    or from its stroke spline, ``linkage="spline"``: models.mechanism.cam_tables.angle_terms)."""
     omega1 = cam_speed(scene)
     if t is not None:
         t = np.asarray(t, dtype=float)
@@ -124,7 +124,7 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     """Tables on the uniform cam-angle grid linspace(0, span, n_points) (rad), t = phi1/omega1.
 
     The speed-independent terms of the grid are shared with every run of the same mechanism, law
-    and span (models.cam_tables): only the combination with the operating point is per run.
+    and span (models.mechanism.cam_tables): only the combination with the operating point is per run.
     """
     omega1 = cam_speed(scene)
     terms = grid_terms(scene.mechanism, scene.program, span, n_points, _load_until(scene))
@@ -276,7 +276,7 @@ def _hidden_crossing(sol, specs, gap: float):
     EVENT_SUBSTEPS points of every step; a crossing in the event's direction before the last
     sub-interval (which ends at solve_ivp's own event, if any) is the phase's real end, located by
     brentq on the dense output. The compiled twin
-    (models.kernels.elastic_nb._crossing) applies the same rule.
+    (models.dynamics.kernels.elastic_nb._crossing) applies the same rule.
     """
     from scipy.optimize import brentq
 
@@ -378,7 +378,7 @@ def contact_gap(scene: Scene) -> float:
 
 def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: dict | None = None) -> "SimulationResult":
     """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only)."""
-    from models.simulate import INDICATORS, SimulationResult
+    from models.dynamics.simulate import INDICATORS, SimulationResult
 
     if reading not in READINGS:
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
@@ -390,8 +390,8 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
     drive = tab.R31 if reading == "consistent" else -tab.R31
     preset = PRESETS[scene.accuracy] if preset is None else preset
     if integrate is None:
-        # compiled twin (models.kernels.elastic_nb) for fast/standard, solve_ivp for reference
-        from models.accuracy import integrator
+        # compiled twin (models.dynamics.kernels.elastic_nb) for fast/standard, solve_ivp for reference
+        from models.dynamics.accuracy import integrator
         integrate = integrator("elastic", scene.accuracy)
     f_scale = max(float(np.max(np.abs(tab.R31))), 1.0)
     period = contact_period(kc, float(np.min(tab.M)), f_scale)
@@ -429,7 +429,7 @@ def _dataset(scene, tab: Tables, segments, events, kc, gap, reading) -> xr.Datas
         b = np.searchsorted(t_uniform, hi, side="right" if k == len(segments) - 1 else "left")
         times.append(np.concatenate([t_uniform[a:b], sol.t]))   # the solver's steps: extremes are not lost
     runs = [sol for _, sol in segments]
-    from models.kernels.dopri5 import DenseRun, evaluate_runs   # numba only when a run needs it
+    from models.dynamics.kernels.dopri5 import DenseRun, evaluate_runs   # numba only when a run needs it
     if all(isinstance(r, DenseRun) for r in runs):
         y = evaluate_runs(runs, times)                          # compiled loop: one pass over all phases
     else:
@@ -515,7 +515,7 @@ def compare_table3(accuracy: str = "standard", contact_length: float | None = No
     """
     import pandas as pd
 
-    from models.paper import read_reference, table1_runs
+    from models.study.paper import read_reference, table1_runs
 
     t3 = read_reference("table3_elastic")
     rows = []

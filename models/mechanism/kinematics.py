@@ -16,12 +16,12 @@ import math
 import numpy as np
 import xarray as xr
 
-from models.cam_profile import contact_geometry
-from models.errors import InputError
-from models.linkage import linkage_state, reduced_follower
+from models.mechanism.cam_profile import contact_geometry
+from common.errors import InputError
+from models.mechanism.linkage import linkage_state, reduced_follower
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
-from models.motor import cam_inertia, transmission_ratio
+from models.mechanism.motion_laws import CamProgram
+from models.mechanism.motor import cam_inertia, transmission_ratio
 
 
 def load_force_x(mech: Mechanism, program: CamProgram, phi1, phi2, Fu: float):

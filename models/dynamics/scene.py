@@ -8,9 +8,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from models.errors import InputError
+from common.errors import InputError
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram, get_law
+from models.mechanism.motion_laws import CamProgram, get_law
 
 ACCURACY_PRESETS = ("fast", "standard", "reference")
 # how the backlash enters the elastic model (docs/models.md, "the backlash in Table 3"):
@@ -23,7 +23,7 @@ ELASTIC_GAPS = ("physical", "closed")
 class Scene:
     """Operating point and model options.
 
-    law            motion law name (models.motion_laws.LAWS)
+    law            motion law name (models.mechanism.motion_laws.LAWS)
     cam_speed_rpm  nominal cam speed n1 (rpm; the only non-SI field, as the paper's factor C)
     Fu             load at N (N, >= 0)
     backlash       groove backlash j (m, >= 0)

@@ -14,8 +14,8 @@ import time
 import numpy as np
 import xarray as xr
 
-from models.errors import InputError
-from models.scene import Scene
+from common.errors import InputError
+from models.dynamics.scene import Scene
 
 # indicator keys of the paper's Tables 2 and 3 (DESIGN.md, --json contract)
 INDICATORS = (
@@ -24,9 +24,9 @@ INDICATORS = (
 )
 
 LEVELS = {
-    "kinematic": "models.simulate:_kinematic",
-    "rigid": "models.rigid:simulate",
-    "elastic": "models.elastic:simulate",
+    "kinematic": "models.dynamics.simulate:_kinematic",
+    "rigid": "models.dynamics.rigid:simulate",
+    "elastic": "models.dynamics.elastic:simulate",
 }
 
 
@@ -60,8 +60,8 @@ def simulate(scene: Scene, model: str = "auto") -> SimulationResult:
     t0 = time.perf_counter()
     reason = f"requested --model {model}"
     if model == "auto":
-        # models.auto climbs the ladder (and escalates in time) itself; it sets model and reason
-        from models.auto import simulate_auto
+        # models.dynamics.auto climbs the ladder (and escalates in time) itself; it sets model and reason
+        from models.dynamics.auto import simulate_auto
         result = simulate_auto(scene)
         model, reason = result.model, result.reason
     else:
@@ -75,10 +75,10 @@ def simulate(scene: Scene, model: str = "auto") -> SimulationResult:
 
 def _kinematic(scene: Scene) -> SimulationResult:
     """The kinematic level: cam as input at constant speed; MR13D kinetostatic."""
-    from models.kinematics import analyze, rise_summary
+    from models.mechanism.kinematics import analyze, rise_summary
     omega1 = scene.omega1_nominal
     if scene.omega1_mode == "var":
-        from models.motor import no_load_cam_speed
+        from models.mechanism.motor import no_load_cam_speed
         omega1 = no_load_cam_speed(scene.mechanism, omega1)
     rpm = omega1 * 30.0 / math.pi
     ds = analyze(scene.mechanism, scene.program, rpm, scene.Fu, scene.jt_factor)

@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 
 TWO_PI = 2.0 * math.pi
 

@@ -5,7 +5,7 @@ A design is a list of :class:`Factor` (letter name ``A``, ``B``, ...; symbol ``F
 order: run 1 has every factor at level 1 and the last factor changes fastest (Table 2's order).
 
 Factor values are kept in the units of the factor file (the table edge: N, mm, rpm, ...); they are
-converted to the SI fields of :class:`models.scene.Scene` once, in :func:`scene_for_run`, through
+converted to the SI fields of :class:`models.dynamics.scene.Scene` once, in :func:`scene_for_run`, through
 the table :data:`SCENE_FACTORS` (symbol -> Scene field, accepted units and their scale to the
 field's unit).
 
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from models.errors import FileFormatError, InputError
+from common.errors import FileFormatError, InputError
 
 # symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
 SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
@@ -300,8 +300,8 @@ def simulate_run(scene, model: str) -> dict:
     """
     import time
 
-    from models.errors import LabtoolError
-    from models.simulate import simulate
+    from common.errors import LabtoolError
+    from models.dynamics.simulate import simulate
     t0 = time.perf_counter()
     try:
         res = simulate(scene, model)

@@ -10,8 +10,8 @@ The reference solution (``reference_run``) is scipy's DOP853 (8th order, a diffe
 the compiled Dormand-Prince 5(4)) at rtol 1e-12 on the model's own equations, with the step limits
 of the model's ``reference`` preset and its absolute tolerances scaled to rtol 1e-12.
 
-``fast`` and ``standard`` run the compiled loops of ``models.kernels`` (numba) with the model's
-tolerances (``models.rigid.PRESETS``, ``models.elastic.PRESETS``); ``reference`` runs the scipy
+``fast`` and ``standard`` run the compiled loops of ``models.dynamics.kernels`` (numba) with the model's
+tolerances (``models.dynamics.rigid.PRESETS``, ``models.dynamics.elastic.PRESETS``); ``reference`` runs the scipy
 ``solve_ivp`` path. ``MEASURED`` holds the worst error over the 16 runs of Table 1 (omega1
 variable, sine law) of each preset against the reference solution, as written by
 ``benchmarks/work_precision.py`` (its CSV is benchmarks/results/work_precision.csv):
@@ -39,12 +39,12 @@ import time
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 
 MODELS = ("rigid", "elastic")
 PRESET_NAMES = ("fast", "standard", "reference")
 
-# which loop runs each preset: "compiled" = models.kernels (numba DP5(4)), "scipy" = solve_ivp
+# which loop runs each preset: "compiled" = models.dynamics.kernels (numba DP5(4)), "scipy" = solve_ivp
 SOLVER = {
     ("rigid", "fast"): "compiled", ("rigid", "standard"): "compiled", ("rigid", "reference"): "scipy",
     ("elastic", "fast"): "compiled", ("elastic", "standard"): "compiled", ("elastic", "reference"): "scipy",
@@ -116,8 +116,8 @@ def solver(model: str, preset: str) -> str:
 def integrator(model: str, preset: str):
     """The integration loop a (model, preset) runs: the compiled twin or the model's scipy loop."""
     if solver(model, preset) == "compiled":
-        return importlib.import_module(f"models.kernels.{model}_nb").integrate
-    return importlib.import_module(f"models.{model}").__dict__["integrate"]
+        return importlib.import_module(f"models.dynamics.kernels.{model}_nb").integrate
+    return importlib.import_module(f"models.dynamics.{model}").__dict__["integrate"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -130,7 +130,7 @@ _PATCH_LOCK = threading.Lock()
 def _patched(model: str, integrate, preset: dict | None, name: str):
     """Run ``models.<model>`` with another integration loop / preset for one call (used only while
     the model's ``simulate`` has no ``integrate=``/``preset=`` arguments)."""
-    mod = importlib.import_module(f"models.{model}")
+    mod = importlib.import_module(f"models.dynamics.{model}")
     with _PATCH_LOCK:
         old_int, old_preset = mod.integrate, mod.PRESETS[name]
         try:
@@ -147,12 +147,12 @@ def run_model(scene, model: str, integrate=None, preset: dict | None = None, sta
     """``models.<model>.simulate(scene)`` with an explicit integration loop and preset dict (None:
     what ``scene.accuracy`` selects). ``stats`` (dict) receives loop_s, the wall time spent in the
     integration loop (s), and for compiled loops nfev and n_steps."""
-    mod = importlib.import_module(f"models.{model}")
+    mod = importlib.import_module(f"models.dynamics.{model}")
     loop = integrate if integrate is not None else integrator(model, scene.accuracy)
     if stats is not None:
         base = loop
-        compiled = getattr(base, "__module__", "").startswith("models.kernels") or (
-            isinstance(base, functools.partial) and base.func.__module__.startswith("models.kernels"))
+        compiled = getattr(base, "__module__", "").startswith("models.dynamics.kernels") or (
+            isinstance(base, functools.partial) and base.func.__module__.startswith("models.dynamics.kernels"))
 
         def loop(*a, **k):
             t0 = time.perf_counter()
@@ -168,7 +168,7 @@ def run_model(scene, model: str, integrate=None, preset: dict | None = None, sta
 
 
 def _kernel(model):
-    return importlib.import_module(f"models.kernels.{model}_nb").integrate
+    return importlib.import_module(f"models.dynamics.kernels.{model}_nb").integrate
 
 
 def scaled_preset(preset: dict, rtol: float | None = None, step_factor: float = 1.0) -> dict:
@@ -191,14 +191,14 @@ def scaled_preset(preset: dict, rtol: float | None = None, step_factor: float = 
 def halved(model: str, preset: str) -> dict:
     """The preset with its step limit halved and its tolerances divided by 2^5 = 32 (a 5th-order
     method's local error for half the step): the 'halve the step' check of the extremes suite."""
-    mod = importlib.import_module(f"models.{model}")
+    mod = importlib.import_module(f"models.dynamics.{model}")
     base = mod.PRESETS[preset]
     return scaled_preset(base, rtol=base["rtol"] / 32.0, step_factor=0.5)
 
 
 def reference_run(scene, model: str):
     """The reference solution of ``scene`` (scipy DOP853, rtol 1e-12)."""
-    mod = importlib.import_module(f"models.{model}")
+    mod = importlib.import_module(f"models.dynamics.{model}")
     preset = scaled_preset(mod.PRESETS["reference"], rtol=REFERENCE_RTOL)
     preset["method"] = REFERENCE_METHOD
     loop = mod.integrate

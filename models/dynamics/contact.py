@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 
 N_EXP = 10.0 / 9.0                     # Palmgren exponent n of eq. (12)-(15)
 PALMGREN_MM = 8.05e4                   # N / mm^(10/9) per mm^(8/9) of contact length (eq. 15)

@@ -43,8 +43,8 @@ def kinematic_vs_table3(no_load_speed: bool = True) -> pd.DataFrame:
     ``no_load_speed``: run the cam at n1 * n_sync / n_nominal, the speed the paper's omega1-variable
     drive settles at (docs/mechanism.md); otherwise at the nominal n1.
     """
-    from models.scene import Scene
-    from models.simulate import _kinematic
+    from models.dynamics.scene import Scene
+    from models.dynamics.simulate import _kinematic
 
     t3 = read_reference("table3_elastic")
     rows = []

@@ -2,7 +2,7 @@
 
 Every layer raises these; the CLI turns them into one line
 ``labtool: error: <what, where, what to do>`` and exit code 2.
-They live in ``models`` because it is the bottom layer every other layer may import.
+They live in ``common``, the bottom layer every other layer may import.
 """
 
 

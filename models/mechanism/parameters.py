@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 
 _UNIT_SCALE = {"_mm": 1e-3, "_deg": math.pi / 180.0, "_rpm": 2.0 * math.pi / 60.0}
 

@@ -1,9 +1,9 @@
-"""Compiled integration of the elastic-contact model (paper eqs 12-19; ``models.elastic``).
+"""Compiled integration of the elastic-contact model (paper eqs 12-19; ``models.dynamics.elastic``).
 
-A drop-in for ``models.elastic.integrate``: same arguments, same return value (segments as a list
+A drop-in for ``models.dynamics.elastic.integrate``: same arguments, same return value (segments as a list
 of (phase, run) where ``run.t`` are the step times and ``run.sol(times)`` the dense output, and the
-event dicts), so ``models.elastic`` keeps its tables, sampling and indicators and only the loop
-runs compiled. The equations are those of ``models.elastic.rhs`` / ``normal_force`` (read them
+event dicts), so ``models.dynamics.elastic`` keeps its tables, sampling and indicators and only the loop
+runs compiled. The equations are those of ``models.dynamics.elastic.rhs`` / ``normal_force`` (read them
 there), transcribed:
 
     M(t) x'' = F(x, x') - drive(t)        x (m) relative displacement along the normal (+ exterior)
@@ -22,12 +22,12 @@ import math
 import numpy as np
 from numba import njit
 
-from models.errors import SolverError
-from models.kernels import dopri5 as dp
+from common.errors import SolverError
+from models.dynamics.kernels import dopri5 as dp
 
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
 N_EXP = 10.0 / 9.0
-NUDGE = 1e-13           # m, as models.elastic.BOUNDARY_NUDGE
+NUDGE = 1e-13           # m, as models.dynamics.elastic.BOUNDARY_NUDGE
 MAX_STEPS = 2_000_000       # accepted steps per run (memory ~100 B a step)
 MAX_SEGMENTS = 1_000_000    # phases per run
 
@@ -52,7 +52,7 @@ def _interp_uniform(t, tg, yg):
 
 @njit(cache=True)
 def force(x, v, phase, kc, gap, damping):
-    """Groove-on-follower normal force along +x (N); models.elastic.normal_force."""
+    """Groove-on-follower normal force along +x (N); models.dynamics.elastic.normal_force."""
     if phase == INTERIOR:
         pen, rate, sign = -x, -v, 1.0
     elif phase == EXTERIOR:
@@ -87,7 +87,7 @@ def _active(g0, g1, direction):
     return (up and direction > 0) or (down and direction < 0)
 
 
-NSUB = 8    # sign checks per step (models.elastic.EVENT_SUBSTEPS)
+NSUB = 8    # sign checks per step (models.dynamics.elastic.EVENT_SUBSTEPS)
 
 
 @njit(cache=True)
@@ -174,7 +174,7 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
     t = 0.0
     phase = phase0
     nst, nseg, nev, nfev = 0, 0, 0, 0
-    short = 0                       # consecutive phases shorter than zeno_dt (models.elastic)
+    short = 0                       # consecutive phases shorter than zeno_dt (models.dynamics.elastic)
     while t < t_end:
         if short >= zeno_segments:
             return dp.NO_PROGRESS, t, nst, nseg, nev, nfev, st_t, st_h, st_y, st_Q, seg_phase, seg_first, seg_end, ev_t, ev_v, ev_from, ev_to
@@ -268,7 +268,7 @@ def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_
                 ev_from[nev] = phase
                 ev_to[nev] = new_phase
                 nev += 1
-                # restart a hair inside the new phase (models.elastic._restart_position)
+                # restart a hair inside the new phase (models.dynamics.elastic._restart_position)
                 eps = nudge if gap == 0.0 else min(nudge, 0.25 * gap)
                 boundary = 0.0 if at_zero else gap
                 if new_phase == INTERIOR:
@@ -303,14 +303,14 @@ _NAMES = ("interior", "flight", "exterior")
 def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
               rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, method="RK45",
               max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, stats=None):
-    """Compiled twin of ``models.elastic.integrate`` (same arguments and return value).
+    """Compiled twin of ``models.dynamics.elastic.integrate`` (same arguments and return value).
 
     ``method`` is accepted for compatibility and must be RK45 (Dormand-Prince 5(4)). Limits: the
     model's chatter guard (ZENO_SEGMENTS consecutive phases shorter than ZENO_DT), ``max_steps``
     steps and ``max_segments`` phases per run. ``stats`` (dict, optional) receives nfev and
     n_steps: the cost measure of the benchmarks.
     """
-    from models import elastic
+    from models.dynamics import elastic
 
     if method != "RK45":
         raise ValueError("the compiled loop is Dormand-Prince 5(4) (RK45) only")
@@ -320,7 +320,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     drive_grid = np.ascontiguousarray(drive_grid, dtype=float)
     t_end = float(tg[-1] if t_end is None else t_end)
     if y0 is None:
-        # the start of models.elastic.integrate: static equilibrium; at rest with no load, against
+        # the start of models.dynamics.elastic.integrate: static equilibrium; at rest with no load, against
         # the flank the first non-zero drive will load
         x0, v0, phase = elastic.initial_state(float(drive_grid[0]), kc, gap)
         nonzero = np.flatnonzero(drive_grid)

@@ -8,21 +8,21 @@ factor Jt as scalar multipliers (sec. 2.1.1):
     MR13D    = Jt (J0 epsilon2 + 1/2 dJ0 omega2^2) - M_gravity - Fu m_load
     J''red   = Jt J0
 
-with J0, dJ0 the follower-side inertia reduced to the follower at Jt = 1 (models.linkage), m_load
+with J0, dJ0 the follower-side inertia reduced to the follower at Jt = 1 (models.mechanism.linkage), m_load
 the moment about D of a unit load (N m per N, its sign opposing the rod's sliding, zero in the
-dwells: models.kinematics.load_force_x), and the contact geometry (pressure angle, Db1, Db2:
-models.cam_profile) a function of phi1 alone. So the expensive part (the linkage and the cam
+dwells: models.mechanism.kinematics.load_force_x), and the contact geometry (pressure angle, Db1, Db2:
+models.mechanism.cam_profile) a function of phi1 alone. So the expensive part (the linkage and the cam
 geometry, ~0.7 us per angle) is evaluated once on an angle grid and shared by every speed, load
 and inertia factor: the 16 runs of Table 1 share one table. ``at_speed`` combines a table with an
 operating point in a handful of array operations.
 
-Values agree with models.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
-models.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
+Values agree with models.mechanism.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
+models.mechanism.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
 
 ``cached`` is the one per-process cache of such speed-independent tables: the elastic model's
 grids (``grid_terms``), the stroke spline, the cam's sense of rotation
-(models.cam_profile.cached_sense) and the rigid model's cam and follower tables
-(models.rigid.build_plant).
+(models.mechanism.cam_profile.cached_sense) and the rigid model's cam and follower tables
+(models.dynamics.rigid.build_plant).
 """
 from __future__ import annotations
 
@@ -32,10 +32,10 @@ import threading
 
 import numpy as np
 
-from models.cam_profile import cached_sense, contact_geometry
-from models.linkage import linkage_state, reduced_follower
+from models.mechanism.cam_profile import cached_sense, contact_geometry
+from models.mechanism.linkage import linkage_state, reduced_follower
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
+from models.mechanism.motion_laws import CamProgram
 
 CACHE_SIZE = 16         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB)
 
@@ -76,7 +76,7 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | 
     """The terms at any cam angles ``phi1`` (rad).
 
     ``load_until`` (rad): the load's direction is taken at min(phi1, load_until), so that a run
-    ending at the end of the rise keeps the rise's load at its last instant (models.elastic).
+    ending at the end of the rise keeps the rise's load at its last instant (models.dynamics.elastic).
     ``linkage``: "exact" evaluates the linkage at every angle; "spline" reads J0, dJ0, M_gravity
     and the load's arm from a cubic spline over the follower's stroke (``stroke_spline``: the
     linkage depends on phi2 alone, analytically; 1e-13 relative, 1e-11 for dJ0), 4x cheaper for
@@ -92,7 +92,7 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | 
     else:
         J0, dJ0, M_gravity, vNx, slide = linkage_columns(mech, phi2)
     phi_load = phi1 if load_until is None else np.minimum(phi1, load_until)
-    # models.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
+    # models.mechanism.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
     # arm (the x velocity coefficient of N)
     m_load = np.sign(slide) * program.direction(phi_load) * vNx
     geo = contact_geometry(mech, program, phi1, sense=cached_sense(mech, program), motion=motion)
@@ -109,7 +109,7 @@ def linkage_columns(mech: Mechanism, phi2):
     of the unit-velocity linkage: J''red and dJ''red/dphi2 at Jt = 1 (kg m^2, kg m^2/rad), the
     moment of gravity about D (N m), the x velocity coefficient of N (m/rad, the load's arm) and the
     x component of the rod's sliding per unit omega2 (its sign opposes the load,
-    models.kinematics.load_force_x)."""
+    models.mechanism.kinematics.load_force_x)."""
     unit = linkage_state(mech, phi2, 1.0, 0.0)
     red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
     return red.J, red.dJ, red.M_gravity, unit.vN[0], unit.ds * np.cos(unit.phi4)

@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from models.errors import InputError
+from common.errors import InputError
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
+from models.mechanism.motion_laws import CamProgram
 
 
 def _perp(v):
@@ -73,9 +73,9 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
 
 
 def cached_sense(mech: Mechanism, program: CamProgram) -> int:
-    """``choose_sense`` remembered per (mechanism, program) (models.cam_tables.cached): it costs
+    """``choose_sense`` remembered per (mechanism, program) (models.mechanism.cam_tables.cached): it costs
     two 721-point geometry passes and every contact-geometry call needs it."""
-    from models.cam_tables import cached      # cam_tables imports this module
+    from models.mechanism.cam_tables import cached      # cam_tables imports this module
 
     return cached(("cam_sense", repr(mech), program), lambda: choose_sense(mech, program))
 

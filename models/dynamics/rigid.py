@@ -13,7 +13,7 @@ free (2 DOF, eqs 4-7)     cam+motor and follower move independently inside the b
     J' eps1 = M1(omega1) + Mc(phi1);  J'' eps2 + 1/2 dJ'' omega2^2 = M_gravity + M_load.
     State (phi1, omega1, q, omega2) with q = phi2 - phi2_pitch(phi1) the follower's angle off the
     inner flank (integrated directly so that the gap keeps full precision).
-impact (eqs 8-11)         ``models.impact.impact`` with Newton's k on the normal velocity of C.
+impact (eqs 8-11)         ``models.dynamics.impact.impact`` with Newton's k on the normal velocity of C.
 
 The gap. The groove's flanks are offset curves of the pitch curve (inner at 0, outer at j along the
 contact normal n). The normal distance of C from the pitch curve is linearised in q:
@@ -49,13 +49,13 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from models.errors import InputError, SolverError
-from models.impact import impact, kinetic_energy
-from models.cam_tables import cached, linkage_columns
+from common.errors import InputError, SolverError
+from models.dynamics.impact import impact, kinetic_energy
+from models.mechanism.cam_tables import cached, linkage_columns
 from models.mechanism import Mechanism
-from models.motion_laws import CamProgram
-from models.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam, no_load_cam_speed, transmission_ratio
-from models.scene import Scene
+from models.mechanism.motion_laws import CamProgram
+from models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam, no_load_cam_speed, transmission_ratio
+from models.dynamics.scene import Scene
 
 TWO_PI = 2.0 * math.pi
 
@@ -140,7 +140,7 @@ class Plant:
 
 def _arms(mech: Mechanism, sense: int, psi, p):
     """Moment arms (m) of the contact normal about D (A2) and A (A1) for follower stroke psi and
-    dpsi/dphi1 = p (the normal depends on both; the same construction as models.cam_profile)."""
+    dpsi/dphi1 = p (the normal depends on both; the same construction as models.mechanism.cam_profile)."""
     phi2 = mech.phiD + mech.psi0 + psi
     r = mech.l * np.stack([np.cos(phi2), np.sin(phi2)])
     C = mech.D[:, None] + r
@@ -216,7 +216,7 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
 
     def cols(x):
         J, dJ, Mg, vNx, slide = linkage_columns(mech, x)
-        # load per N of Fu and per unit direction (models.kinematics.load_force_x): Fu_x = Fu *
+        # load per N of Fu and per unit direction (models.mechanism.kinematics.load_force_x): Fu_x = Fu *
         # sign(ds ux) * direction; its moment about D is Fu_x * vN_x (vN per unit omega2)
         return np.stack([J, dJ, Mg, np.sign(slide) * vNx])
 
@@ -229,7 +229,7 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
 
 def build_plant(scene: Scene, backlash: float | None = None, phi1_hi: float | None = None) -> tuple[Plant, dict]:
     """The plant of a scene (backlash overrides scene.backlash, e.g. 0 for the no-backlash run)."""
-    from models.cam_profile import cached_sense
+    from models.mechanism.cam_profile import cached_sense
 
     mech, program = scene.mechanism, scene.program
     sense = cached_sense(mech, program)
@@ -238,7 +238,7 @@ def build_plant(scene: Scene, backlash: float | None = None, phi1_hi: float | No
     span = simulated_span(scene)
     hi = (span if phi1_hi is None else phi1_hi) + 0.2
     # both tables depend on the mechanism and the cam program only: built once per process and
-    # shared by every speed, load, inertia factor and backlash (models.cam_tables.cached)
+    # shared by every speed, load, inertia factor and backlash (models.mechanism.cam_tables.cached)
     tab1 = cached(("rigid_cam_table", repr(mech), program, sense, -0.05, hi),
                   lambda: cam_table(mech, program, sense, -0.05, hi))
     lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
@@ -501,16 +501,16 @@ def _in_rise(program: CamProgram, phi1):
 
 
 def simulate(scene: Scene, integrate=None, preset: dict | None = None):
-    """Run the rigid model on a scene. Returns models.simulate.SimulationResult.
+    """Run the rigid model on a scene. Returns models.dynamics.simulate.SimulationResult.
 
-    ``integrate``: the integration loop (default: ``models.accuracy.integrator``: the compiled twin
-    ``models.kernels.rigid_nb.integrate`` for fast/standard, this module's solve_ivp loop for
+    ``integrate``: the integration loop (default: ``models.dynamics.accuracy.integrator``: the compiled twin
+    ``models.dynamics.kernels.rigid_nb.integrate`` for fast/standard, this module's solve_ivp loop for
     reference); ``preset``: a preset dict instead of PRESETS[scene.accuracy] (benchmarks, tests).
     """
     if integrate is None:
-        from models.accuracy import integrator
+        from models.dynamics.accuracy import integrator
         integrate = integrator("rigid", scene.accuracy)
-    from models.simulate import INDICATORS, SimulationResult
+    from models.dynamics.simulate import INDICATORS, SimulationResult
 
     t_start = _time.perf_counter()
     preset = PRESETS[scene.accuracy] if preset is None else preset
@@ -534,7 +534,7 @@ def simulate(scene: Scene, integrate=None, preset: dict | None = None):
     n = max(int(preset["samples"] * span / program.rise_angle), 200)
     times = np.linspace(0.0, t_end, n + 1)
     # the last sample just inside the simulated span: at phi1 = rise exactly the dwell begins (the
-    # load switches off, as in models.kinematics), which would put a step into every time series
+    # load switches off, as in models.mechanism.kinematics), which would put a step into every time series
     times[-1] = t_end * (1.0 - 1e-9)
     s = sample(plant, phases, times)
     rfj_full = sample(plant0, phases0, times)
@@ -671,7 +671,7 @@ def rigid_vs_table2(accuracy: str = "standard", law: str = "sine", omega1_mode: 
     factors, our indicators, the paper's and the % differences (jumps: the difference in counts)."""
     import pandas as pd
 
-    from models.paper import read_reference, table1_runs
+    from models.study.paper import read_reference, table1_runs
 
     t2 = read_reference("table2_rigid")
     rows = []

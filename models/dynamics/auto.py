@@ -6,7 +6,7 @@ The ladder (DESIGN.md): kinematic -> rigid (1 DOF, the motor's speed variation) 
 1. Contact outputs requested (x_el, contact force, deformation): the elastic model, the only
    level that has them.
 2. Otherwise the kinematic level first (cam as input, kinetostatic MR13D over the rise, read from
-   the shared cam-angle table of models.cam_tables; the kinematic dataset is built only when it is
+   the shared cam-angle table of models.mechanism.cam_tables; the kinematic dataset is built only when it is
    the answer).
    MR13D keeps its sign (by more than SIGN_MARGIN of its range) and omega1 is constant: the follower
    never leaves the flank, so the rigid model *is* the kinematic model; no dynamic model runs, and
@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from models.scene import Scene
+from models.dynamics.scene import Scene
 
 CONTACT_OUTPUTS = frozenset({"x_el", "xel_max_mm", "xel_min_mm", "contact_force", "deformation",
                              "MR13D_contact"})
@@ -57,7 +57,7 @@ def _choose(scene: Scene, contact: bool):
     """(level, reason, kinematic result or None)."""
     if contact:
         return "elastic", "contact outputs (x_el, contact force) were requested: only the elastic model has them", None
-    from models.simulate import _kinematic
+    from models.dynamics.simulate import _kinematic
     mn, mx = rise_moment_range(scene)
     change = _sign_change(mn, mx)
     if scene.omega1_mode == "const" and (not change or scene.backlash == 0.0):
@@ -77,17 +77,17 @@ def _choose(scene: Scene, contact: bool):
 
 def rise_moment_range(scene: Scene) -> tuple[float, float]:
     """(min, max) of the kinetostatic MR13D (N m) over the rise at the cam speed the kinematic level
-    runs at, from the shared cam-angle table (models.cam_tables: the grid the elastic model uses,
+    runs at, from the shared cam-angle table (models.mechanism.cam_tables: the grid the elastic model uses,
     4001 angles over the rise, computed once per mechanism and law): the decision costs ~0.1 ms
     instead of a whole kinematic analysis."""
-    from models import elastic
+    from models.dynamics import elastic
 
     tab = elastic.grid_tables(scene.replace(rise_only=True), scene.program.rise_angle)
     return float(tab.MR13D.min()), float(tab.MR13D.max())
 
 
 class SharedPrefixLoop:
-    """An integration loop for ``models.rigid.simulate`` (compiled) that integrates the prefix the
+    """An integration loop for ``models.dynamics.rigid.simulate`` (compiled) that integrates the prefix the
     backlash run and the no-backlash run share only once.
 
     First call (the backlash plant, j > 0): integrate the no-backlash run (j = 0) over the span,
@@ -102,11 +102,11 @@ class SharedPrefixLoop:
         self.escalation_phi1 = None
 
     def _kernel(self):
-        from models.kernels import rigid_nb
+        from models.dynamics.kernels import rigid_nb
         return rigid_nb.integrate
 
     def __call__(self, P, phi1_end, omega1_0, preset, t_rise, start=None):
-        from models import rigid
+        from models.dynamics import rigid
         kern = self._kernel()
         if start is not None:
             return kern(P, phi1_end, omega1_0, preset, t_rise, start, stats=self.stats)
@@ -162,9 +162,9 @@ def _time_at_phi1(phase, phi1_end: float) -> float:
 
 
 def simulate_auto(scene: Scene, outputs=()):
-    """Run the cheapest level the scene needs (module doc). Returns models.simulate.SimulationResult."""
-    from models import accuracy
-    from models.simulate import _resolve
+    """Run the cheapest level the scene needs (module doc). Returns models.dynamics.simulate.SimulationResult."""
+    from models.dynamics import accuracy
+    from models.dynamics.simulate import _resolve
 
     level, reason, kin = _choose(scene, bool(CONTACT_OUTPUTS.intersection(outputs)))
     stats: dict = {}

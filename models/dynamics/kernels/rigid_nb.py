@@ -1,9 +1,9 @@
 """Compiled integration of the rigid-element model with backlash and impacts (paper eqs 1-11).
 
-A drop-in for ``models.rigid.integrate``: same arguments, same return value (phases with a dense
-``sol`` and the event dicts), so ``models.rigid`` keeps its tables, sampling and indicators and only
-the event-driven loop runs compiled. The equations are ``models.rigid.contact_terms``,
-``free_terms``, ``gap_event`` and the impact law ``models.impact.impact``, transcribed line by line
+A drop-in for ``models.dynamics.rigid.integrate``: same arguments, same return value (phases with a dense
+``sol`` and the event dicts), so ``models.dynamics.rigid`` keeps its tables, sampling and indicators and only
+the event-driven loop runs compiled. The equations are ``models.dynamics.rigid.contact_terms``,
+``free_terms``, ``gap_event`` and the impact law ``models.dynamics.impact.impact``, transcribed line by line
 (read the physics and the sign conventions there):
 
 contact (1 DOF, state phi1 rad, omega1 rad/s): the follower rides the inner (+1) or outer (-1)
@@ -15,7 +15,7 @@ free (2 DOF, state phi1, omega1, q rad, omega2 rad/s): eqs (4)-(7); events: the 
 impact: Newton's k on the normal velocity of the roller centre; a grazing or accumulating impact
     (|v| < v_settle) is made plastic and the follower stays on the flank if it is pressed on it.
 
-Integration: Dormand-Prince 5(4) (``models.kernels.dopri5``), scipy's controller, events located
+Integration: Dormand-Prince 5(4) (``models.dynamics.kernels.dopri5``), scipy's controller, events located
 by bisection on the dense output. Caps: ``preset["max_events"]`` events and ``MAX_STEPS`` steps
 per run, then ``SolverError`` naming the limit.
 """
@@ -26,8 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
-from models.errors import SolverError
-from models.kernels import dopri5 as dp
+from common.errors import SolverError
+from models.dynamics.kernels import dopri5 as dp
 
 INNER, OUTER, FREE = 1, -1, 0
 CONTACT_MODE, FREE_MODE = 0, 1
@@ -59,7 +59,7 @@ def _cell(nodes, x):
 
 @njit(cache=True)
 def interp(nodes, inv_h, coef, x, out):
-    """All columns of a piecewise-cubic table at x (models.rigid.interp)."""
+    """All columns of a piecewise-cubic table at x (models.dynamics.rigid.interp)."""
     i = _cell(nodes, x)
     t = (x - nodes[i]) * inv_h[i]
     for c in range(coef.shape[0]):
@@ -68,7 +68,7 @@ def interp(nodes, inv_h, coef, x, out):
 
 @njit(cache=True)
 def contact_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, flank, w1, w2, res):
-    """res = (eps1, phi2, omega2, eps2, MR13D, lam, qc, A2, psi') on ``flank`` (models.rigid.contact_terms)."""
+    """res = (eps1, phi2, omega2, eps2, MR13D, lam, qc, A2, psi') on ``flank`` (models.dynamics.rigid.contact_terms)."""
     interp(n1, h1, c1, phi1, w1)
     psi, d1, d2, A2, dA2, ddA2, Mc, dirn = w1[0], w1[1], w1[2], w1[3], w1[4], w1[5], w1[6], w1[7]
     j = p[I_J]
@@ -98,7 +98,7 @@ def contact_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, flank, w1, w2, res):
 
 @njit(cache=True)
 def free_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, q, omega2, w1, w2, res):
-    """res = (eps1, dq/dt, eps2, g, phi2, A2, psi', A2') in the gap (models.rigid.free_terms)."""
+    """res = (eps1, dq/dt, eps2, g, phi2, A2, psi', A2') in the gap (models.dynamics.rigid.free_terms)."""
     interp(n1, h1, c1, phi1, w1)
     psi, d1, A2, dA2, Mc, dirn = w1[0], w1[1], w1[3], w1[4], w1[6], w1[7]
     phi2 = p[I_PHI20] + psi + q
@@ -143,7 +143,7 @@ def _event(which, mode, flank, left, t, t0, v0, y, phi1_end, n1, h1, c1, n2, h2,
 
 @njit(cache=True)
 def _impact(omega1, omega2, G1, G2, inv_Jcam, Jf, k):
-    """models.impact.impact: (omega1+, omega2+, P N s, v_n- m/s, v_n+ m/s)."""
+    """models.dynamics.impact.impact: (omega1+, omega2+, P N s, v_n- m/s, v_n+ m/s)."""
     vb = G2 * omega2 - G1 * omega1
     P = -(1.0 + k) * vb / (G2 * G2 / Jf + G1 * G1 * inv_Jcam)
     return omega1 - P * G1 * inv_Jcam, omega2 + P * G2 / Jf, P, vb, -k * vb
@@ -152,7 +152,7 @@ def _impact(omega1, omega2, G1, G2, inv_Jcam, Jf, k):
 @njit(cache=True)
 def run(n1, h1, c1, n2, h2, c2, p, phi1_end, omega1_0, rtol, max_step, t_max, v_settle, max_events,
         max_steps, start_mode, start_flank, s_phi1, s_omega1, s_q, s_omega2, t_start):
-    """The event-driven loop (models.rigid.integrate). Returns status, t at failure, counts, steps,
+    """The event-driven loop (models.dynamics.rigid.integrate). Returns status, t at failure, counts, steps,
     phases and events (see ``integrate``)."""
     cap = min(max_steps, 4096)
     st_t = np.empty(cap)
@@ -406,13 +406,13 @@ def _params(P) -> np.ndarray:
 
 def integrate(P, phi1_end: float, omega1_0: float, preset: dict, t_rise: float, start: tuple | None = None,
               stats: dict | None = None, t_start: float = 0.0, max_steps: int = MAX_STEPS):
-    """Compiled twin of ``models.rigid.integrate`` (same arguments and return value).
+    """Compiled twin of ``models.dynamics.rigid.integrate`` (same arguments and return value).
 
     Extra: ``start`` may also be ("contact", phi1, omega1, flank) to start on a flank at
-    ``t_start`` (s) (models.auto escalates from the kinematic level this way); ``stats`` receives
+    ``t_start`` (s) (models.dynamics.auto escalates from the kinematic level this way); ``stats`` receives
     nfev and n_steps, the cost measure of the benchmarks.
     """
-    from models.rigid import Phase
+    from models.dynamics.rigid import Phase
 
     rtol = float(preset["rtol"])
     max_step = float(preset["max_step"] * t_rise)
@@ -423,7 +423,7 @@ def integrate(P, phi1_end: float, omega1_0: float, preset: dict, t_rise: float, 
         smode, sflank, s = CONTACT_MODE, int(start[3]), (float(start[1]), float(start[2]), 0.0, 0.0)
     else:
         smode, sflank, s = FREE_MODE, FREE, tuple(float(v) for v in start[1:5])
-    # the tables are shared read-only arrays (models.cam_tables.cached); numba would compile a
+    # the tables are shared read-only arrays (models.mechanism.cam_tables.cached); numba would compile a
     # second specialisation for read-only arrays, so the loop gets writeable copies (~1 MB)
     rw = lambda a: np.require(a, dtype=np.float64, requirements=["C", "W"])  # noqa: E731
     out = run(rw(P.tab1.nodes), rw(P.tab1.inv_h), rw(P.tab1.coef), rw(P.tab2.nodes), rw(P.tab2.inv_h),
