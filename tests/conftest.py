@@ -1,3 +1,48 @@
+import contextlib
 import os
+import shutil
+import subprocess
+import uuid
+from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+HOSTILE_KINDS = ("hang", "traceback", "full_disk", "concurrency", "silent_wrong", "injection",
+                 "interrupted", "real_file")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for mark in item.iter_markers("hostile"):
+            kind = mark.args[0] if mark.args else None
+            if kind not in HOSTILE_KINDS:
+                raise pytest.UsageError(f"{item.nodeid}: hostile kind must be one of {HOSTILE_KINDS}, got {kind!r}")
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A real, small filesystem (tmpfs) for full-disk cases: ``small_disk(size_kb) -> Path``.
+
+    Needs root (CI and the dev machines run as root); skipped with the reason otherwise. The mount
+    is removed at the end of the test.
+    """
+    mounts = []
+
+    def make(size_kb: int) -> Path:
+        if os.geteuid() != 0 or shutil.which("mount") is None:
+            pytest.skip("a full-disk test needs root to mount a tmpfs")
+        where = tmp_path / f"disk-{uuid.uuid4().hex[:8]}"
+        where.mkdir()
+        proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={int(size_kb)}k", "tmpfs", str(where)],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
+        mounts.append(where)
+        return where
+
+    yield make
+    for where in mounts:
+        with contextlib.suppress(Exception):
+            subprocess.run(["umount", "-l", str(where)], capture_output=True)
