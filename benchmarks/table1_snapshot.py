@@ -1,0 +1,144 @@
+"""Snapshot of every indicator of Table 1's 16 runs, both models, every preset, and their errors.
+
+A before/after check for changes that must not move the physics (issue 14): run it on two
+commits and compare the JSON files.
+
+    .venv/bin/python benchmarks/table1_snapshot.py -o before.json [--errors]
+    .venv/bin/python benchmarks/table1_snapshot.py --compare before.json after.json
+
+Per (model, preset, run): every numeric indicator and the event times (s). The elastic model runs
+twice: the default physical gap and the closed gap of the paper's Table 3. ``--errors`` adds each
+preset's errors against the reference solution (models.dynamics.accuracy.compare against
+reference_run: DOP853 at rtol 1e-12), the figures of accuracy.MEASURED (a few minutes).
+The compare mode prints, per model and preset, the largest change of each indicator relative to
+the preset's stated accuracy (accuracy.STATED, relative to the indicator's own size; counts and
+event numbers must be equal).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pathlib
+import sys
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+
+CASES = (("rigid", "physical"), ("elastic", "physical"), ("elastic", "closed"))
+PRESETS = ("fast", "standard", "reference")
+COUNTS = ("jumps", "impacts", "liftoffs", "settles", "separations", "n_events")
+
+
+def _event_times(ds):
+    try:                                             # the one event record (issue 14)
+        from models.dynamics import events
+        return [float(t) for t in events.read(ds)["event_time"].values]
+    except ImportError:                              # before it: two formats
+        from models.dynamics import accuracy
+        return [float(t) for t in accuracy.event_times(ds)]
+
+
+def _scene(run, gap, preset):
+    from models.dynamics.scene import Scene
+    return Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
+                 omega1_mode="var", accuracy=preset, elastic_gap=gap)
+
+
+def snapshot(errors: bool) -> dict:
+    from models.dynamics import accuracy
+    from models.dynamics.simulate import simulate
+    from models.study.paper import table1_runs
+
+    out = {}
+    for model, gap in CASES:
+        refs = {}
+        for preset in PRESETS:
+            rows = []
+            for run in table1_runs().itertuples():
+                scene = _scene(run, gap, preset)
+                t0 = time.perf_counter()
+                res = simulate(scene, model)
+                wall = time.perf_counter() - t0
+                ind = {k: (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)
+                       for k, v in res.indicators.items() if isinstance(v, (int, float, type(None)))}
+                row = dict(run=int(run.run), wall_s=wall, indicators=ind, event_times=_event_times(res.dataset))
+                if errors and model == "rigid" or errors and gap == "physical":
+                    if run.run not in refs:
+                        refs[run.run] = accuracy.reference_run(scene, model)
+                    row["errors"] = accuracy.compare(res, refs[run.run])
+                rows.append(row)
+                print(f"{model}/{gap}/{preset} run {run.run}: {wall:.3f} s", file=sys.stderr)
+            out[f"{model}/{gap}/{preset}"] = rows
+    return out
+
+
+def _rel(a, b, scale):
+    if a is None or b is None:
+        return 0.0 if a is b else math.inf
+    return abs(a - b) / max(abs(scale), 1e-12)
+
+
+def compare(before: dict, after: dict) -> None:
+    from models.dynamics import accuracy
+
+    print(f"{'case':28s} {'indicator':22s} {'max change':>12s} {'stated':>8s}  verdict")
+    for case, rows_a in before.items():
+        rows_b = after.get(case)
+        if rows_b is None:
+            print(f"{case:28s} missing after")
+            continue
+        model, _, preset = case.split("/")
+        stated = accuracy.STATED[model][preset]
+        keys = sorted(set(rows_a[0]["indicators"]) | set(rows_b[0]["indicators"]))
+        for key in keys:
+            worst, diff_counts = 0.0, 0
+            for ra, rb in zip(rows_a, rows_b):
+                a, b = ra["indicators"].get(key), rb["indicators"].get(key)
+                if not isinstance(a, (int, float, type(None))) or not isinstance(b, (int, float, type(None))):
+                    continue
+                if key in COUNTS:
+                    diff_counts += int(a != b)
+                    continue
+                scale = max(abs(ra["indicators"].get("MR13D_max_Nm") or 0), abs(ra["indicators"].get("MR13D_min_Nm") or 0)) \
+                    if key.startswith("MR13D") else (a if a else 1.0)
+                worst = max(worst, _rel(a, b, scale))
+            if key in COUNTS:
+                print(f"{case:28s} {key:22s} {diff_counts:>9d} runs {'':>8s}  {'same' if diff_counts == 0 else 'DIFFERENT'}")
+            elif worst > 0 or True:
+                verdict = "identical" if worst == 0 else ("within" if worst <= stated else "OUTSIDE")
+                print(f"{case:28s} {key:22s} {worst:12.2e} {stated:8.0e}  {verdict}")
+        n_ev = sum(len(ra["event_times"]) != len(rb["event_times"]) for ra, rb in zip(rows_a, rows_b))
+        dt = max((abs(x - y) for ra, rb in zip(rows_a, rows_b) if len(ra["event_times"]) == len(rb["event_times"])
+                  for x, y in zip(ra["event_times"], rb["event_times"])), default=0.0)
+        print(f"{case:28s} {'event times':22s} {dt:12.2e} {'s':>8s}  {n_ev} runs with another event count")
+        if "errors" in rows_a[0] and "errors" in rows_b[0]:
+            for key in ("err_omega2", "err_MR13D", "err_event_time", "d_events", "err_indicators"):
+                ea = max(r["errors"][key] for r in rows_a)
+                eb = max(r["errors"][key] for r in rows_b)
+                print(f"{case:28s} {'preset ' + key:22s} {ea:12.2e} -> {eb:.2e}")
+        wa = sum(r["wall_s"] for r in rows_a)
+        wb = sum(r["wall_s"] for r in rows_b)
+        print(f"{case:28s} {'wall, 16 runs':22s} {wa:10.3f} s -> {wb:.3f} s (noisy: same-run ratios only)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("-o", "--output", type=pathlib.Path)
+    ap.add_argument("--errors", action="store_true", help="also the presets' errors against the reference")
+    ap.add_argument("--compare", nargs=2, type=pathlib.Path, metavar=("BEFORE", "AFTER"))
+    args = ap.parse_args(argv)
+    if args.compare:
+        compare(*(json.loads(p.read_text()) for p in args.compare))
+        return 0
+    data = snapshot(args.errors)
+    text = json.dumps(data, indent=1)
+    if args.output:
+        args.output.write_text(text)
+    else:
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
