@@ -18,7 +18,7 @@ Time in s, states in the caller's units; tolerances as in scipy (scale = atol + 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from models.dynamics.jit import jit
 
 A = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0],
@@ -54,7 +54,7 @@ STATUS_TEXT = {
 }
 
 
-@njit(cache=True)
+@jit
 def stage_state(y, h, K, coeffs, n_stages, out):
     """out = y + h * sum_{j < n_stages} coeffs[j] K[j]."""
     for i in range(y.size):
@@ -64,7 +64,7 @@ def stage_state(y, h, K, coeffs, n_stages, out):
         out[i] = y[i] + h * acc
 
 
-@njit(cache=True)
+@jit
 def error_norm(K, h, y, y_new, rtol, atol):
     """scipy's RMS error norm of the embedded 4th-order estimate (atol: array per component)."""
     acc = 0.0
@@ -79,7 +79,7 @@ def error_norm(K, h, y, y_new, rtol, atol):
     return np.sqrt(acc / n)
 
 
-@njit(cache=True)
+@jit
 def dense_coeffs(K, out):
     """out (n, 4) = K.T @ P: the dense-output polynomial of the step just taken."""
     n = out.shape[0]
@@ -91,14 +91,14 @@ def dense_coeffs(K, out):
             out[i, c] = acc
 
 
-@njit(cache=True)
+@jit
 def dense_eval(y0, h, Q, s, out):
     """out = y(t0 + s h) from the step's start y0 and coefficients Q (s in [0, 1])."""
     for i in range(y0.size):
         out[i] = y0[i] + h * s * (Q[i, 0] + s * (Q[i, 1] + s * (Q[i, 2] + s * Q[i, 3])))
 
 
-@njit(cache=True)
+@jit
 def new_step_factor(err, rejected):
     """Step-size factor after a step with error norm ``err`` (scipy's controller)."""
     if err < 1.0:
@@ -112,7 +112,7 @@ def new_step_factor(err, rejected):
     return max(MIN_FACTOR, SAFETY * err ** ERROR_EXPONENT)
 
 
-@njit(cache=True)
+@jit
 def grow(a, n_new):
     """A copy of ``a`` with its first axis enlarged to n_new (the step store doubles as it fills)."""
     b = np.empty((n_new,) + a.shape[1:], dtype=a.dtype)
@@ -120,7 +120,7 @@ def grow(a, n_new):
     return b
 
 
-@njit(cache=True)
+@jit
 def rms(v, scale):
     acc = 0.0
     for i in range(v.size):

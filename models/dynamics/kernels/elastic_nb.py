@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from models.dynamics.jit import jit
 
 from common.errors import SolverError
 from models.dynamics.kernels import dopri5 as dp
@@ -32,7 +32,7 @@ MAX_STEPS = 2_000_000       # accepted steps per run (memory ~100 B a step)
 MAX_SEGMENTS = 1_000_000    # phases per run
 
 
-@njit(cache=True)
+@jit
 def _interp_uniform(t, tg, yg):
     """np.interp on an increasing grid tg (nearly uniform: one guess, then a short walk)."""
     n = tg.size
@@ -50,7 +50,7 @@ def _interp_uniform(t, tg, yg):
     return yg[i] + w * (yg[i + 1] - yg[i])
 
 
-@njit(cache=True)
+@jit
 def force(x, v, phase, kc, gap, damping):
     """Groove-on-follower normal force along +x (N); models.dynamics.elastic.normal_force."""
     if phase == INTERIOR:
@@ -67,7 +67,7 @@ def force(x, v, phase, kc, gap, damping):
     return sign * f
 
 
-@njit(cache=True)
+@jit
 def rhs(t, y, phase, tg, drive, mg, kc, gap, damping, out):
     d = _interp_uniform(t, tg, drive)
     m = _interp_uniform(t, tg, mg)
@@ -75,12 +75,12 @@ def rhs(t, y, phase, tg, drive, mg, kc, gap, damping, out):
     out[1] = (force(y[0], y[1], phase, kc, gap, damping) - d) / m
 
 
-@njit(cache=True)
+@jit
 def _event_value(which, y, gap):
     return y[0] if which == 0 else y[0] - gap
 
 
-@njit(cache=True)
+@jit
 def _active(g0, g1, direction):
     up = g0 <= 0.0 and g1 >= 0.0
     down = g0 >= 0.0 and g1 <= 0.0
@@ -90,7 +90,7 @@ def _active(g0, g1, direction):
 NSUB = 8    # sign checks per step (models.dynamics.elastic.EVENT_SUBSTEPS)
 
 
-@njit(cache=True)
+@jit
 def _bisect(which, gap, y0, h, Q, lo, hi, g_lo, tmp):
     """Step fraction in (lo, hi] where the event changes sign, by bisection on the dense output."""
     for _ in range(60):
@@ -106,7 +106,7 @@ def _bisect(which, gap, y0, h, Q, lo, hi, g_lo, tmp):
     return hi
 
 
-@njit(cache=True)
+@jit
 def _crossing(which, direction, gap, y0, h, Q, g0, g1, nsub, tmp):
     """First step fraction s in (0, 1] where the event changes sign in its direction, 2.0 if none.
 
@@ -128,7 +128,7 @@ def _crossing(which, direction, gap, y0, h, Q, g0, g1, nsub, tmp):
     return 2.0
 
 
-@njit(cache=True)
+@jit
 def _first_step(t0, y0, f0, t_bound, max_step, rtol, atol, phase, tg, drive, mg, kc, gap, damping):
     """scipy's initial step selection (Hairer, Norsett & Wanner II.4), order 4."""
     n = y0.size
@@ -148,7 +148,7 @@ def _first_step(t0, y0, f0, t_bound, max_step, rtol, atol, phase, tg, drive, mg,
     return min(100.0 * h0, h1, t_bound - t0, max_step)
 
 
-@njit(cache=True)
+@jit
 def run(tg, drive, mg, kc, gap, damping, t_end, x0, v0, phase0, rtol, atol, max_step,
         max_steps, max_segments, zeno_segments, zeno_dt, nudge, nsub):
     """The phase-by-phase loop. Returns (status, t_fail, n_steps, n_seg, nfev, step arrays,

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from models.dynamics.jit import jit
 
 from common.errors import SolverError
 from models.dynamics.kernels import dopri5 as dp
@@ -39,7 +39,7 @@ I_PHI20, I_JT, I_JCAM, I_INVJ, I_CONST, I_M0, I_M1, I_FU, I_J, I_K = range(10)
 N_EVCOLS = 14   # time, phi1, kind, flank, v_b, v_a, P, w1b, w1a, w2b, w2a, phi2, Eb, Ea
 
 
-@njit(cache=True)
+@jit
 def _cell(nodes, x):
     """Index of the cell [nodes[i], nodes[i+1]) that holds x, clipped to the table (binary search)."""
     n = nodes.size
@@ -57,7 +57,7 @@ def _cell(nodes, x):
     return lo
 
 
-@njit(cache=True)
+@jit
 def interp(nodes, inv_h, coef, x, out):
     """All columns of a piecewise-cubic table at x (models.dynamics.rigid.interp)."""
     i = _cell(nodes, x)
@@ -66,7 +66,7 @@ def interp(nodes, inv_h, coef, x, out):
         out[c] = coef[c, i, 0] + t * (coef[c, i, 1] + t * (coef[c, i, 2] + t * coef[c, i, 3]))
 
 
-@njit(cache=True)
+@jit
 def contact_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, flank, w1, w2, res):
     """res = (eps1, phi2, omega2, eps2, MR13D, lam, qc, A2, psi') on ``flank`` (models.dynamics.rigid.contact_terms)."""
     interp(n1, h1, c1, phi1, w1)
@@ -96,7 +96,7 @@ def contact_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, flank, w1, w2, res):
     res[5], res[6], res[7], res[8] = MR / A2, qc, A2, d1
 
 
-@njit(cache=True)
+@jit
 def free_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, q, omega2, w1, w2, res):
     """res = (eps1, dq/dt, eps2, g, phi2, A2, psi', A2') in the gap (models.dynamics.rigid.free_terms)."""
     interp(n1, h1, c1, phi1, w1)
@@ -110,7 +110,7 @@ def free_terms(n1, h1, c1, n2, h2, c2, p, phi1, omega1, q, omega2, w1, w2, res):
     res[4], res[5], res[6], res[7] = phi2, A2, d1, dA2
 
 
-@njit(cache=True)
+@jit
 def _rhs(mode, flank, y, out, n1, h1, c1, n2, h2, c2, p, w1, w2, res):
     if mode == CONTACT_MODE:
         contact_terms(n1, h1, c1, n2, h2, c2, p, y[0], y[1], flank, w1, w2, res)
@@ -124,7 +124,7 @@ def _rhs(mode, flank, y, out, n1, h1, c1, n2, h2, c2, p, w1, w2, res):
         out[3] = res[2]
 
 
-@njit(cache=True)
+@jit
 def _event(which, mode, flank, left, t, t0, v0, y, phi1_end, n1, h1, c1, n2, h2, c2, p, w1, w2, res):
     """Event functions. which 0: end of the cam angle; contact 1: flank force; free 1: inner gap,
     free 2: outer gap (divided by t - t0 on the flank just left)."""
@@ -141,7 +141,7 @@ def _event(which, mode, flank, left, t, t0, v0, y, phi1_end, n1, h1, c1, n2, h2,
     return g / (t - t0) if t > t0 else v0
 
 
-@njit(cache=True)
+@jit
 def _impact(omega1, omega2, G1, G2, inv_Jcam, Jf, k):
     """models.dynamics.impact.impact: (omega1+, omega2+, P N s, v_n- m/s, v_n+ m/s)."""
     vb = G2 * omega2 - G1 * omega1
@@ -149,7 +149,7 @@ def _impact(omega1, omega2, G1, G2, inv_Jcam, Jf, k):
     return omega1 - P * G1 * inv_Jcam, omega2 + P * G2 / Jf, P, vb, -k * vb
 
 
-@njit(cache=True)
+@jit
 def run(n1, h1, c1, n2, h2, c2, p, phi1_end, omega1_0, rtol, max_step, t_max, v_settle, max_events,
         max_steps, start_mode, start_flank, s_phi1, s_omega1, s_q, s_omega2, t_start):
     """The event-driven loop (models.dynamics.rigid.integrate). Returns status, t at failure, counts, steps,

@@ -1,0 +1,141 @@
+"""``jit``: numba's ``njit(cache=True)`` with an on-disk cache that cannot go stale.
+
+numba keys a cached function on the source of its own file only. A compiled loop inlines the
+functions it calls from other files (the Dormand-Prince driver, the contact law, a model's
+equations), so an edit there, or an upgrade of labtool, would leave the loop running the old code
+from the cache (issue 14: SAFETY in the driver changed from 0.9 to 0.5 and the elastic loop kept
+the old controller). Here every cached function of labtool's models is stamped with one hash of
+the source of every module that compiled code can reach: the modules that import this one and,
+transitively, the first-party modules they import (``KERNEL_SOURCES``), plus the versions of
+numba and llvmlite. A change to any of them invalidates every cached entry at its next load
+(numba compares the stamp stored in each index file and recompiles on a mismatch).
+
+The cache directory is numba's usual choice (``NUMBA_CACHE_DIR`` if set, else ``__pycache__``
+beside the source, else the user-wide cache); only the stamp changes. Where numba's cache machinery
+is not the one this was written against, caching is off (always correct, slower first calls):
+``CACHING`` says which.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from pathlib import Path
+
+import numba
+from numba import njit
+
+_ROOT = Path(__file__).resolve().parents[2]          # the tree that holds models/ and common/
+_THIS = "models.dynamics.jit"
+_IMPORT = re.compile(r"^\s*(?:from\s+((?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)|import\s+((?:models|common)(?:\.\w+)*))",
+                     re.MULTILINE)
+
+
+def _module_file(name: str) -> Path | None:
+    base = _ROOT.joinpath(*name.split("."))
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _first_party_imports(text: str) -> set[str]:
+    out = set()
+    for m in _IMPORT.finditer(text):
+        if m.group(3):
+            out.add(m.group(3))
+            continue
+        out.add(m.group(1))
+        for name in re.split(r"[\s,()]+", m.group(2)):     # 'from models.dynamics import contact'
+            if name:
+                out.add(f"{m.group(1)}.{name}")
+    return out
+
+
+def kernel_sources() -> list[Path]:
+    """Every source file compiled code can reach (sorted): the modules under models/ that import
+    this one, and the first-party modules they import, transitively."""
+    seeds = [p for p in sorted((_ROOT / "models").rglob("*.py")) if _THIS in p.read_text(encoding="utf-8")]
+    seen, todo = set(), list(seeds)
+    while todo:
+        path = todo.pop()
+        if path in seen:
+            continue
+        seen.add(path)
+        for name in _first_party_imports(path.read_text(encoding="utf-8")):
+            found = _module_file(name)
+            if found is not None and found not in seen:
+                todo.append(found)
+    return sorted(seen)
+
+
+def _source_hash() -> str:
+    import llvmlite
+
+    h = hashlib.sha256(f"numba {numba.__version__} llvmlite {llvmlite.__version__}".encode())
+    for path in kernel_sources():
+        h.update(str(path.relative_to(_ROOT)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+KERNEL_SOURCES_HASH = _source_hash()
+
+
+def _install_locator() -> bool:
+    """Put the stamping locator first in numba's list; False if numba's internals differ."""
+    try:
+        from numba.core import caching
+        impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl      # numba >= 0.61 / before
+        base = caching._CacheLocator
+        inner_classes = list(impl._locator_classes)
+    except (ImportError, AttributeError):
+        return False
+    if any(getattr(c, "_labtool", False) for c in inner_classes):
+        return True
+
+    class KernelSourceLocator(base):
+        """numba's own locator for the file, with the stamp extended by KERNEL_SOURCES_HASH."""
+
+        _labtool = True
+
+        def __init__(self, inner):
+            self._inner = inner
+
+        def ensure_cache_path(self):
+            self._inner.ensure_cache_path()
+
+        def get_cache_path(self):
+            return self._inner.get_cache_path()
+
+        def get_source_stamp(self):
+            return (self._inner.get_source_stamp(), KERNEL_SOURCES_HASH)
+
+        def get_disambiguator(self):
+            return self._inner.get_disambiguator()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                Path(py_file).resolve().relative_to(_ROOT / "models")
+            except (ValueError, OSError):
+                return None                           # not labtool's: numba's own locators decide
+            for inner_cls in inner_classes:
+                inner = inner_cls.from_function(py_func, py_file)
+                if inner is not None:
+                    return cls(inner)
+            return None
+
+    impl._locator_classes.insert(0, KernelSourceLocator)
+    return True
+
+
+CACHING = not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES") and _install_locator()
+
+
+def jit(fn=None, **options):
+    """``numba.njit`` with the on-disk cache (stamped as above) when CACHING, else without."""
+    options.setdefault("cache", CACHING)
+    if fn is None:
+        return njit(**options)
+    return njit(**options)(fn)
