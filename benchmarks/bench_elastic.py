@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from models.dynamics.elastic import compare_table3
+from models.study.paper import compare_table3
 from models.study.paper import read_reference, table1_runs
 from models.dynamics.scene import Scene
 from models.dynamics.simulate import simulate

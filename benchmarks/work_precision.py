@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import functools
 import json
 import math
 import os
@@ -78,9 +77,8 @@ def timed(fn, repeat=1):
 
 def one(model, solver, rtol, preset_name, run, scene, ref, repeat):
     """One measurement row."""
-    from models.dynamics import accuracy
-    import importlib
-    mod = importlib.import_module(f"models.dynamics.{model}")
+    from models.dynamics import accuracy, elastic, rigid
+    mod = {"rigid": rigid, "elastic": elastic}[model]
     if preset_name is not None:
         sc = scene.replace(accuracy=preset_name)
         preset, loop = None, None
@@ -88,18 +86,15 @@ def one(model, solver, rtol, preset_name, run, scene, ref, repeat):
     else:
         sc = scene.replace(accuracy="standard")
         preset = accuracy.scaled_preset(mod.PRESETS["standard"], rtol=rtol)
-        if solver == "compiled":
-            loop = accuracy.integrator(model, "standard")
-        else:
-            method = solver.split("-")[1]
-            preset["method"] = method
-            loop = mod.integrate if model == "rigid" else functools.partial(mod.integrate, method=method)
+        loop = "compiled" if solver == "compiled" else "scipy"
+        if loop == "scipy":
+            preset["method"] = solver.split("-")[1]
         label = solver
     stats_box = {}
 
     def call():
         stats_box.clear()
-        return accuracy.run_model(sc, model, integrate=loop, preset=preset, stats=stats_box)
+        return accuracy.run_model(sc, model, solver=loop, preset=preset, stats=stats_box)
     res, wall = timed(call, repeat)
     err = accuracy.compare(res, ref)
     return dict(model=model, solver=label, rtol=(rtol if rtol is not None else mod.PRESETS[preset_name]["rtol"]),

@@ -6,7 +6,6 @@ summary.py render it. Nothing here draws or writes files.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import time
 from pathlib import Path
@@ -151,15 +150,9 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
 # --------------------------------------------------------------------------- simulations
 
 def model_available(name: str) -> bool:
-    """Whether the model level's module can be imported (rigid and elastic land separately)."""
+    """Whether labtool has the model level (models.dynamics.simulate.LEVELS)."""
     from models.dynamics.simulate import LEVELS
-    if name not in LEVELS:
-        return False
-    try:
-        importlib.import_module(LEVELS[name].split(":")[0])
-    except ModuleNotFoundError:
-        return False
-    return True
+    return name in LEVELS
 
 
 def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutions: float,
@@ -240,33 +233,18 @@ def _measured_events(ds: xr.Dataset, cycles: align.MeasuredCycles) -> dict:
 
 
 def predicted_events(sim: xr.Dataset) -> dict | None:
-    """Cam angles (rad, in [0, 2 pi)) of the impacts and of the jumps (contact losses) in the
-    simulation's last whole revolution: ``{"impacts": array, "jumps": array}``.
+    """Cam angles (rad, in [0, 2 pi)) of the impacts and of the jumps (flights) in the simulation's
+    last whole revolution: ``{"impacts": array, "jumps": array}``, from the dataset's event record
+    (models.dynamics.events: impacts = landings, jumps = flights, by lift-off or rebound). None when
+    the simulation records no events (kinematic level)."""
+    from models.dynamics import events
 
-    Rigid model: ``event_phi1`` by ``event_kind`` (flag meanings ``impact_*`` = impact; a jump, i.e. a
-    free flight, starts at a ``liftoff`` and after every ``impact_rebound``); elastic model: ``event_kinds``/``event_times_s`` (``leave_*`` = jump, ``land_*`` =
-    impact), mapped to phi1 through the simulation's own phi1(time). None when the simulation records
-    no events (kinematic level)."""
-    out = None
-    if "event_phi1" in sim and "event_kind" in sim:
-        meanings = str(sim["event_kind"].attrs.get("flag_meanings", "")).split()
-        values = list(np.atleast_1d(sim["event_kind"].attrs.get("flag_values", range(1, len(meanings) + 1))))
-        kinds = np.asarray(sim["event_kind"].values)
-        phi = np.asarray(sim["event_phi1"].values, dtype=float)
-        flags = lambda word: [v for v, m in zip(values, meanings) if word in m]   # noqa: E731
-        # a flight (jump) starts at a lift-off and again after every rebounding impact
-        out = {"impacts": phi[np.isin(kinds, flags("impact"))],
-               "jumps": phi[np.isin(kinds, flags("liftoff") + flags("rebound"))]}
-    elif "event_times_s" in sim.attrs and "event_kinds" in sim.attrs and "time" in sim.variables:
-        times = np.atleast_1d(np.asarray(sim.attrs["event_times_s"], dtype=float))
-        kinds = [k for k in str(sim.attrs["event_kinds"]).split(",") if k]
-        if len(kinds) != times.size:
-            return None
-        phi = np.interp(times, np.asarray(sim["time"].values, float), np.asarray(sim["phi1"].values, float))
-        out = {"impacts": phi[np.array([k.startswith("land") for k in kinds], dtype=bool)],
-               "jumps": phi[np.array([k.startswith("leave") for k in kinds], dtype=bool)]}
-    if out is None:
+    try:
+        ev = events.read(sim)
+    except FileFormatError:
         return None
+    phi = np.asarray(ev["event_phi1"].values, dtype=float)
+    out = {"impacts": phi[events.is_impact(ev)], "jumps": phi[events.is_flight(ev)]}
     top = float(np.nanmax(np.asarray(sim["phi1"].values, float)))
     k = max(int(math.floor(top / (2 * math.pi) + 1e-6)) - 1, 0)
     a = 2 * math.pi * k

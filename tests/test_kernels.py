@@ -1,14 +1,17 @@
-"""Compiled loops (models.dynamics.kernels): the same numerics as the scipy path, closed forms, caching."""
+"""The one compiled driver (models.dynamics.kernels.dopri5) and the scipy reference loop over the same
+compiled equations: closed forms, the same numerics, the same events, caching."""
 import math
 
 import numpy as np
 import pytest
 
-from models.dynamics import elastic, rigid
+from models.dynamics import elastic, events, rigid
 from models.dynamics.contact import contact_potential, contact_stiffness
-from models.dynamics.kernels import dopri5, elastic_nb, rigid_nb
-from models.study.paper import table1_runs
+from models.dynamics.kernels import dopri5
 from models.dynamics.scene import Scene
+from models.study.paper import table1_runs
+
+T, KIND, SIDE = events.COL_TIME, events.COL_KIND, events.COL_SIDE
 
 
 def _scene(run, **kw):
@@ -27,13 +30,14 @@ def test_tableau_is_dormand_prince():
     np.testing.assert_allclose(dopri5.P.sum(axis=1)[:6], dopri5.B, atol=1e-14)
 
 
-def test_free_flight_is_exact_parabola():
+@pytest.mark.parametrize("solver", ["compiled", "scipy"])
+def test_free_flight_is_exact_parabola(solver):
     # flight phase, constant drive d and mass m: x = x0 + v0 t - d t^2 / (2 m): 5th order is exact
     t = np.linspace(0.0, 1e-2, 5)
     d, m, gap = 2.0, 0.5, 1.0
-    segments, events = elastic_nb.integrate(t, np.full(5, d), np.full(5, m), 1e9, gap, y0=(0.5, 3.0, 1),
-                                            rtol=1e-10, atol=(1e-14, 1e-12), max_step=1e-3)
-    assert events == []
+    segments, rows = elastic.integrate(t, np.full(5, d), np.full(5, m), 1e9, gap, y0=(0.5, 3.0, 1),
+                                       rtol=1e-10, atol=(1e-14, 1e-12), max_step=1e-3, solver=solver)
+    assert rows.shape[0] == 0
     (phase, run), = segments
     tt = np.linspace(0.0, 1e-2, 37)
     x, v = run(tt)
@@ -46,9 +50,9 @@ def test_contact_energy_is_conserved_and_converges(step):
     # interior contact under a constant drive: E = m v^2/2 + U(-x) + d x is an invariant
     kc, m, d = contact_stiffness(6e-3), 0.3, 200.0
     t = np.linspace(0.0, 5e-3, 3)
-    segments, events = elastic_nb.integrate(t, np.full(3, d), np.full(3, m), kc, 1e-3, y0=(-1e-7, 0.0, 0),
-                                            rtol=1e-12, atol=(1e-18, 1e-14), max_step=step)
-    assert events == []                     # a loaded contact oscillates about its static deflection
+    segments, rows = elastic.integrate(t, np.full(3, d), np.full(3, m), kc, 1e-3, y0=(-1e-7, 0.0, 0),
+                                       rtol=1e-12, atol=(1e-18, 1e-14), max_step=step)
+    assert rows.shape[0] == 0               # a loaded contact oscillates about its static deflection
     (_, run), = segments
     tt = np.linspace(0.0, 5e-3, 400)
     x, v = run(tt)
@@ -57,50 +61,94 @@ def test_contact_energy_is_conserved_and_converges(step):
 
 
 @pytest.mark.parametrize("run", [1, 6, 11])
-def test_elastic_kernel_is_the_scipy_loop(run):
+def test_elastic_compiled_loop_is_scipy_rk45_on_the_same_equations(run):
     s = _scene(run)
     tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
     kc = contact_stiffness(s.contact_length)
     kw = dict(rtol=1e-8, atol=(1e-13, 1e-9), max_step=5e-5)
-    seg_a, ev_a = elastic.integrate(tab.t, tab.R31, tab.M, kc, s.backlash, **kw)
-    seg_b, ev_b = elastic_nb.integrate(tab.t, tab.R31, tab.M, kc, s.backlash, **kw)
-    assert [e["kind"] for e in ev_a] == [e["kind"] for e in ev_b]
-    # equal to rounding: np.interp vs the compiled interpolation differ in the last bits, which
-    # the event locations and step sizes carry forward (1e-10 s << the solver's own error, 1e-7 s)
-    np.testing.assert_allclose([e["t"] for e in ev_a], [e["t"] for e in ev_b], rtol=0, atol=1e-10)
+    seg_a, ev_a = elastic.integrate(tab.t, tab.R31, tab.M, kc, s.backlash, solver="scipy", method="RK45", **kw)
+    seg_b, ev_b = elastic.integrate(tab.t, tab.R31, tab.M, kc, s.backlash, **kw)
+    np.testing.assert_array_equal(ev_a[:, [KIND, SIDE]], ev_b[:, [KIND, SIDE]])
+    # equal to rounding: brentq and the bisection locate the events to 1e-15 s, and the step
+    # sequences then carry the last bits forward (1e-10 s << the solver's own error, 1e-7 s)
+    np.testing.assert_allclose(ev_a[:, T], ev_b[:, T], rtol=0, atol=1e-10)
     # the same steps (same controller) and the same dense output
     for (pa, sa), (pb, sb) in zip(seg_a, seg_b):
         assert pa == pb
         assert sa.t.size == sb.t.size
         np.testing.assert_allclose(sa.t, sb.t, rtol=0, atol=1e-10)
         tt = np.linspace(sa.t[0], sa.t[-1], 50)
-        np.testing.assert_allclose(sa.sol(tt)[0], sb.sol(tt)[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(sa(tt)[0], sb(tt)[0], rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("run", [1, 12, 16])
-def test_rigid_kernel_is_the_scipy_loop(run):
+def test_rigid_compiled_loop_is_scipy_rk45_on_the_same_equations(run):
     s = _scene(run)
-    P, _ = rigid.build_plant(s)
-    span = rigid.simulated_span(s)
-    w0 = (P.m0 + float(rigid.interp(P.tab1, 0.0)[6])) / P.m1
+    model, _ = rigid.build_model(s)
+    w0 = rigid.start_speed(s, model)
     preset = rigid.PRESETS["fast"]
-    ph_a, ev_a = rigid.integrate(P, span, w0, preset, s.program.rise_angle / w0)
-    ph_b, ev_b = rigid_nb.integrate(P, span, w0, preset, s.program.rise_angle / w0)
-    assert [(e["kind"], e["flank"]) for e in ev_a] == [(e["kind"], e["flank"]) for e in ev_b]
-    for key, atol in (("time", 1e-12), ("percussion", 1e-9), ("omega2_after", 1e-8)):
-        np.testing.assert_allclose([e[key] for e in ev_a], [e[key] for e in ev_b], rtol=0, atol=atol)
+    ph_a, ev_a = rigid.integrate(model, w0, preset, s.program.rise_angle / w0, solver="scipy")
+    ph_b, ev_b = rigid.integrate(model, w0, preset, s.program.rise_angle / w0)
+    np.testing.assert_array_equal(ev_a[:, [KIND, SIDE]], ev_b[:, [KIND, SIDE]])
+    for col, atol in ((T, 1e-12), (events.COL_PERCUSSION, 1e-9), (rigid.eq.COL_OMEGA2_AFTER, 1e-8)):
+        np.testing.assert_allclose(ev_a[:, col], ev_b[:, col], rtol=0, atol=atol)
     assert [(p.kind, p.flank) for p in ph_a] == [(p.kind, p.flank) for p in ph_b]
     tt = np.linspace(ph_a[-1].t0, ph_a[-1].t1, 20)
     np.testing.assert_allclose(ph_a[-1].sol(tt), ph_b[-1].sol(tt), rtol=1e-10, atol=1e-12)
 
 
+def _event_list(result):
+    ev = events.read(result.dataset)
+    return list(zip(ev["event_kind"].values, ev["event_side"].values)), ev["event_time"].values
+
+
+MICRO_BOUNCE = dict(law="sine", cam_speed_rpm=408.0, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
+                    contact_length=0.009765625, contact_damping=1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model, kw", [
+    ("elastic", MICRO_BOUNCE),                       # tests/test_elastic.py: the micro-bounce case
+    ("elastic", dict(run=1)), ("elastic", dict(run=6)), ("elastic", dict(run=11)),
+    ("rigid", dict(run=1)), ("rigid", dict(run=12)), ("rigid", dict(run=16)),
+])
+def test_compiled_and_reference_loops_give_the_same_events(model, kw):
+    """The compiled loop (standard) and the independent reference (scipy DOP853 at the reference
+    preset) on the same compiled equations: the same events, at times within the standard preset's
+    measured error (models.dynamics.accuracy) times 10."""
+    from models.dynamics import accuracy
+    from models.dynamics.simulate import simulate
+
+    kw = dict(kw)
+    scene = _scene(kw.pop("run")) if "run" in kw else Scene(**kw)
+    a = _event_list(simulate(scene.replace(accuracy="standard"), model))
+    b = _event_list(simulate(scene.replace(accuracy="reference"), model))
+    assert a[0] == b[0] and len(a[0]) > 0
+    tol = 10 * accuracy.MEASURED[model]["standard"]["err_event_time"]
+    np.testing.assert_allclose(a[1], b[1], rtol=0, atol=max(tol, 1e-9))
+
+
+@pytest.mark.parametrize("solver", ["compiled", "scipy"])
+def test_unloaded_start_gives_no_events_in_either_loop(solver):
+    """R31(0) = 0 (zero, then a ramp): both loops start at rest against the flank the ramp loads and
+    record no event (the compiled copy once lacked the at-rest prefix: 2 events at 0.41 and 1.01 ms)."""
+    t = np.linspace(0.0, 5e-3, 11)
+    kc = contact_stiffness(6e-3)
+    for sign in (1.0, -1.0):
+        drive = sign * np.maximum(t - 1e-3, 0.0) * 1e4
+        segs, rows = elastic.integrate(t, drive, np.full(11, 2.0), kc, gap=16e-6, rtol=1e-9, atol=(1e-15, 1e-11),
+                                       max_step=2e-5, solver=solver, method="DOP853" if solver == "scipy" else "RK45")
+        assert rows.shape[0] == 0
+        assert segs[0][0] == (elastic.INTERIOR if sign > 0 else elastic.EXTERIOR)
+        assert isinstance(segs[0][1], elastic.AtRest) and segs[0][1].t[-1] == pytest.approx(1e-3)   # the last instant before the drive departs from 0
+
+
 def test_dense_output_is_continuous_across_steps():
     s = _scene(5)
     tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
-    segs, _ = elastic_nb.integrate(tab.t, tab.R31, tab.M, contact_stiffness(s.contact_length), s.backlash,
-                                   max_step=5e-5)
+    segs, _ = elastic.integrate(tab.t, tab.R31, tab.M, contact_stiffness(s.contact_length), s.backlash, max_step=5e-5)
     for _, run in segs:
-        if run.t0s.size < 2:
+        if not isinstance(run, dopri5.DenseRun) or run.t0s.size < 2:
             continue
         # each step's polynomial at s = 1 is the next step's start
         ends = run.y0s[:-1] + run.hs[:-1, None] * run.Qs[:-1].sum(axis=2)
@@ -108,7 +156,9 @@ def test_dense_output_is_continuous_across_steps():
 
 
 def test_kernels_are_compiled_with_an_on_disk_cache():
-    for fn in (rigid_nb.run, elastic_nb.run, dopri5.error_norm):
+    from models.dynamics.jit import CACHING
+    assert CACHING
+    for fn in (dopri5.run, dopri5.error_norm, rigid.eq.contact_terms, elastic.eq.rhs):
         assert fn._cache.__class__.__name__ == "FunctionCache", fn
 
 
@@ -116,15 +166,15 @@ def test_start_on_a_flank_at_a_later_time_continues_the_run():
     # the escalation in time of models.dynamics.auto: restarting the contact run from its own state later
     # gives the same run
     s = _scene(1)
-    P, _ = rigid.build_plant(s)
-    P0 = rigid.dataclasses.replace(P, j=0.0)
-    w0 = (P.m0 + float(rigid.interp(P.tab1, 0.0)[6])) / P.m1
+    model, _ = rigid.build_model(s)
+    model0 = model._replace(j=0.0, phi1_end=0.9)
+    w0 = rigid.start_speed(s, model)
     tr = s.program.rise_angle / w0
     preset = rigid.PRESETS["standard"]
-    ph, _ = rigid_nb.integrate(P0, 0.9, w0, preset, tr)
+    ph, _ = rigid.integrate(model0, w0, preset, tr)
     t_a = 0.3 * ph[0].t1
     phi1, omega1 = ph[0].sol(t_a)
-    ph2, _ = rigid_nb.integrate(P0, 0.9, w0, preset, tr, start=("contact", phi1, omega1, rigid.INNER), t_start=t_a)
+    ph2, _ = rigid.integrate(model0, w0, preset, tr, start=("contact", phi1, omega1, rigid.INNER), t_start=t_a)
     assert ph2[0].t0 == t_a and ph2[-1].t1 == pytest.approx(ph[0].t1, abs=1e-12)
     tt = np.linspace(t_a, ph[0].t1, 30)
     np.testing.assert_allclose(ph2[0].sol(tt), ph[0].sol(tt), rtol=1e-9)

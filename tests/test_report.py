@@ -332,23 +332,19 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
 
 
 def test_predicted_events_of_the_last_revolution():
-    """Rigid-style events (flags) and elastic-style events (kinds + times) in the last revolution."""
+    """The report reads the one event record (models.dynamics.events): landings are impacts, every
+    separation begins a flight (a jump), in the last whole revolution only."""
     import xarray as xr
+    from models.dynamics import events
     two = 2 * math.pi
-    rigid = xr.Dataset(
-        {"phi1": ("time", np.linspace(0, 2 * two, 50)),
-         "event_phi1": ("event", np.array([0.5, 1.0, two + 0.3, two + 0.4, two + 0.9])),
-         "event_kind": ("event", np.array([1, 2, 1, 2, 3], dtype="int8"),
-                        {"flag_values": np.array([1, 2, 3], dtype="int8"),
-                         "flag_meanings": "liftoff impact_rebound impact_settle"})},
-        coords={"time": np.linspace(0, 1, 50)})
-    ev = pipeline.predicted_events(rigid)
+    phi = np.array([0.5, 1.0, 1.0, two + 0.3, two + 0.4, two + 0.4, two + 0.9])
+    kind = ["separation", "contact", "separation", "separation", "contact", "separation", "contact"]
+    side = ["interior", "exterior", "exterior", "interior", "exterior", "exterior", "interior"]
+    n = phi.size
+    record = events.record(phi / two, phi, kind, side, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool))
+    sim = xr.Dataset({"phi1": ("time", np.linspace(0, 2 * two, 50)), **record}, coords={"time": np.linspace(0, 2, 50)})
+    ev = pipeline.predicted_events(sim)
     assert np.allclose(ev["impacts"], [0.4, 0.9]) and np.allclose(ev["jumps"], [0.3, 0.4])
-    t = np.linspace(0, 2, 101)
-    elastic = xr.Dataset({"phi1": ("time", two * t)}, coords={"time": t},
-                         attrs={"event_times_s": np.array([0.1, 1.05, 1.25]), "event_kinds": "leave_interior,leave_exterior,land_exterior"})
-    ev = pipeline.predicted_events(elastic)
-    assert np.allclose(ev["jumps"], [two * 0.05]) and np.allclose(ev["impacts"], [two * 0.25])
     assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
 
 

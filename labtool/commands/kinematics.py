@@ -1,13 +1,13 @@
 """``labtool kinematics``: kinematic analysis of the paper's mechanism at constant cam speed."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from common.files import check_output_path, write_netcdf
+from common.units import DEG
 
 
 def register(app: typer.Typer) -> None:
@@ -41,8 +41,8 @@ def kinematics(
         if path is not None:
             check_output_path(path, force)
     mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
-    mech = mech.replace(psi_a=math.radians(stroke_deg)) if stroke_deg != 15.0 else mech
-    program = CamProgram.for_mechanism(mech, law=law, rise=math.radians(rise_deg), stroke=mech.psi_a)
+    mech = mech.replace(psi_a=stroke_deg * DEG) if stroke_deg != 15.0 else mech
+    program = CamProgram.for_mechanism(mech, law=law, rise=rise_deg * DEG, stroke=mech.psi_a)
     ds = analyze(mech, program, rpm, fu, jt_factor, n_points=points)
     s = rise_summary(ds)
     cut = undercut(mech, program)
@@ -70,6 +70,12 @@ def kinematics(
         n = export_groove_csv(groove_csv, mech, program)
         typer.echo(f"wrote {groove_csv} ({n} points, mm)")
     if output is not None:
-        ds.attrs["history"] = f"labtool kinematics --law {law} --rpm {rpm} --fu {fu} --jt-factor {jt_factor}"
+        from models.dynamics.provenance import labtool_version, mechanism_attributes
+
+        ds.attrs.update(mechanism_attributes(mech), labtool_version=labtool_version(), points=points)
+        ds.attrs["history"] = " ".join([
+            f"labtool kinematics --law {law} --rpm {rpm!r} --fu {fu!r} --jt-factor {jt_factor!r}",
+            f"--rise-deg {rise_deg!r} --stroke-deg {stroke_deg!r} --points {points}",
+            *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
         write_netcdf(ds, output)
         typer.echo(f"wrote {output}")

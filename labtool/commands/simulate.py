@@ -2,7 +2,10 @@
 
 Dispatches through ``models.dynamics.simulate.simulate(scene, model)``; prints the paper's indicators as a
 table, or with ``--json`` one JSON object (DESIGN.md: the indicator keys of Tables 2-3, then
-``model``, ``accuracy``, ``wall_s``); writes the time series as NetCDF with ``-o``.
+``model``, ``accuracy``, ``wall_s``); prints the model's validity warnings on stderr
+(``labtool: warning: ...``); writes the time series as NetCDF with ``-o``, with the whole scene,
+the mechanism's source and labtool's version among its attributes (models.dynamics.provenance) and
+the command line in ``history``.
 """
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ from typing import Optional
 import typer
 
 from common.files import check_output_path, write_netcdf
+from common.units import MM
 
 
 def register(app: typer.Typer) -> None:
@@ -47,6 +51,7 @@ def simulate(
                                                      "crosses the gap j) or closed (no gap: the convention of the paper's Table 3)"),
     rise_only: bool = typer.Option(True, "--rise-only/--full-cycle",
                                    help="simulate the rise only (as the paper's tables) or whole revolutions"),
+    mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
     as_json: bool = typer.Option(False, "--json", help="print the indicators as one JSON object on stdout"),
     force: bool = typer.Option(False, help="overwrite an existing output file"),
@@ -56,6 +61,7 @@ def simulate(
     from models.dynamics.scene import Scene
     from models.dynamics.simulate import INDICATORS
     from models.dynamics.simulate import simulate as run
+    from models.mechanism import Mechanism
 
     if output is not None:
         check_output_path(output, force)
@@ -65,15 +71,14 @@ def simulate(
                         ("--contact-damping", contact_damping)):
         if not math.isfinite(value):
             raise InputError(f"{name} must be a finite number, got {value}")
-    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * 1e-3, jt_factor=jt_factor,
+    mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
+    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * MM, jt_factor=jt_factor,
                   omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
-                  rise_only=rise_only, contact_length=contact_length_mm * 1e-3, kc_factor=kc_factor,
-                  contact_damping=contact_damping, elastic_gap=elastic_gap)
-    try:
-        result = run(scene, model)
-    except ModuleNotFoundError as exc:  # a level whose module is not installed/written yet
-        raise InputError(f"model '{model}' is not available in this installation ({exc.name} missing); "
-                         "use --model kinematic or rigid") from None
+                  rise_only=rise_only, contact_length=contact_length_mm * MM, kc_factor=kc_factor,
+                  contact_damping=contact_damping, elastic_gap=elastic_gap, mechanism=mech)
+    result = run(scene, model)
+    for warning in result.warnings:
+        typer.echo(f"labtool: warning: {warning}", err=True)
 
     if as_json:
         out = {k: _json_value(result.indicators.get(k)) for k in INDICATORS}
@@ -84,9 +89,13 @@ def simulate(
         _print(result, scene)
     if output is not None:
         ds = result.dataset
-        ds.attrs["history"] = (f"labtool simulate --model {model} --law {law} --rpm {rpm:g} --fu {fu:g} "
-                               f"--backlash-mm {backlash_mm:g} --jt-factor {jt_factor:g} --omega1 {omega1} "
-                               f"--accuracy {accuracy} --restitution {restitution:g}")
+        ds.attrs["history"] = " ".join([
+            f"labtool simulate --model {model} --law {law} --rpm {rpm!r} --fu {fu!r}",
+            f"--backlash-mm {backlash_mm!r} --jt-factor {jt_factor!r} --omega1 {omega1} --accuracy {accuracy}",
+            f"--restitution {restitution!r} --revolutions {revolutions!r} --contact-length-mm {contact_length_mm!r}",
+            f"--kc-factor {kc_factor!r} --contact-damping {contact_damping!r} --elastic-gap {elastic_gap}",
+            "--rise-only" if rise_only else "--full-cycle",
+            *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
         write_netcdf(ds, output)
         typer.echo(f"wrote {output}", err=as_json)
 

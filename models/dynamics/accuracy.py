@@ -10,9 +10,9 @@ The reference solution (``reference_run``) is scipy's DOP853 (8th order, a diffe
 the compiled Dormand-Prince 5(4)) at rtol 1e-12 on the model's own equations, with the step limits
 of the model's ``reference`` preset and its absolute tolerances scaled to rtol 1e-12.
 
-``fast`` and ``standard`` run the compiled loops of ``models.dynamics.kernels`` (numba) with the model's
-tolerances (``models.dynamics.rigid.PRESETS``, ``models.dynamics.elastic.PRESETS``); ``reference`` runs the scipy
-``solve_ivp`` path. ``MEASURED`` holds the worst error over the 16 runs of Table 1 (omega1
+``fast`` and ``standard`` run the shared compiled loop (models.dynamics.kernels.dopri5, numba) with the
+model's tolerances (``models.dynamics.rigid.PRESETS``, ``models.dynamics.elastic.PRESETS``); ``reference``
+runs the scipy ``solve_ivp`` loop (models.dynamics.reference) over the same compiled equations. ``MEASURED`` holds the worst error over the 16 runs of Table 1 (omega1
 variable, sine law) of each preset against the reference solution, as written by
 ``benchmarks/work_precision.py`` (its CSV is benchmarks/results/work_precision.csv):
 
@@ -29,26 +29,17 @@ other scenes than Table 1's), never below 1e-9.
 """
 from __future__ import annotations
 
-import contextlib
-import functools
-import importlib
-import inspect
 import math
-import threading
-import time
 
 import numpy as np
 
 from common.errors import InputError
+from models.dynamics import elastic, events, rigid
 
 MODELS = ("rigid", "elastic")
 PRESET_NAMES = ("fast", "standard", "reference")
 
-# which loop runs each preset: "compiled" = models.dynamics.kernels (numba DP5(4)), "scipy" = solve_ivp
-SOLVER = {
-    ("rigid", "fast"): "compiled", ("rigid", "standard"): "compiled", ("rigid", "reference"): "scipy",
-    ("elastic", "fast"): "compiled", ("elastic", "standard"): "compiled", ("elastic", "reference"): "scipy",
-}
+_MODULES = {"rigid": rigid, "elastic": elastic}
 
 # the independent reference solution: scipy DOP853 at rtol 1e-12 (absolute tolerances: the
 # model's 'reference' ones scaled by 1e-12 / its rtol; step limits and output: its 'reference' ones)
@@ -108,67 +99,17 @@ def bound(model: str, preset: str, key: str) -> float:
 
 
 def solver(model: str, preset: str) -> str:
-    """'compiled' or 'scipy' for a (model, preset)."""
+    """'compiled' or 'scipy': the loop a (model, preset) runs (the model's SOLVERS)."""
     _check(model, preset)
-    return SOLVER[(model, preset)]
+    return _MODULES[model].SOLVERS[preset]
 
 
-def integrator(model: str, preset: str):
-    """The integration loop a (model, preset) runs: the compiled twin or the model's scipy loop."""
-    if solver(model, preset) == "compiled":
-        return importlib.import_module(f"models.dynamics.kernels.{model}_nb").integrate
-    return importlib.import_module(f"models.dynamics.{model}").__dict__["integrate"]
-
-
-# ------------------------------------------------------------------------------------------
-# running a model with a given loop and tolerances
-# ------------------------------------------------------------------------------------------
-_PATCH_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def _patched(model: str, integrate, preset: dict | None, name: str):
-    """Run ``models.<model>`` with another integration loop / preset for one call (used only while
-    the model's ``simulate`` has no ``integrate=``/``preset=`` arguments)."""
-    mod = importlib.import_module(f"models.dynamics.{model}")
-    with _PATCH_LOCK:
-        old_int, old_preset = mod.integrate, mod.PRESETS[name]
-        try:
-            if integrate is not None:
-                mod.integrate = integrate
-            if preset is not None:
-                mod.PRESETS[name] = preset
-            yield mod
-        finally:
-            mod.integrate, mod.PRESETS[name] = old_int, old_preset
-
-
-def run_model(scene, model: str, integrate=None, preset: dict | None = None, stats: dict | None = None):
-    """``models.<model>.simulate(scene)`` with an explicit integration loop and preset dict (None:
-    what ``scene.accuracy`` selects). ``stats`` (dict) receives loop_s, the wall time spent in the
-    integration loop (s), and for compiled loops nfev and n_steps."""
-    mod = importlib.import_module(f"models.dynamics.{model}")
-    loop = integrate if integrate is not None else integrator(model, scene.accuracy)
-    if stats is not None:
-        base = loop
-        compiled = getattr(base, "__module__", "").startswith("models.dynamics.kernels") or (
-            isinstance(base, functools.partial) and base.func.__module__.startswith("models.dynamics.kernels"))
-
-        def loop(*a, **k):
-            t0 = time.perf_counter()
-            try:
-                return base(*a, stats=stats, **k) if compiled else base(*a, **k)
-            finally:
-                stats["loop_s"] = stats.get("loop_s", 0.0) + time.perf_counter() - t0
-    params = inspect.signature(mod.simulate).parameters
-    if "integrate" in params and "preset" in params:
-        return mod.simulate(scene, integrate=loop, preset=preset)
-    with _patched(model, loop, preset, scene.accuracy):
-        return mod.simulate(scene)
-
-
-def _kernel(model):
-    return importlib.import_module(f"models.dynamics.kernels.{model}_nb").integrate
+def run_model(scene, model: str, solver: str | None = None, preset: dict | None = None, stats: dict | None = None):
+    """``models.dynamics.<model>.simulate(scene)`` with an explicit loop ("compiled" or "scipy") and
+    preset dict (None: what ``scene.accuracy`` selects). ``stats`` (dict) receives loop_s, the wall
+    time in the integration loops (s), nfev and n_steps."""
+    _check(model, scene.accuracy)
+    return _MODULES[model].simulate(scene, solver=solver, preset=preset, stats=stats)
 
 
 def scaled_preset(preset: dict, rtol: float | None = None, step_factor: float = 1.0) -> dict:
@@ -191,20 +132,17 @@ def scaled_preset(preset: dict, rtol: float | None = None, step_factor: float = 
 def halved(model: str, preset: str) -> dict:
     """The preset with its step limit halved and its tolerances divided by 2^5 = 32 (a 5th-order
     method's local error for half the step): the 'halve the step' check of the extremes suite."""
-    mod = importlib.import_module(f"models.dynamics.{model}")
-    base = mod.PRESETS[preset]
+    _check(model, preset)
+    base = _MODULES[model].PRESETS[preset]
     return scaled_preset(base, rtol=base["rtol"] / 32.0, step_factor=0.5)
 
 
 def reference_run(scene, model: str):
     """The reference solution of ``scene`` (scipy DOP853, rtol 1e-12)."""
-    mod = importlib.import_module(f"models.dynamics.{model}")
-    preset = scaled_preset(mod.PRESETS["reference"], rtol=REFERENCE_RTOL)
+    _check(model, "reference")
+    preset = scaled_preset(_MODULES[model].PRESETS["reference"], rtol=REFERENCE_RTOL)
     preset["method"] = REFERENCE_METHOD
-    loop = mod.integrate
-    if model == "elastic":   # its simulate does not pass a method: DOP853 is set on the loop
-        loop = functools.partial(mod.integrate, method=preset["method"])
-    return run_model(scene.replace(accuracy="reference"), model, integrate=loop, preset=preset)
+    return run_model(scene.replace(accuracy="reference"), model, solver="scipy", preset=preset)
 
 
 # ------------------------------------------------------------------------------------------
@@ -215,10 +153,8 @@ INDICATOR_KEYS = ("MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_
 
 
 def event_times(ds) -> np.ndarray:
-    """Contact event times (s) of a model's dataset (rigid: event_time; elastic: event_times_s)."""
-    if "event_time" in ds:
-        return np.asarray(ds["event_time"].values, dtype=float)
-    return np.atleast_1d(np.asarray(ds.attrs.get("event_times_s", []), dtype=float))
+    """Event times (s) of a model's dataset, from its event record (models.dynamics.events)."""
+    return np.asarray(events.read(ds)["event_time"].values, dtype=float)
 
 
 def _series_error(ds, ref, name: str, exclude: np.ndarray) -> float:

@@ -25,11 +25,12 @@ the compiled loops, ``auto_escalation_phi1_rad`` = where the backlash model took
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 
+from models.dynamics import elastic, kinematic, rigid
+from models.dynamics.kernels import rigid_nb
 from models.dynamics.scene import Scene
 
 CONTACT_OUTPUTS = frozenset({"x_el", "xel_max_mm", "xel_min_mm", "contact_force", "deformation",
@@ -57,11 +58,10 @@ def _choose(scene: Scene, contact: bool):
     """(level, reason, kinematic result or None)."""
     if contact:
         return "elastic", "contact outputs (x_el, contact force) were requested: only the elastic model has them", None
-    from models.dynamics.simulate import _kinematic
     mn, mx = rise_moment_range(scene)
     change = _sign_change(mn, mx)
     if scene.omega1_mode == "const" and (not change or scene.backlash == 0.0):
-        kin = _kinematic(scene)          # the answer: only now is the kinematic dataset built
+        kin = kinematic.simulate(scene)  # the answer: only now is the kinematic dataset built
         mn, mx = kin.indicators["MR13D_min_Nm"], kin.indicators["MR13D_max_Nm"]
         why = (f"MR13D keeps its sign over the rise ({mn:.3g} to {mx:.3g} N m)" if not change else
                f"MR13D changes sign ({mn:.3g} to {mx:.3g} N m) but the groove has no backlash")
@@ -80,8 +80,6 @@ def rise_moment_range(scene: Scene) -> tuple[float, float]:
     runs at, from the shared cam-angle table (models.mechanism.cam_tables: the grid the elastic model uses,
     4001 angles over the rise, computed once per mechanism and law): the decision costs ~0.1 ms
     instead of a whole kinematic analysis."""
-    from models.dynamics import elastic
-
     tab = elastic.grid_tables(scene.replace(rise_only=True), scene.program.rise_angle)
     return float(tab.MR13D.min()), float(tab.MR13D.max())
 
@@ -90,61 +88,53 @@ class SharedPrefixLoop:
     """An integration loop for ``models.dynamics.rigid.simulate`` (compiled) that integrates the prefix the
     backlash run and the no-backlash run share only once.
 
-    First call (the backlash plant, j > 0): integrate the no-backlash run (j = 0) over the span,
+    First call (the backlash model, j > 0): integrate the no-backlash run (j = 0) over the span,
     find the first of its steps where its flank force is <= 0, and start the backlash run (contact
     on the inner flank, free to lift off) BACK_STEPS steps earlier from its state; the prefix phase
-    is the no-backlash run's. Second call (j = 0): return the run already made. ``stats`` accumulates nfev/n_steps.
+    is the no-backlash run's. Second call (j = 0): return the run already made.
     """
 
-    def __init__(self, stats: dict | None = None):
-        self.stats = {} if stats is None else stats
-        self.rfj = None            # (phi1_end, omega1_0, phases, events)
+    def __init__(self):
+        self.rfj = None            # (phi1_end, omega1_0, phases, event rows)
         self.escalation_phi1 = None
 
-    def _kernel(self):
-        from models.dynamics.kernels import rigid_nb
-        return rigid_nb.integrate
-
-    def __call__(self, P, phi1_end, omega1_0, preset, t_rise, start=None):
-        from models.dynamics import rigid
-        kern = self._kernel()
+    def __call__(self, model, omega1_0, preset, t_rise, start=None, t_start=0.0, solver="compiled", stats=None):
+        run = lambda m, **kw: rigid.integrate(m, omega1_0, preset, t_rise, solver=solver, stats=stats, **kw)  # noqa: E731
         if start is not None:
-            return kern(P, phi1_end, omega1_0, preset, t_rise, start, stats=self.stats)
-        if P.j == 0.0:
-            if self.rfj is not None and self.rfj[1] == omega1_0 and self.rfj[0] >= phi1_end:
+            return run(model, start=start, t_start=t_start)
+        if model.j == 0.0:
+            if self.rfj is not None and self.rfj[1] == omega1_0 and self.rfj[0] >= model.phi1_end:
                 return self.rfj[2], self.rfj[3]
-            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+            return run(model)
         # the backlash run: the no-backlash run first (a little longer: rigid.simulate samples it
         # up to the end of the backlash run, which may overshoot by an event's resolution)
-        P0 = dataclasses.replace(P, j=0.0)
-        end0 = phi1_end + 0.1
-        phases0, events0 = kern(P0, end0, omega1_0, preset, t_rise, stats=self.stats)
-        self.rfj = (end0, omega1_0, phases0, events0)
+        model0 = model._replace(j=0.0, phi1_end=model.phi1_end + 0.1)
+        phases0, rows0 = run(model0)
+        self.rfj = (model0.phi1_end, omega1_0, phases0, rows0)
         if len(phases0) != 1 or phases0[0].kind != "contact":
-            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+            return run(model)
         ph = phases0[0]
         ts = ph.sol.t
-        y = ph.sol(ts)
-        lam = np.asarray(rigid.contact_terms(P0, y[0], y[1], rigid.INNER)[5], dtype=float)
-        lam = np.where(y[0] <= phi1_end, lam, np.inf)        # only inside the backlash run's span
+        y = np.ascontiguousarray(ph.sol(ts))
+        terms = np.empty((len(rigid.SAMPLED), ts.size))
+        rigid_nb.derived(model0, rigid.CONTACT, rigid.INNER, y, terms)
+        lam = np.where(y[0] <= model.phi1_end, terms[rigid.SAMPLED.index("R13n")], np.inf)   # inside the span
         low = np.flatnonzero(lam <= 0.0)
-        first = int(low[0]) if low.size else ts.size - 1
         if not low.size:
             # the flank force never vanishes: the backlash run is the no-backlash run; cut it at
             # the end of the backlash run's span
             self.escalation_phi1 = None
-            return [rigid.Phase("contact", rigid.INNER, ph.t0, _time_at_phi1(ph, phi1_end), ph.sol)], []
-        k = first - BACK_STEPS
+            return [rigid.Phase("contact", rigid.INNER, ph.t0, _time_at_phi1(ph, model.phi1_end), ph.sol)], rows0[:0]
+        k = int(low[0]) - BACK_STEPS
         if k <= 0:                                            # at (or near) the start: the full run
             self.escalation_phi1 = 0.0
-            return kern(P, phi1_end, omega1_0, preset, t_rise, stats=self.stats)
+            return run(model)
         t_a = float(ts[k])
         phi1_a, omega1_a = float(y[0, k]), float(y[1, k])
         prefix = rigid.Phase("contact", rigid.INNER, ph.t0, t_a, ph.sol)
         self.escalation_phi1 = phi1_a
-        phases, events = kern(P, phi1_end, omega1_0, preset, t_rise, ("contact", phi1_a, omega1_a, rigid.INNER),
-                              stats=self.stats, t_start=t_a)
-        return [prefix] + phases, events
+        phases, rows = run(model, start=("contact", phi1_a, omega1_a, rigid.INNER), t_start=t_a)
+        return [prefix] + phases, rows
 
 
 def _time_at_phi1(phase, phi1_end: float) -> float:
@@ -162,26 +152,19 @@ def _time_at_phi1(phase, phi1_end: float) -> float:
 
 
 def simulate_auto(scene: Scene, outputs=()):
-    """Run the cheapest level the scene needs (module doc). Returns models.dynamics.simulate.SimulationResult."""
-    from models.dynamics import accuracy
-    from models.dynamics.simulate import _resolve
-
+    """Run the cheapest level the scene needs (module doc). Returns models.dynamics.result.SimulationResult."""
     level, reason, kin = _choose(scene, bool(CONTACT_OUTPUTS.intersection(outputs)))
     stats: dict = {}
     escalation = None
     if level == "kinematic":
         result = kin
-        ind = result.indicators
-        ind.update(dphi2_max_deg=0.0, domega2_max_rad_s=0.0, domega1_max_rad_s=0.0, percussion_max_Ns=0.0,
-                   jumps=0, impacts=0)
+        result.indicators.update(dphi2_max_deg=0.0, domega2_max_rad_s=0.0, domega1_max_rad_s=0.0,
+                                 percussion_max_Ns=0.0, jumps=0, impacts=0)
     elif level == "elastic":
-        if accuracy.solver("elastic", scene.accuracy) == "compiled":
-            result = accuracy.run_model(scene, "elastic", stats=stats)
-        else:
-            result = _resolve("elastic")(scene)
-    elif accuracy.solver("rigid", scene.accuracy) == "compiled":
-        loop = SharedPrefixLoop(stats)
-        result = accuracy.run_model(scene, "rigid", integrate=loop)
+        result = elastic.simulate(scene, stats=stats)
+    elif rigid.SOLVERS[scene.accuracy] == "compiled":
+        loop = SharedPrefixLoop()
+        result = rigid.simulate(scene, stats=stats, integrate_with=loop)
         escalation = loop.escalation_phi1
         if escalation is None:
             reason += ("; the flank force of the 1-DOF run never vanishes: no backlash model was needed "
@@ -190,7 +173,7 @@ def simulate_auto(scene: Scene, outputs=()):
             reason += (f"; the 1-DOF run (no backlash) up to phi1 = {math.degrees(escalation):.2f} deg, "
                        "just before its flank force changes sign, then the 2-DOF model with impacts")
     else:
-        result = _resolve("rigid")(scene)
+        result = rigid.simulate(scene, stats=stats)
         reason += "; the reference preset runs the full scipy model (no escalation in time)"
     result.model = level
     result.reason = reason

@@ -7,9 +7,14 @@ The paper's eq. (15) rounds the constant to 8.05e4:
     F [N] = Kc_mm * x[mm]^(10/9),      Kc_mm = 8.05e4 * lw[mm]^(8/9)   (N / mm^(10/9))
 
 Converted once to SI (x in m): F = Kc * x^(10/9) with Kc = Kc_mm * (1e3)^(10/9) (N / m^(10/9)).
-Every function here is small and pure (scalars or numpy arrays in, the same out) so that a later
-numba kernel can reuse it unchanged. A penetration is never raised to 10/9 when negative: the
-force functions clip it at zero first.
+With Hunt-Crossley damping c (s/m) on the penetration rate: F = Kc p^(10/9) (1 + c dp/dt), clipped
+at zero so that the contact never pulls.
+
+The law is written once, ``normal_force`` (compiled, scalar): the elastic model's loops call it,
+and the array functions below (``contact_force``, ``hunt_crossley_force``) run it over numpy
+arrays. A penetration is never raised to 10/9 when negative: the force is zero there.
+``contact_potential`` (its integral) and ``static_penetration`` (its inverse) are closed forms of
+the same law.
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ import math
 import numpy as np
 
 from common.errors import InputError
+from models.dynamics.jit import jit
 
 N_EXP = 10.0 / 9.0                     # Palmgren exponent n of eq. (12)-(15)
 PALMGREN_MM = 8.05e4                   # N / mm^(10/9) per mm^(8/9) of contact length (eq. 15)
@@ -37,10 +43,36 @@ def contact_stiffness(contact_length: float, kc_factor: float = 1.0) -> float:
     return kc_factor * PALMGREN_MM * lw_mm ** (8.0 / 9.0) * MM_TO_SI
 
 
+@jit
+def normal_force(penetration, rate, kc, damping):
+    """Contact force (N, >= 0) at a penetration (m) growing at ``rate`` (m/s): Kc p^(10/9) times
+    (1 + damping * rate) with Hunt-Crossley damping (s/m, 0 = purely elastic), clipped at 0."""
+    if penetration <= 0.0:
+        return 0.0
+    f = kc * penetration ** N_EXP
+    if damping > 0.0:
+        f = max(f * (1.0 + damping * rate), 0.0)
+    return f
+
+
+@jit
+def _force_many(penetration, rate, kc, damping, out):
+    for i in range(out.size):
+        out[i] = normal_force(penetration[i], rate[i], kc, damping)
+
+
+def hunt_crossley_force(penetration, rate, kc: float, damping: float):
+    """``normal_force`` over arrays (N): penetration (m) and its rate (m/s), broadcast together."""
+    p, r = np.broadcast_arrays(np.asarray(penetration, dtype=float), np.asarray(rate, dtype=float))
+    out = np.empty(p.shape)
+    _force_many(np.ascontiguousarray(p).reshape(-1), np.ascontiguousarray(r).reshape(-1), float(kc),
+                float(damping), out.reshape(-1))
+    return out if out.ndim else float(out)
+
+
 def contact_force(penetration, kc: float):
     """Elastic contact force (N, >= 0) for a penetration (m); zero where the penetration <= 0."""
-    p = np.maximum(penetration, 0.0)
-    return kc * p ** N_EXP
+    return hunt_crossley_force(penetration, 0.0, kc, 0.0)
 
 
 def contact_potential(penetration, kc: float):
@@ -49,16 +81,21 @@ def contact_potential(penetration, kc: float):
     return (9.0 / 19.0) * kc * p ** (N_EXP + 1.0)
 
 
-def static_penetration(force, kc: float):
+@jit
+def penetration_under(force, kc):
     """Penetration (m) that carries a compressive force (N >= 0): (F / Kc)^(9/10); 0 for F <= 0."""
-    f = np.maximum(force, 0.0)
-    return (f / kc) ** (1.0 / N_EXP)
+    return (force / kc) ** (1.0 / N_EXP) if force > 0.0 else 0.0
 
 
-def hunt_crossley_force(penetration, rate, kc: float, damping: float):
-    """Contact force (N, >= 0) with Hunt-Crossley damping: Kc p^n (1 + damping * dp/dt).
+@jit
+def _penetration_many(force, kc, out):
+    for i in range(out.size):
+        out[i] = penetration_under(force[i], kc)
 
-    ``damping`` in s/m (0 = purely elastic, as in the paper); ``rate`` = dp/dt (m/s, > 0 while the
-    penetration grows). Clipped at zero so the contact never pulls.
-    """
-    return np.maximum(contact_force(penetration, kc) * (1.0 + damping * rate), 0.0)
+
+def static_penetration(force, kc: float):
+    """``penetration_under`` over arrays (m)."""
+    f = np.asarray(force, dtype=float)
+    out = np.empty(f.shape)
+    _penetration_many(np.ascontiguousarray(f).reshape(-1), float(kc), out.reshape(-1))
+    return out if out.ndim else float(out)

@@ -23,40 +23,55 @@ The gap j between the flanks is the scene's backlash (``elastic_gap = "physical"
 not depend on j and its xel max stays below j; docs/models.md, "The backlash in Table 3").
 
 The cam turns at constant speed: n1 (omega1 'const') or n1 * n_sync / n_nominal (omega1 'var',
-the speed the paper's variable-speed drive settles at; models.mechanism.motor.no_load_cam_speed).
+the speed the paper's variable-speed drive settles at; models.dynamics.kinematic.cam_speed).
 
-Contact onset and separation are solve_ivp events (terminal, then restart in the new phase), so
-every phase integrates a smooth right-hand side. ``rhs`` and the event functions are small pure
-functions of (t, y) and plain arrays, for a later numba kernel.
+The equations, events, restart and initial state are compiled once
+(models.dynamics.kernels.elastic_nb); ``integrate`` runs them in the shared compiled Dormand-Prince
+loop (fast, standard) or in scipy's solve_ivp (reference). This module builds the tables, samples
+the run into a Dataset, completes the event record and computes the indicators.
+
+Events (models.dynamics.events): a separation when x leaves a flank's contact range, a contact when
+a flight ends on a flank. A landing's impact window is its bounce time (the duration of a free
+undamped landing at that speed on the contact law, ``bounce_time``) or the contact, whichever is
+shorter: ``event_domega2`` is the change of x'/(l cos alpha) over it, ``event_percussion`` the
+contact force's impulse over it; a contact that lasts more than twice its bounce time (or to the
+end of the run) is persistent, and so is a separation from one.
 """
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import solve_ivp
+from scipy.special import beta as beta_function
 
-from models.mechanism.cam_tables import angle_terms, grid_terms
-from models.dynamics.contact import contact_force, contact_stiffness, hunt_crossley_force, static_penetration
 from common.errors import InputError, SolverError
-from models.mechanism.motor import cam_inertia, no_load_cam_speed, transmission_ratio
+from models.dynamics import events, reference, validity
+from models.dynamics.contact import N_EXP, contact_potential, contact_stiffness, static_penetration
+from models.dynamics.kernels import dopri5 as dp
+from models.dynamics.kernels import elastic_nb as eq
+from models.dynamics.kinematic import cam_speed
+from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
+from models.mechanism.cam_tables import angle_terms, grid_terms
+from models.mechanism.motor import cam_inertia, transmission_ratio
 
-INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
+INTERIOR, FLIGHT, EXTERIOR = eq.INTERIOR, eq.FLIGHT, eq.EXTERIOR
 PHASE_NAMES = ("interior", "flight", "exterior")
 READINGS = ("consistent", "literal")
 
 # solver presets: relative tolerance; absolute tolerances as fractions of the scene's own scales
 # (the static deflection under the largest |R31| for x, that times the contact's angular frequency
 # for dx/dt), so that a stiffer contact (smaller x) is resolved as well as a soft one; max_step as a
-# fraction of the linearised contact period
+# fraction of the linearised contact period; the reference preset runs scipy's DOP853
 PRESETS = {
     "fast": dict(rtol=1e-6, atol=1e-5, steps_per_period=4.0),
     "standard": dict(rtol=1e-8, atol=1e-7, steps_per_period=8.0),
-    "reference": dict(rtol=1e-10, atol=1e-9, steps_per_period=16.0),
+    "reference": dict(rtol=1e-10, atol=1e-9, steps_per_period=16.0, method="RK45"),
 }
+SOLVERS = {"fast": "compiled", "standard": "compiled", "reference": "scipy"}
 OUTPUT_STEP = 2e-5        # s, output sampling (>= 25 samples per contact period of ~0.5 ms)
 GRID_POINTS = 4001        # cam-angle grid for the kinematic tables (linear interpolation in time)
 ZENO_SEGMENTS = 200       # this many phases in a row, each shorter than ZENO_DT, is endless chatter
@@ -64,6 +79,11 @@ ZENO_DT = 1e-9            # s
 # the event functions' sign is read at this many points of every step (its dense output), not at
 # the step's ends only: a micro-bounce that leaves a flank and returns within one step is an event
 EVENT_SUBSTEPS = 8
+BOUNDARY_NUDGE = eq.NUDGE  # m, how far inside the new phase a restart begins
+MAX_STEPS = 2_000_000      # accepted steps per run (memory ~100 B a step)
+MAX_SEGMENTS = 1_000_000   # phases per run
+PERSISTENT_BOUNCES = 2.0   # a contact longer than this many bounce times is persistent
+WINDOW_POINTS = 65         # samples of a landing's impact window (its percussion: trapezoid)
 
 
 @dataclass(frozen=True)
@@ -87,13 +107,6 @@ class Tables:
     omega1: float          # rad/s
 
 
-def cam_speed(scene: Scene) -> float:
-    """Cam angular speed (rad/s) for the scene's omega1 mode."""
-    if scene.omega1_mode == "var":
-        return no_load_cam_speed(scene.mechanism, scene.omega1_nominal)
-    return scene.omega1_nominal
-
-
 def reduced_masses(J_cam, J_follower, Db1, Db2):
     """M1, M2, M (kg) of eq. (16): M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2, M = M1 M2/(M1+M2).
 
@@ -115,7 +128,7 @@ def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None
     omega1 = cam_speed(scene)
     if t is not None:
         t = np.asarray(t, dtype=float)
-        terms = angle_terms(scene.mechanism, scene.program, omega1 * t, _load_until(scene), linkage=linkage)
+        terms = angle_terms(scene.mechanism, scene.program, omega1 * t, _until(scene), linkage=linkage)
         return _tables(scene, terms, t, omega1)
     return grid_tables(scene, omega1 * t_end, n_points)
 
@@ -127,13 +140,14 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     and span (models.mechanism.cam_tables): only the combination with the operating point is per run.
     """
     omega1 = cam_speed(scene)
-    terms = grid_terms(scene.mechanism, scene.program, span, n_points, _load_until(scene))
+    terms = grid_terms(scene.mechanism, scene.program, span, n_points, _until(scene))
     return _tables(scene, terms, terms.phi1 / omega1, omega1)
 
 
-def _load_until(scene: Scene):
-    # the load acts over the closed rise [0, rise]: at phi1 = rise exactly the dwell (no load) would
-    # begin and put a step into R31 at the last instant of a rise-only run
+def _until(scene: Scene):
+    # a rise-only run covers the closed rise [0, rise]: at phi1 = rise exactly the dwell would begin
+    # (no acceleration, no load) and put a step into R31 at the run's last instant; the kinematics
+    # there are the rise's left limit
     return float(np.nextafter(scene.program.rise_angle, 0.0)) if scene.rise_only else None
 
 
@@ -148,216 +162,84 @@ def _tables(scene: Scene, terms, t, omega1: float) -> Tables:
                   alpha=terms.alpha, Db1=terms.Db1, Db2=terms.Db2, omega1=omega1)
 
 
-# ---------------------------------------------------------------- pure kernels (numba-ready)
+# ---------------------------------------------------------------- the integration
 
-def normal_force(x, v, phase, kc, gap, damping):
-    """Force of the groove on the follower along +x (N) in a given phase.
-
-    Interior flank: penetration -x, pushes +x. Exterior flank: penetration x - gap, pushes -x.
-    Flight: 0. Damping (Hunt-Crossley, s/m) acts on the penetration rate.
-    """
-    if phase == INTERIOR:
-        return hunt_crossley_force(-x, -v, kc, damping) if damping > 0 else contact_force(-x, kc)
-    if phase == EXTERIOR:
-        pen = x - gap
-        return -(hunt_crossley_force(pen, v, kc, damping) if damping > 0 else contact_force(pen, kc))
-    return 0.0
-
-
-def rhs(t, y, phase, t_grid, drive_grid, m_grid, kc, gap, damping):
-    """d/dt (x, v) with M(t) v' = F(x, v) - drive(t); drive = R31 (consistent) or -R31 (literal)."""
-    x, v = y[0], y[1]
-    drive = np.interp(t, t_grid, drive_grid)
-    m = np.interp(t, t_grid, m_grid)
-    return np.array([v, (normal_force(x, v, phase, kc, gap, damping) - drive) / m])
-
-
-def ev_zero(t, y, *args):
-    """x = 0: the interior flank's contact boundary."""
-    return y[0]
-
-
-def ev_gap(t, y, phase, t_grid, drive_grid, m_grid, kc, gap, damping):
-    """x = j: the exterior flank's contact boundary."""
-    return y[0] - gap
-
-
-def _events_for(phase, gap):
-    """(event function, direction, next phase) for the boundaries of ``phase``."""
-    if phase == INTERIOR:
-        return [(ev_zero, 1.0, FLIGHT if gap > 0 else EXTERIOR)]
-    if phase == EXTERIOR:
-        return [(ev_gap, -1.0, FLIGHT if gap > 0 else INTERIOR)]
-    return [(ev_zero, -1.0, INTERIOR), (ev_gap, 1.0, EXTERIOR)]
-
-
-def _make_event(func, direction):
-    def event(t, y, *args):
-        return func(t, y, *args)
-    event.terminal = True
-    event.direction = direction
-    return event
-
-
-def initial_state(drive0: float, kc: float, gap: float):
-    """Static equilibrium (x0 m, v0 = 0, phase) under the drive force at t = 0."""
-    if drive0 > 0:
-        return -float(static_penetration(drive0, kc)), 0.0, INTERIOR
-    if drive0 < 0:
-        return gap + float(static_penetration(-drive0, kc)), 0.0, EXTERIOR
-    return 0.0, 0.0, FLIGHT if gap > 0 else INTERIOR
-
-
-def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
-              rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, method="RK45"):
-    """Integrate phase by phase with terminal events; returns (segments, events).
-
-    segments: list of (phase, OdeSolution-backed solve_ivp result); events: list of dicts with
-    t (s), kind ('leave_interior', 'land_exterior', 'leave_exterior', 'land_interior', ...), v (m/s).
-    """
-    t_end = float(t_grid[-1] if t_end is None else t_end)
-    t0 = 0.0
-    segments, events = [], []
-    if y0 is None:
-        x0, v0, phase = initial_state(float(drive_grid[0]), kc, gap)
-        nonzero = np.flatnonzero(drive_grid)
-        if drive_grid[0] == 0 and nonzero.size:
-            # unloaded start: nothing moves until the drive departs from zero; then sit against the
-            # flank it loads, so the run does not begin with a zero-speed "landing" or "jump"
-            phase = INTERIOR if drive_grid[nonzero[0]] > 0 else EXTERIOR
-            x0 = _restart_position(phase == INTERIOR, phase, gap)
-            t0 = float(t_grid[nonzero[0] - 1])
-            if t0 > 0:
-                segments.append((phase, _AtRest(0.0, t0, x0)))
-    else:
-        x0, v0, phase = y0
-    y = np.array([x0, v0], dtype=float)
-    args = (t_grid, drive_grid, m_grid, kc, gap, damping)
-    short = 0                     # consecutive phases shorter than ZENO_DT
-    while t0 < t_end:
-        if short >= ZENO_SEGMENTS:
-            raise SolverError(f"elastic model: {ZENO_SEGMENTS} contact switches within "
-                              f"{ZENO_SEGMENTS * ZENO_DT:.1g} s at t = {t0:.6g} s (endless chatter); "
-                              "add contact damping or check the scene")
-        specs = _events_for(phase, gap)
-        evs = [_make_event(f, d) for f, d, _ in specs]
-        sol = solve_ivp(rhs, (t0, t_end), y, method=method, args=(phase,) + args, events=evs,
-                        dense_output=True, rtol=rtol, atol=list(atol), max_step=max_step)
-        if sol.status == -1:
-            raise SolverError(f"elastic model: integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
-        hidden = _hidden_crossing(sol, specs, gap)
-        if hidden is not None:
-            sol = _Truncated(sol, hidden[1])
-        segments.append((phase, sol))
-        short = short + 1 if sol.t[-1] - t0 < ZENO_DT else 0
-        if sol.status != 1:
-            break
-        if hidden is not None:
-            hit, t_hit = hidden
-            y_hit = np.array(sol.sol(t_hit), dtype=float)
-        else:
-            hit = next(i for i, te in enumerate(sol.t_events) if len(te))
-            t_hit, y_hit = sol.t_events[hit][0], sol.y_events[hit][0].copy()
-        new_phase = specs[hit][2]
-        events.append({"t": float(t_hit), "kind": _event_kind(phase, new_phase), "v": float(y_hit[1]),
-                       "from": PHASE_NAMES[phase], "to": PHASE_NAMES[new_phase]})
-        # restart a hair inside the new phase: started exactly on the boundary, the new phase's own
-        # boundary event can fire again on its first step from rounding alone (endless switching)
-        y_hit[0] = _restart_position(specs[hit][0] is ev_zero, new_phase, gap)
-        t0, y, phase = float(t_hit), y_hit, new_phase
-    return segments, events
-
-
-def _hidden_crossing(sol, specs, gap: float):
-    """(spec index, t) of a boundary crossing that solve_ivp did not see, or None.
-
-    solve_ivp reads an event's sign at the ends of each step only, so a crossing and its return
-    within one step (a micro-bounce off a flank) is missed. The dense output is read at
-    EVENT_SUBSTEPS points of every step; a crossing in the event's direction before the last
-    sub-interval (which ends at solve_ivp's own event, if any) is the phase's real end, located by
-    brentq on the dense output. The compiled twin
-    (models.dynamics.kernels.elastic_nb._crossing) applies the same rule.
-    """
-    from scipy.optimize import brentq
-
-    ts = sol.t
-    if ts.size < 2:
-        return None
-    frac = np.arange(1, EVENT_SUBSTEPS + 1) / EVENT_SUBSTEPS
-    tt = np.concatenate([[ts[0]], (ts[:-1, None] + np.diff(ts)[:, None] * frac).ravel()])
-    tt[EVENT_SUBSTEPS::EVENT_SUBSTEPS] = ts[1:]             # the step ends exactly
-    x = sol.sol(tt)[0]
-    best = None
-    for i, (func, direction, _) in enumerate(specs):
-        boundary = 0.0 if func is ev_zero else gap            # x of the event's flank
-        g = x - boundary
-        a, b = g[:-1], g[1:]
-        cross = (a <= 0) & (b >= 0) if direction > 0 else (a >= 0) & (b <= 0)
-        k = np.flatnonzero(cross)
-        if not k.size:
-            continue
-        k = int(k[0])
-        if sol.status == 1 and k + 1 >= tt.size - 1:
-            continue                 # the last sub-interval ends at solve_ivp's own event: its root stands
-        f = lambda t, b=boundary: sol.sol(t)[0] - b  # noqa: E731
-        t_hit = tt[k + 1] if f(tt[k + 1]) == 0 else brentq(f, tt[k], tt[k + 1], xtol=1e-15, rtol=4 * np.finfo(float).eps)
-        if best is None or t_hit < best[1]:
-            best = (i, float(t_hit))
-    return best
-
-
-class _Truncated:
-    """A solve_ivp result cut at t_hit (a crossing found inside a step): .t, .sol, .status = 1."""
-
-    def __init__(self, sol, t_hit: float):
-        self.t = np.append(sol.t[sol.t < t_hit], t_hit)
-        self.sol = sol.sol
-        self.status = 1
-
-
-class _AtRest:
-    """A phase segment with the follower at rest at x0 over [t0, t1] (solve_ivp result look-alike)."""
+class AtRest:
+    """A phase with the follower at rest at x0 over [t0, t1] (the unloaded start)."""
 
     def __init__(self, t0: float, t1: float, x0: float):
         self.t = np.array([t0, t1])
         self.x0 = x0
-        self.y = np.array([[x0, x0], [0.0, 0.0]])
 
-    def sol(self, tt):
+    def __call__(self, tt):
         tt = np.atleast_1d(tt)
         return np.vstack([np.full(tt.size, self.x0), np.zeros(tt.size)])
 
-
-BOUNDARY_NUDGE = 1e-13   # m, how far inside the new phase a restart begins (<< any deformation)
-
-
-def _restart_position(at_zero: bool, new_phase: int, gap: float) -> float:
-    """x (m) just inside ``new_phase`` at the boundary x = 0 (at_zero) or x = gap."""
-    eps = BOUNDARY_NUDGE if gap == 0 else min(BOUNDARY_NUDGE, 0.25 * gap)
-    boundary = 0.0 if at_zero else gap
-    inward = {INTERIOR: -1.0, EXTERIOR: 1.0}.get(new_phase, 1.0 if at_zero else -1.0)
-    return boundary + inward * eps
+    @property
+    def sol(self):
+        return self
 
 
-def _event_kind(old, new):
-    if old == INTERIOR:
-        return "leave_interior"
-    if old == EXTERIOR:
-        return "leave_exterior"
-    return "land_interior" if new == INTERIOR else "land_exterior"
+def model_struct(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, omega1=0.0) -> eq.ElasticModel:
+    """The compiled model of a run (kernels.elastic_nb.ElasticModel)."""
+    tab = np.ascontiguousarray(np.vstack([t_grid, drive_grid, m_grid]), dtype=np.float64)
+    return eq.ElasticModel(tab, float(kc), float(gap), float(damping), float(omega1), float(BOUNDARY_NUDGE))
 
 
-def count_events(events):
-    """Jumps and impacts (docs/models.md, 'counting').
+def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
+              rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, solver="compiled", method="RK45",
+              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, omega1=0.0, stats=None):
+    """Integrate M x'' = F - drive over the grid, phase by phase: (segments, event rows).
 
-    jump: the follower loses contact with the interior flank, i.e. x crosses 0 upwards (the paper's
-    criterion, sec. 2.1.2: "when the relative displacement becomes equal to zero or changes the
-    sign, the jump occurs"). impact: the follower comes into contact with one of the flanks after a
-    flight through the gap (the paper's definition, sec. 2.1.1), i.e. every landing.
+    segments: list of (phase, run) with ``run.t`` the step times and ``run(t)`` the dense output
+    (x m, x' m/s); event rows: array (n, dopri5.EV_WIDTH) in models.dynamics.events' layout (the
+    impact columns of landings not yet completed: ``simulate`` does that). ``y0`` = (x0, v0, phase)
+    or None for the model's start (static equilibrium; with no drive at the start, at rest until it
+    departs from zero). ``solver``: "compiled" (Dormand-Prince 5(4) of kernels.dopri5) or "scipy"
+    (solve_ivp with ``method``). ``stats`` (dict) receives nfev and n_steps.
     """
-    jumps = sum(1 for e in events if e["kind"] == "leave_interior")
-    impacts = sum(1 for e in events if e["kind"] in ("land_exterior", "land_interior"))
-    return jumps, impacts
+    tg = np.asarray(t_grid, dtype=float)
+    model = model_struct(tg, drive_grid, m_grid, kc, gap, damping, omega1)
+    t_end = float(tg[-1] if t_end is None else t_end)
+    if y0 is None:
+        phase, t0, x0, v0 = eq.start(model)
+    else:
+        (x0, v0, phase), t0 = y0, 0.0
+    ctl = dp.Controls(float(rtol), np.tile(np.asarray(atol, dtype=float), (3, 1)),
+                      float(min(max_step, t_end)) if math.isfinite(max_step) else t_end, t_end, True,
+                      int(max_steps), int(max_segments), EVENT_SUBSTEPS, ZENO_SEGMENTS, ZENO_DT, 2)
+    ph0 = np.zeros(dp.PHASE_WIDTH)
+    ph0[0] = phase
+    y_start = np.array([x0, v0], dtype=float)
+    if solver == "compiled":
+        if method != "RK45":
+            raise InputError("the compiled loop is Dormand-Prince 5(4) (RK45) only")
+        status, t_fail, _, phases, rows, nfev, nst = dp.unpack(dp.run(model, ctl, ph0, y_start, float(t0)),
+                                                               lambda row: 2)
+    else:
+        status, t_fail, _, phases, rows, nfev, nst = reference.run(model, eq, ctl, ph0, y_start, float(t0),
+                                                                   method=method, name="elastic model")
+    if stats is not None:
+        stats["nfev"] = stats.get("nfev", 0) + nfev
+        stats["n_steps"] = stats.get("n_steps", 0) + nst
+    _raise_for(status, t_fail, max_steps, max_segments)
+    segments = [(int(p.row[0]), p.sol) for p in phases]
+    if t0 > 0:
+        segments.insert(0, (int(phase), AtRest(0.0, float(t0), float(x0))))
+    return segments, rows
+
+
+def _raise_for(status: int, t_fail: float, max_steps: int, max_segments: int) -> None:
+    if status == dp.OK:
+        return
+    if status == dp.NO_PROGRESS:
+        raise SolverError(f"elastic model: {ZENO_SEGMENTS} contact switches within {ZENO_SEGMENTS * ZENO_DT:.1g} s "
+                          f"at t = {t_fail:.6g} s (endless chatter); add contact damping or check the scene")
+    if status == dp.TOO_MANY_EVENTS:
+        raise SolverError(f"elastic model: more than {max_segments} contact phases before t = {t_fail:.4g} s "
+                          "(the phase cap per run)")
+    raise SolverError(f"elastic model: {dp.STATUS_TEXT[status]} at t = {t_fail:.6g} s "
+                      f"(limits: {max_steps} steps, {max_segments} phases per run)")
 
 
 def contact_period(kc: float, m: float, force: float) -> float:
@@ -365,6 +247,18 @@ def contact_period(kc: float, m: float, force: float) -> float:
     force = max(abs(force), 1.0)
     k_lin = (10.0 / 9.0) * force / float(static_penetration(force, kc))
     return 2.0 * math.pi * math.sqrt(m / k_lin)
+
+
+_BOUNCE_INTEGRAL = beta_function(1.0 / (N_EXP + 1.0), 0.5) / (N_EXP + 1.0)   # int_0^1 du / sqrt(1 - u^(n+1))
+
+
+def bounce_time(kc: float, m, v):
+    """Duration (s) of a free undamped landing of a mass m (kg) at speed v (m/s) on the contact law:
+    2 p_max / v * int_0^1 du / sqrt(1 - u^(n+1)), p_max = ((n+1) m v^2 / (2 Kc))^(1/(n+1))."""
+    v = np.abs(np.asarray(v, dtype=float))
+    with np.errstate(divide="ignore"):
+        p_max = ((N_EXP + 1.0) * np.asarray(m) * v * v / (2.0 * kc)) ** (1.0 / (N_EXP + 1.0))
+        return np.where(v > 0, 2.0 * p_max / np.where(v > 0, v, 1.0) * _BOUNCE_INTEGRAL, np.inf)
 
 
 def contact_gap(scene: Scene) -> float:
@@ -376,12 +270,61 @@ def contact_gap(scene: Scene) -> float:
     return 0.0 if scene.elastic_gap == "closed" else gap
 
 
-def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: dict | None = None) -> "SimulationResult":
-    """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only)."""
-    from models.dynamics.simulate import INDICATORS, SimulationResult
+# ---------------------------------------------------------------- the event record
 
+WINDOW_POINTS = 65         # samples of a landing's impact window (its percussion: trapezoid)
+
+
+def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
+    """The impact columns of the landings (module doc) and the persistence of every row, in place."""
+    if not rows.size:
+        return rows
+    starts = np.array([run.t[0] for _, run in segments])
+    ends = np.array([run.t[-1] for _, run in segments])
+    landing = np.flatnonzero(rows[:, events.COL_KIND] == events.KIND_CONTACT)
+    t_land = rows[landing, events.COL_TIME]
+    # the contact a landing starts: the last phase beginning at its instant (none at the run's end)
+    k = np.clip(np.searchsorted(starts, t_land, side="right") - 1, 0, len(segments) - 1)
+    has = starts[k] == t_land
+    duration = np.where(has, ends[k] - t_land, 0.0)
+    mass = np.interp(t_land, model.tab[eq.TG], model.tab[eq.MASS])
+    tau = bounce_time(model.kc, mass, rows[landing, events.COL_V_REL])
+    persistent = np.zeros(rows.shape[0], dtype=bool)
+    persistent[landing] = ~has | (duration > PERSISTENT_BOUNCES * tau) | (ends[k] >= ends[-1])
+    rows[landing, events.COL_PERCUSSION] = 0.0
+    rows[landing, events.COL_DOMEGA2] = 0.0
+    sel = np.flatnonzero(has)
+    if sel.size:
+        tt = t_land[sel, None] + np.minimum(duration, tau)[sel, None] * np.linspace(0.0, 1.0, WINDOW_POINTS)
+        x, v = (c.reshape(tt.shape) for c in _sample([segments[i] for i in k[sel]], list(tt)))
+        F = np.empty(tt.size)
+        eq.forces(model, np.repeat([segments[i][0] for i in k[sel]], WINDOW_POINTS).astype(np.int64),
+                  x.ravel(), v.ravel(), F)
+        rows[landing[sel], events.COL_PERCUSSION] = np.trapezoid(np.abs(F).reshape(tt.shape), tt, axis=1)
+        rows[landing[sel], events.COL_DOMEGA2] = (v[:, -1] - v[:, 0]) / np.interp(t_land[sel], tab.t, tab.arm)
+    # a separation ends the contact the last landing (or the start of the run) began
+    since = True
+    for i in range(rows.shape[0]):
+        if rows[i, events.COL_KIND] == events.KIND_SEPARATION:
+            persistent[i], since = since, True
+        else:
+            since = persistent[i]
+    rows[:, events.COL_PERSISTENT] = persistent
+    return rows
+
+
+# ---------------------------------------------------------------- the model
+
+def simulate(scene: Scene, reading: str = "consistent", solver: str | None = None, preset: dict | None = None,
+             stats: dict | None = None) -> SimulationResult:
+    """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only).
+
+    ``solver`` ("compiled" or "scipy") and ``preset`` (a dict like PRESETS[...]) override what
+    ``scene.accuracy`` selects; ``stats`` (dict) receives nfev, n_steps and loop_s (s in the loop).
+    """
     if reading not in READINGS:
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
+    warnings = validity.check_scene(scene)
     kc = contact_stiffness(scene.contact_length, scene.kc_factor)
     gap = contact_gap(scene)
     span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
@@ -389,51 +332,86 @@ def simulate(scene: Scene, reading: str = "consistent", integrate=None, preset: 
     tab = grid_tables(scene, span, n_grid)
     drive = tab.R31 if reading == "consistent" else -tab.R31
     preset = PRESETS[scene.accuracy] if preset is None else preset
-    if integrate is None:
-        # compiled twin (models.dynamics.kernels.elastic_nb) for fast/standard, solve_ivp for reference
-        from models.dynamics.accuracy import integrator
-        integrate = integrator("elastic", scene.accuracy)
+    solver = SOLVERS[scene.accuracy] if solver is None else solver
+    warnings += validity.elastic_before(scene, tab)
     f_scale = max(float(np.max(np.abs(tab.R31))), 1.0)
     period = contact_period(kc, float(np.min(tab.M)), f_scale)
     x_scale = float(static_penetration(f_scale, kc))
     atol = (preset["atol"] * x_scale, preset["atol"] * x_scale * 2.0 * math.pi / period)
-    segments, events = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping,
-                                 rtol=preset["rtol"], atol=atol,
-                                 max_step=period / preset["steps_per_period"])
-    ds = _dataset(scene, tab, segments, events, kc, gap, reading)
-    ds.attrs.update(elastic_gap=scene.elastic_gap, scene_backlash_m=scene.backlash)
-    jumps, impacts = count_events(events)
+    loop_stats = {} if stats is None else stats
+    t0 = time.perf_counter()
+    segments, rows = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"], atol=atol,
+                               max_step=period / preset["steps_per_period"], solver=solver,
+                               method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats)
+    loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
+    model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
+    complete_events(rows, segments, model, tab)
+    record = events.from_rows(rows, {"event_v_signed": (eq.COL_V, "m/s", "rate of x_el at the event")})
+    ds = _dataset(scene, tab, segments, model, reading, record)
+    ind = _indicators(scene, ds, events.columns(record), segments, reading, kc)
+    warnings += validity.elastic_after(scene, ds, ind)
+    ds.attrs["validity_warnings"] = validity.attribute(warnings)
+    return SimulationResult(ds, ind, "elastic", warnings=warnings)
+
+
+def _indicators(scene: Scene, ds: xr.Dataset, ev: dict, segments, reading: str, kc: float) -> dict:
     x, m_static, m_contact = (ds[k].values for k in ("x_el", "MR13D_static", "MR13D"))
-    ind = {k: None for k in INDICATORS}
+    ind = empty_indicators()
     ind.update(
         MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
-        xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3), jumps=jumps, impacts=impacts,
+        xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
+        # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
+        jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(ds["deformation"].values.max() * 1e3),
-        separations=sum(1 for e in events if e["kind"] in ("leave_exterior", "leave_interior")),
-        contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap, contact_length_mm=scene.contact_length * 1e3,
-        Kc_SI=kc,
+        separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
+        contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap,
+        contact_length_mm=scene.contact_length * 1e3, Kc_SI=kc,
+        energy_error=energy_error(ds, kc) if scene.contact_damping == 0.0 else None,
     )
-    return SimulationResult(ds, ind, "elastic")
+    return ind
 
 
-def _dataset(scene, tab: Tables, segments, events, kc, gap, reading) -> xr.Dataset:
+def energy_error(ds: xr.Dataset, kc: float) -> float:
+    """The energy balance of an undamped run, relative to its energy scale: with
+    M(t) x'' = F(x) - R31(t), d/dt (M v^2/2 + U) = -R31 v + Mdot v^2/2 (U the flanks' Palmgren
+    potential); the residual of its trapezoidal integration over the output samples."""
+    from scipy.integrate import cumulative_trapezoid
+
+    t, v, M = ds["time"].values, ds["dx_el"].values, ds["reduced_mass"].values
+    E = 0.5 * M * v**2 + contact_potential(ds["deformation"].values, kc)
+    W = cumulative_trapezoid(-ds["R31"].values * v + 0.5 * np.gradient(M, t) * v**2, t, initial=0.0)
+    scale = max(float(np.max(np.abs(E))), float(np.max(np.abs(W))), 1e-300)
+    return float(np.max(np.abs(E - E[0] - W)) / scale)
+
+
+def _sample(segments, times):
+    """x, x' of every phase at its own instants ``times[k]`` (compiled runs in one pass)."""
+    dense = [k for k, (_, run) in enumerate(segments) if isinstance(run, dp.DenseRun)]
+    out = [None] * len(segments)
+    if dense:
+        y = dp.evaluate_runs([segments[k][1] for k in dense], [times[k] for k in dense])
+        cuts = np.cumsum([times[k].size for k in dense])[:-1]
+        for k, part in zip(dense, np.split(y, cuts, axis=1)):
+            out[k] = part
+    for k, (_, run) in enumerate(segments):
+        if out[k] is None:
+            out[k] = np.asarray(run(times[k]), dtype=float).reshape(2, -1)
+    return np.concatenate(out, axis=1)
+
+
+def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, record: dict) -> xr.Dataset:
     """Sample every phase on a uniform time grid (plus the solver's own steps) into a Dataset."""
     t_end = tab.t[-1]
     n = max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2)
     t_uniform = np.linspace(0.0, t_end, n)
     times = []
-    for k, (phase, sol) in enumerate(segments):
-        lo, hi = sol.t[0], sol.t[-1]
+    for k, (phase, run) in enumerate(segments):
+        lo, hi = run.t[0], run.t[-1]
         a = np.searchsorted(t_uniform, lo, side="left")
         b = np.searchsorted(t_uniform, hi, side="right" if k == len(segments) - 1 else "left")
-        times.append(np.concatenate([t_uniform[a:b], sol.t]))   # the solver's steps: extremes are not lost
-    runs = [sol for _, sol in segments]
-    from models.dynamics.kernels.dopri5 import DenseRun, evaluate_runs   # numba only when a run needs it
-    if all(isinstance(r, DenseRun) for r in runs):
-        y = evaluate_runs(runs, times)                          # compiled loop: one pass over all phases
-    else:
-        y = np.concatenate([sol.sol(tt) for sol, tt in zip(runs, times)], axis=1)
+        times.append(np.concatenate([t_uniform[a:b], run.t]))   # the solver's steps: extremes are not lost
+    y = _sample(segments, times)
     t = np.concatenate(times)
     phase = np.repeat([ph for ph, _ in segments], [tt.size for tt in times])
     # in time order; an instant shared by two phases (an event) keeps the value of the phase that ends
@@ -446,19 +424,21 @@ def _dataset(scene, tab: Tables, segments, events, kc, gap, reading) -> xr.Datas
     # spline, accurate to rounding)
     exact = build_tables(scene, t_end, t=t, linkage="spline")
     arm, R31, M = exact.arm, exact.R31, exact.M
-    F = _force_vector(x, v, phase, kc, gap, scene.contact_damping)
+    F = np.empty(t.size)
+    eq.forces(model, phase.astype(np.int64), x, v, F)
     drive = R31 if reading == "consistent" else -R31
     a = (F - drive) / M
     darm = np.interp(t, tab.t, np.gradient(tab.arm, tab.t))
     phi2 = exact.phi2 + x / arm                                           # eq. (19)
     omega2 = exact.omega2 + v / arm                                       # eq. (19)
     epsilon2 = exact.epsilon2 + a / arm - v * darm / arm**2               # d/dt of eq. (19)
+    gap = model.gap
     deformation = np.where(x < 0, -x, np.where(x > gap, x - gap, 0.0))
 
     def var(data, units, long_name):
         return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
 
-    ds = xr.Dataset(
+    return xr.Dataset(
         data_vars={
             "phi1": var(tab.omega1 * t, "rad", "cam angle (0 at rise start)"),
             "omega1": var(np.full(t.size, tab.omega1), "rad/s", "cam angular velocity"),
@@ -476,70 +456,13 @@ def _dataset(scene, tab: Tables, segments, events, kc, gap, reading) -> xr.Datas
             "epsilon2": var(epsilon2, "rad/s^2", "follower angular acceleration (time derivative of eq. 19)"),
             "phi2_kin": var(exact.phi2, "rad", "kinematic follower angle"),
             "omega2_kin": var(exact.omega2, "rad/s", "kinematic follower angular velocity"),
+            **record,
         },
         coords={"time": ("time", t, {"units": "s", "long_name": "time from the start of the rise"})},
         attrs={
             "title": "labtool elastic-contact model (paper eqs 12-19)",
-            "reading": reading, "Kc_SI": kc, "Kc_units": "N/m^(10/9)",
-            "contact_length_m": scene.contact_length, "backlash_m": gap,
-            "contact_damping_s_per_m": scene.contact_damping, "omega1_mode": scene.omega1_mode,
-            "omega1_rad_s": tab.omega1, "law": scene.law, "Fu_N": scene.Fu, "jt_factor": scene.jt_factor,
-            "event_times_s": np.array([e["t"] for e in events], dtype=float),
-            "event_kinds": ",".join(e["kind"] for e in events),
+            "reading": reading, "Kc_SI": model.kc, "Kc_units": "N/m^(10/9)", "elastic_gap_m": gap,
+            "elastic_gap": scene.elastic_gap, "omega1_rad_s": tab.omega1,
+            "event_record": events.RECORD_VERSION,
         },
     )
-    return ds
-
-
-def _force_vector(x, v, phase, kc, gap, damping):
-    """normal_force over arrays (same law, vectorised)."""
-    F = np.zeros_like(x)
-    i = phase == INTERIOR
-    e = phase == EXTERIOR
-    if damping > 0:
-        F[i] = hunt_crossley_force(-x[i], -v[i], kc, damping)
-        F[e] = -hunt_crossley_force(x[e] - gap, v[e], kc, damping)
-    else:
-        F[i] = contact_force(-x[i], kc)
-        F[e] = -contact_force(x[e] - gap, kc)
-    return F
-
-
-def compare_table3(accuracy: str = "standard", contact_length: float | None = None, law: str = "sine",
-                   elastic_gap: str = "closed"):
-    """Table 1's 16 runs (omega1 variable) against the paper's Table 3: a DataFrame, one row a run.
-
-    Columns: factors, our indicators, the paper's, and % differences for MR13D and xel.
-    ``elastic_gap`` "closed" (default) is the convention Table 3 was computed with, "physical"
-    lets the follower cross the backlash (docs/models.md, "the backlash in Table 3").
-    """
-    import pandas as pd
-
-    from models.study.paper import read_reference, table1_runs
-
-    t3 = read_reference("table3_elastic")
-    rows = []
-    for run, ref in zip(table1_runs().itertuples(), t3.itertuples()):
-        extra = {} if contact_length is None else {"contact_length": contact_length}
-        scene = Scene(law=law, cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3,
-                      jt_factor=run.Jt_factor, omega1_mode="var", accuracy=accuracy,
-                      elastic_gap=elastic_gap, **extra)
-        ind = simulate(scene).indicators
-        pct = lambda ours, paper: 100.0 * (ours / paper - 1.0)
-        rows.append({
-            "run": run.run, "Fu_N": run.Fu_N, "j_mm": run.j_mm, "n1_rpm": run.n1_rpm, "Jt": run.Jt_factor,
-            "MR13D_max": ind["MR13D_max_Nm"], "paper_MR13D_max": ref.MR13D_max_Nm,
-            "MR13D_max_pct": pct(ind["MR13D_max_Nm"], ref.MR13D_max_Nm),
-            "MR13D_min": ind["MR13D_min_Nm"], "paper_MR13D_min": ref.MR13D_min_Nm,
-            "MR13D_min_pct": pct(ind["MR13D_min_Nm"], ref.MR13D_min_Nm),
-            "contact_max": ind["MR13D_contact_max_Nm"], "contact_min": ind["MR13D_contact_min_Nm"],
-            "xel_max_mm": ind["xel_max_mm"], "paper_xel_max_mm": ref.xel_max_mm,
-            "xel_max_pct": pct(ind["xel_max_mm"], ref.xel_max_mm),
-            "xel_min_mm": ind["xel_min_mm"], "paper_xel_min_mm": ref.xel_min_mm,
-            "xel_min_pct": pct(ind["xel_min_mm"], ref.xel_min_mm),
-            "deformation_max_mm": ind["deformation_max_mm"],
-            "jumps": ind["jumps"], "paper_jumps": int(ref.jumps),
-            "impacts": ind["impacts"], "paper_impacts": int(ref.impacts),
-            "separations": ind["separations"],
-        })
-    return pd.DataFrame(rows)

@@ -1,4 +1,4 @@
-"""The one event record of every simulation dataset (rigid, elastic, twin) and its counts.
+r"""The one event record of every simulation dataset (rigid, elastic, twin) and its counts.
 
 A model's dataset carries its contact events on a dimension ``event`` (length 0 allowed), one row
 an event, in time order:
@@ -51,8 +51,14 @@ DIM = "event"
 SEPARATION, CONTACT = "separation", "contact"
 INTERIOR, EXTERIOR = "interior", "exterior"
 # integer codes the compiled loops write (kind, side); names are what the dataset stores
-KIND_CODES = {0: SEPARATION, 1: CONTACT}
-SIDE_CODES = {0: INTERIOR, 1: EXTERIOR}
+KIND_SEPARATION, KIND_CONTACT = 0, 1
+SIDE_INTERIOR, SIDE_EXTERIOR = 0, 1
+KIND_CODES = {KIND_SEPARATION: SEPARATION, KIND_CONTACT: CONTACT}
+SIDE_CODES = {SIDE_INTERIOR: INTERIOR, SIDE_EXTERIOR: EXTERIOR}
+# columns of an event row as the compiled loops write it (rows of models.dynamics.kernels.dopri5.EV_WIDTH
+# numbers): the shared columns first, a model's own from N_SHARED on
+COL_TIME, COL_PHI1, COL_KIND, COL_SIDE, COL_V_REL, COL_DOMEGA2, COL_PERCUSSION, COL_PERSISTENT = range(8)
+N_SHARED = 8
 
 VARIABLES = {
     "event_time": ("s", "time of the contact event from the start of the simulation"),
@@ -94,6 +100,17 @@ def record(time, phi1, kind, side, v_rel, domega2, percussion, persistent, extra
     return out
 
 
+def from_rows(rows, extra: dict | None = None) -> dict:
+    """``record`` from event rows (n, >= N_SHARED) in the column layout above; ``extra``: a model's
+    own columns, name -> (column, units, long_name)."""
+    rows = np.asarray(rows, dtype=float)
+    if rows.ndim != 2 or rows.shape[1] < N_SHARED:
+        raise ValueError(f"event rows must be an array (n, >= {N_SHARED}), got shape {rows.shape}")
+    return record(rows[:, COL_TIME], rows[:, COL_PHI1], rows[:, COL_KIND].astype(int), rows[:, COL_SIDE].astype(int),
+                  rows[:, COL_V_REL], rows[:, COL_DOMEGA2], rows[:, COL_PERCUSSION], rows[:, COL_PERSISTENT] > 0,
+                  {name: (rows[:, col], units, long_name) for name, (col, units, long_name) in (extra or {}).items()})
+
+
 def _names(values, codes: dict) -> np.ndarray:
     arr = np.asarray(values).reshape(-1)
     if arr.dtype.kind in "iuf":
@@ -132,52 +149,71 @@ def empty() -> dict:
 
 # ------------------------------------------------------------------ one definition of each count
 
-def _side_mask(ev: xr.Dataset, side: str | None) -> np.ndarray:
-    kinds = np.asarray(ev["event_kind"].values, dtype=str)
+# ``ev`` below: an event record, as a Dataset (``read``) or any mapping of the variable names to
+# arrays (what ``columns`` returns, cheaper inside a model)
+
+def columns(record: dict) -> dict:
+    """name -> values of a ``record`` (``record(...)``'s data variables)."""
+    return {name: spec[1] for name, spec in record.items()}
+
+
+def _col(ev, name: str) -> np.ndarray:
+    return np.asarray(ev[name])
+
+
+def _side_mask(ev, side: str | None) -> np.ndarray:
+    kinds = _col(ev, "event_kind")
     if side is None:
         return np.ones(kinds.size, dtype=bool)
     if side not in (INTERIOR, EXTERIOR):
         raise ValueError(f"side must be {INTERIOR!r} or {EXTERIOR!r}, got {side!r}")
-    return np.asarray(ev["event_side"].values, dtype=str) == side
+    return _col(ev, "event_side").astype(str) == side
 
 
-def is_flight(ev: xr.Dataset, side: str | None = None) -> np.ndarray:
+def is_flight(ev, side: str | None = None) -> np.ndarray:
     """Rows that begin a flight: every separation (from ``side`` only, if given)."""
-    return (np.asarray(ev["event_kind"].values, dtype=str) == SEPARATION) & _side_mask(ev, side)
+    return (_col(ev, "event_kind").astype(str) == SEPARATION) & _side_mask(ev, side)
 
 
-def is_impact(ev: xr.Dataset, side: str | None = None) -> np.ndarray:
+def is_impact(ev, side: str | None = None) -> np.ndarray:
     """Rows that end a flight on a flank: every contact (landing), with or without rebound."""
-    return (np.asarray(ev["event_kind"].values, dtype=str) == CONTACT) & _side_mask(ev, side)
+    return (_col(ev, "event_kind").astype(str) == CONTACT) & _side_mask(ev, side)
 
 
-def is_lift_off(ev: xr.Dataset, side: str | None = None) -> np.ndarray:
+def is_lift_off(ev, side: str | None = None) -> np.ndarray:
     """Separations from persistent contact (a lift-off, not a rebound)."""
-    return is_flight(ev, side) & np.asarray(ev["event_persistent"].values, dtype=bool)
+    return is_flight(ev, side) & _col(ev, "event_persistent").astype(bool)
 
 
-def is_settle(ev: xr.Dataset, side: str | None = None) -> np.ndarray:
+def is_settle(ev, side: str | None = None) -> np.ndarray:
     """Contacts that start persistent contact (the follower stays on the flank)."""
-    return is_impact(ev, side) & np.asarray(ev["event_persistent"].values, dtype=bool)
+    return is_impact(ev, side) & _col(ev, "event_persistent").astype(bool)
 
 
-def flights(ev: xr.Dataset, side: str | None = None) -> int:
+def flights(ev, side: str | None = None) -> int:
     return int(is_flight(ev, side).sum())
 
 
-def impacts(ev: xr.Dataset, side: str | None = None) -> int:
+def impacts(ev, side: str | None = None) -> int:
     return int(is_impact(ev, side).sum())
 
 
-def lift_offs(ev: xr.Dataset, side: str | None = None) -> int:
+def lift_offs(ev, side: str | None = None) -> int:
     return int(is_lift_off(ev, side).sum())
 
 
-def settles(ev: xr.Dataset, side: str | None = None) -> int:
+def settles(ev, side: str | None = None) -> int:
     return int(is_settle(ev, side).sum())
 
 
-def within_rise(ev: xr.Dataset, rise_angle: float) -> xr.Dataset:
-    """The rows whose cam angle lies in a rise, 0 <= phi1 mod 2 pi < rise_angle (rad)."""
-    phi = np.asarray(ev["event_phi1"].values, dtype=float)
-    return ev.isel({DIM: np.mod(phi, 2.0 * np.pi) < rise_angle})
+def in_rise(ev, rise_angle: float) -> np.ndarray:
+    """Rows whose cam angle lies in a rise, 0 <= phi1 mod 2 pi < rise_angle (rad)."""
+    return np.mod(_col(ev, "event_phi1").astype(float), 2.0 * np.pi) < rise_angle
+
+
+def within_rise(ev, rise_angle: float):
+    """The rows of ``in_rise`` (a Dataset's ``isel``, or a mapping's arrays indexed)."""
+    keep = in_rise(ev, rise_angle)
+    if isinstance(ev, xr.Dataset):
+        return ev.isel({DIM: keep})
+    return {name: np.asarray(values)[keep] for name, values in ev.items()}

@@ -21,16 +21,18 @@ A cam driven at constant speed (omega1 'const') has J' = infinity: pass ``inv_Jc
 """
 from __future__ import annotations
 
+from models.dynamics.jit import jit
 
-def impact(omega1: float, omega2: float, G1: float, G2: float, inv_Jcam: float, J_follower: float,
-           k: float) -> tuple[float, float, float, float, float]:
+
+@jit
+def impact(omega1, omega2, G1, G2, inv_Jcam, J_follower, k):
     """Velocities after an impact and its percussion.
 
     omega1, omega2 in rad/s before the impact; G1, G2 in m (moment arms of the contact normal
     about A and D, signed as above); inv_Jcam = 1/J' in 1/(kg m^2) (0: cam as input);
     J_follower = J'' in kg m^2; k in [0, 1].
     Returns (omega1+, omega2+, P [N s, signed: > 0 pushes the follower towards the outer flank],
-    v_n- [m/s], v_n+ [m/s]).
+    v_n- [m/s], v_n+ [m/s]). Compiled: the rigid model's loops call it (models.dynamics.kernels.rigid_nb).
     """
     v_before = G2 * omega2 - G1 * omega1
     P = -(1.0 + k) * v_before / (G2 * G2 / J_follower + G1 * G1 * inv_Jcam)
@@ -52,6 +54,7 @@ def paper_eq10(omega10: float, omega20: float, A1: float, A2: float, J_cam: floa
     return omega1, omega2, P
 
 
-def kinetic_energy(omega1: float, omega2: float, J_cam: float, J_follower: float) -> float:
+@jit
+def kinetic_energy(omega1, omega2, J_cam, J_follower):
     """1/2 J' omega1^2 + 1/2 J'' omega2^2 in J."""
     return 0.5 * J_cam * omega1 * omega1 + 0.5 * J_follower * omega2 * omega2

@@ -26,7 +26,7 @@ import numba
 from numba import njit
 
 _ROOT = Path(__file__).resolve().parents[2]          # the tree that holds models/ and common/
-_THIS = "models.dynamics.jit"
+_SEED = "from models.dynamics.jit import jit"      # a module that compiles code
 _IMPORT = re.compile(r"^\s*(?:from\s+((?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)|import\s+((?:models|common)(?:\.\w+)*))",
                      re.MULTILINE)
 
@@ -53,9 +53,10 @@ def _first_party_imports(text: str) -> set[str]:
 
 
 def kernel_sources() -> list[Path]:
-    """Every source file compiled code can reach (sorted): the modules under models/ that import
-    this one, and the first-party modules they import, transitively."""
-    seeds = [p for p in sorted((_ROOT / "models").rglob("*.py")) if _THIS in p.read_text(encoding="utf-8")]
+    """Every source file compiled code can reach (sorted): the modules under models/ that compile
+    with ``jit``, this one, and the first-party modules they import, transitively."""
+    seeds = [p for p in sorted((_ROOT / "models").rglob("*.py")) if _SEED in p.read_text(encoding="utf-8")]
+    seeds.append(Path(__file__).resolve())
     seen, todo = set(), list(seeds)
     while todo:
         path = todo.pop()

@@ -6,9 +6,11 @@ converts its edge units (rpm, mm) into a Scene once.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 from common.errors import InputError
+from common.units import rpm_to_rad_s
 from models.mechanism import Mechanism
 from models.mechanism.motion_laws import CamProgram, get_law
 
@@ -79,10 +81,11 @@ class Scene:
     @property
     def omega1_nominal(self) -> float:
         """Nominal cam speed in rad/s."""
-        return self.cam_speed_rpm * 2.0 * math.pi / 60.0
+        return rpm_to_rad_s(self.cam_speed_rpm)
 
-    @property
+    @functools.cached_property
     def program(self) -> CamProgram:
+        """The cam program of the mechanism with the scene's law (built once per scene)."""
         return CamProgram.for_mechanism(self.mechanism, law=self.law)
 
     def replace(self, **changes) -> "Scene":

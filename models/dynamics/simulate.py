@@ -1,89 +1,59 @@
 """One entry point for every model level: ``simulate(scene, model) -> SimulationResult``.
 
 Levels (DESIGN.md, fidelity ladder): ``kinematic`` (cam as input), ``rigid`` (eqs 1-11),
-``elastic`` (eqs 12-19). Each level module exposes ``simulate(scene) -> SimulationResult``; they are
-imported lazily so that a run loads only what its scene needs.
+``elastic`` (eqs 12-19), and ``auto`` (the cheapest level the scene needs, models.dynamics.auto).
+``LEVELS`` is the registry: a level's module is imported when a run needs it (the compiled models
+load numba; a kinematic run does not), always downwards: no level imports this module.
+Every result's dataset gets the scene's provenance (models.dynamics.provenance) and the level
+that ran, and why.
 """
 from __future__ import annotations
 
-import dataclasses
-import importlib
-import math
 import time
 
-import numpy as np
-import xarray as xr
-
 from common.errors import InputError
+from models.dynamics.provenance import scene_attributes
+from models.dynamics.result import INDICATORS, SimulationResult  # noqa: F401  (the public names)
 from models.dynamics.scene import Scene
 
-# indicator keys of the paper's Tables 2 and 3 (DESIGN.md, --json contract)
-INDICATORS = (
-    "MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s",
-    "percussion_max_Ns", "jumps", "impacts", "xel_max_mm", "xel_min_mm",
-)
 
-LEVELS = {
-    "kinematic": "models.dynamics.simulate:_kinematic",
-    "rigid": "models.dynamics.rigid:simulate",
-    "elastic": "models.dynamics.elastic:simulate",
-}
+def _kinematic(scene: Scene, **options) -> SimulationResult:
+    from models.dynamics import kinematic
+    return kinematic.simulate(scene)
 
 
-@dataclasses.dataclass
-class SimulationResult:
-    """Time series (xarray, SI, units on every variable) and the paper's indicators."""
-
-    dataset: xr.Dataset
-    indicators: dict
-    model: str
-    reason: str = ""
-    wall_s: float = 0.0
-
-    def summary(self) -> dict:
-        out = {k: self.indicators.get(k) for k in INDICATORS}
-        out.update(model=self.model, reason=self.reason, wall_s=self.wall_s)
-        return out
+def _rigid(scene: Scene, **options) -> SimulationResult:
+    from models.dynamics import rigid
+    return rigid.simulate(scene, **options)
 
 
-def _resolve(level: str):
-    try:
-        target = LEVELS[level]
-    except KeyError:
-        raise InputError(f"unknown model '{level}'; known: auto, {', '.join(LEVELS)}") from None
-    module, func = target.split(":")
-    return getattr(importlib.import_module(module), func)
+def _elastic(scene: Scene, **options) -> SimulationResult:
+    from models.dynamics import elastic
+    return elastic.simulate(scene, **options)
 
 
-def simulate(scene: Scene, model: str = "auto") -> SimulationResult:
-    """Run ``model`` (or the cheapest level the scene needs, for ``auto``) on ``scene``."""
+def _auto(scene: Scene, **options) -> SimulationResult:
+    from models.dynamics import auto
+    return auto.simulate_auto(scene, **options)
+
+
+LEVELS = {"kinematic": _kinematic, "rigid": _rigid, "elastic": _elastic}
+
+
+def simulate(scene: Scene, model: str = "auto", **options) -> SimulationResult:
+    """Run ``model`` (or the cheapest level the scene needs, for ``auto``) on ``scene``.
+
+    ``options`` go to the level (rigid, elastic: solver=, preset=, stats=; see their simulate)."""
     t0 = time.perf_counter()
-    reason = f"requested --model {model}"
     if model == "auto":
-        # models.dynamics.auto climbs the ladder (and escalates in time) itself; it sets model and reason
-        from models.dynamics.auto import simulate_auto
-        result = simulate_auto(scene)
-        model, reason = result.model, result.reason
+        result = _auto(scene, **options)            # sets model and reason itself
+    elif model in LEVELS:
+        result = LEVELS[model](scene, **options)
+        result.model, result.reason = model, f"requested --model {model}"
     else:
-        result = _resolve(model)(scene)
-    result.model = model
-    result.reason = reason
+        raise InputError(f"unknown model '{model}'; known: auto, {', '.join(LEVELS)}")
     result.wall_s = time.perf_counter() - t0
-    result.dataset.attrs.update(model=model, model_reason=reason, accuracy=scene.accuracy)
+    result.dataset.attrs.update(scene_attributes(scene))
+    result.dataset.attrs.update(model=result.model, model_reason=result.reason)
+    result.dataset.attrs.setdefault("validity_warnings", "[]")
     return result
-
-
-def _kinematic(scene: Scene) -> SimulationResult:
-    """The kinematic level: cam as input at constant speed; MR13D kinetostatic."""
-    from models.mechanism.kinematics import analyze, rise_summary
-    omega1 = scene.omega1_nominal
-    if scene.omega1_mode == "var":
-        from models.mechanism.motor import no_load_cam_speed
-        omega1 = no_load_cam_speed(scene.mechanism, omega1)
-    rpm = omega1 * 30.0 / math.pi
-    ds = analyze(scene.mechanism, scene.program, rpm, scene.Fu, scene.jt_factor)
-    s = rise_summary(ds)
-    ind = {k: None for k in INDICATORS}
-    ind.update(MR13D_max_Nm=s["MR13D_max_Nm"], MR13D_min_Nm=s["MR13D_min_Nm"])
-    ind["sign_change"] = s["sign_change"]
-    return SimulationResult(ds, ind, "kinematic")

@@ -14,6 +14,7 @@ import numpy as np
 
 from common.errors import InputError
 from models.mechanism import Mechanism
+from models.mechanism.memo import cached
 from models.mechanism.motion_laws import CamProgram
 
 
@@ -73,10 +74,8 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
 
 
 def cached_sense(mech: Mechanism, program: CamProgram) -> int:
-    """``choose_sense`` remembered per (mechanism, program) (models.mechanism.cam_tables.cached): it costs
+    """``choose_sense`` remembered per (mechanism, program) (models.mechanism.memo.cached): it costs
     two 721-point geometry passes and every contact-geometry call needs it."""
-    from models.mechanism.cam_tables import cached      # cam_tables imports this module
-
     return cached(("cam_sense", repr(mech), program), lambda: choose_sense(mech, program))
 
 

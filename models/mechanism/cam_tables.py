@@ -19,28 +19,19 @@ operating point in a handful of array operations.
 Values agree with models.mechanism.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
 models.mechanism.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
 
-``cached`` is the one per-process cache of such speed-independent tables: the elastic model's
-grids (``grid_terms``), the stroke spline, the cam's sense of rotation
-(models.mechanism.cam_profile.cached_sense) and the rigid model's cam and follower tables
-(models.dynamics.rigid.build_plant).
+The grids and the stroke spline are memoised per process (models.mechanism.memo).
 """
 from __future__ import annotations
 
-import collections
 import dataclasses
-import threading
 
 import numpy as np
 
 from models.mechanism.cam_profile import cached_sense, contact_geometry
 from models.mechanism.linkage import linkage_state, reduced_follower
 from models.mechanism import Mechanism
+from models.mechanism.memo import cached
 from models.mechanism.motion_laws import CamProgram
-
-CACHE_SIZE = 16         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB)
-
-_cache: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
-_lock = threading.Lock()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,19 +62,21 @@ class AngleTerms:
         return dict(omega2=omega2, epsilon2=epsilon2, MR13D=MR13D, J_follower=J)
 
 
-def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | None = None,
+def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None = None,
                 linkage: str = "exact") -> AngleTerms:
     """The terms at any cam angles ``phi1`` (rad).
 
-    ``load_until`` (rad): the load's direction is taken at min(phi1, load_until), so that a run
-    ending at the end of the rise keeps the rise's load at its last instant (models.dynamics.elastic).
+    ``until`` (rad): every term is taken at min(phi1, until) (``phi1`` itself is kept), so that a
+    run ending at the end of the rise keeps the rise's motion and load at its last instant instead
+    of the dwell's (models.dynamics.elastic).
     ``linkage``: "exact" evaluates the linkage at every angle; "spline" reads J0, dJ0, M_gravity
     and the load's arm from a cubic spline over the follower's stroke (``stroke_spline``: the
     linkage depends on phi2 alone, analytically; 1e-13 relative, 1e-11 for dJ0), 4x cheaper for
     thousands of arbitrary instants. The motion law and the contact geometry are always exact.
     """
     phi1 = np.asarray(phi1, dtype=float)
-    motion = program(phi1)
+    at = phi1 if until is None else np.minimum(phi1, until)
+    motion = program(at)
     psi, dpsi, ddpsi, _ = motion
     phi2 = mech.phiD + mech.psi0 + psi
     spline = stroke_spline(mech) if linkage == "spline" else None
@@ -91,11 +84,10 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, load_until: float | 
         J0, dJ0, M_gravity, vNx, slide = spline(phi2).T
     else:
         J0, dJ0, M_gravity, vNx, slide = linkage_columns(mech, phi2)
-    phi_load = phi1 if load_until is None else np.minimum(phi1, load_until)
     # models.mechanism.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
     # arm (the x velocity coefficient of N)
-    m_load = np.sign(slide) * program.direction(phi_load) * vNx
-    geo = contact_geometry(mech, program, phi1, sense=cached_sense(mech, program), motion=motion)
+    m_load = np.sign(slide) * program.direction(at) * vNx
+    geo = contact_geometry(mech, program, at, sense=cached_sense(mech, program), motion=motion)
     return AngleTerms(phi1=phi1, psi=psi, dpsi=dpsi, ddpsi=ddpsi, phi2=phi2, J0=J0, dJ0=dJ0,
                       M_gravity=M_gravity, m_load=m_load, alpha=geo["pressure_angle"],
                       Db1=geo["Db1"], Db2=geo["Db2"])
@@ -129,38 +121,10 @@ def stroke_spline(mech: Mechanism):
 
 
 def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
-               load_until: float | None = None) -> AngleTerms:
+               until: float | None = None) -> AngleTerms:
     """The terms on the uniform grid ``linspace(0, span, n_points)`` (rad), cached per process.
 
     The arrays of a cached table are read-only: they are shared by every caller.
     """
-    key = ("angle_terms", repr(mech), program, float(span), int(n_points), load_until)
-    return cached(key, lambda: angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), load_until))
-
-
-def cached(key: tuple, build):
-    """``build()`` once per ``key`` per process (the CACHE_SIZE most recent kept): for what depends
-    on the mechanism and the cam program only (this module's grids and stroke spline, the cam's
-    sense of rotation, the rigid model's cam and follower tables). When the result is a dataclass
-    its numpy arrays are made read-only, since every caller shares them."""
-    with _lock:
-        hit = _cache.get(key)
-        if hit is not None:
-            _cache.move_to_end(key)
-            return hit
-    value = build()
-    for f in dataclasses.fields(value) if dataclasses.is_dataclass(value) else ():
-        arr = getattr(value, f.name)
-        if isinstance(arr, np.ndarray):
-            arr.flags.writeable = False
-    with _lock:
-        _cache[key] = value
-        while len(_cache) > CACHE_SIZE:
-            _cache.popitem(last=False)
-    return value
-
-
-def clear_cache() -> None:
-    """Forget every cached table (benchmarks that time a first call use it)."""
-    with _lock:
-        _cache.clear()
+    key = ("angle_terms", repr(mech), program, float(span), int(n_points), until)
+    return cached(key, lambda: angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), until))

@@ -18,6 +18,7 @@ import xarray as xr
 
 from models.mechanism.cam_profile import contact_geometry
 from common.errors import InputError
+from common.units import rpm_to_rad_s
 from models.mechanism.linkage import linkage_state, reduced_follower
 from models.mechanism import Mechanism
 from models.mechanism.motion_laws import CamProgram
@@ -63,7 +64,7 @@ def analyze(mech: Mechanism | None = None, program: CamProgram | None = None, rp
     mech = mech or Mechanism.default()
     program = program or CamProgram.for_mechanism(mech)
     _check(rpm, Fu, jt_factor, n_points)
-    omega1 = rpm * 2.0 * math.pi / 60.0
+    omega1 = rpm_to_rad_s(rpm)
     if phi1 is None:
         phi1 = np.linspace(0.0, 2.0 * math.pi, n_points)
     phi1 = np.asarray(phi1, dtype=float)

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import tomllib
 from importlib import resources
@@ -15,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import InputError
+from common.units import DEG, MM, RPM
 
-_UNIT_SCALE = {"_mm": 1e-3, "_deg": math.pi / 180.0, "_rpm": 2.0 * math.pi / 60.0}
+_UNIT_SCALE = {"_mm": MM, "_deg": DEG, "_rpm": RPM}
 
 # (section, key in file, attribute, may be zero, may be negative)
 _FIELDS = [
@@ -112,6 +114,7 @@ class Mechanism:
     rr_max: float | None = None
     program: dict = dataclasses.field(default_factory=dict)
     source: str = "built-in"
+    source_sha256: str = ""          # of the TOML text the parameters were read from
 
     # --- derived -------------------------------------------------------------
     @property
@@ -143,7 +146,7 @@ class Mechanism:
     def default(cls) -> "Mechanism":
         """The paper's mechanism (sec. 2, 2.2)."""
         text = resources.files("models.data").joinpath("stb216.toml").read_text()
-        return cls.from_toml_text(text, source="models/data/stb216.toml")
+        return cls.from_toml_text(text, source="built-in STB-216 (models/data/stb216.toml)")
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Mechanism":
@@ -181,7 +184,8 @@ class Mechanism:
         values["rr_min"] = float(cam["rr_min_mm"]) * 1e-3 if "rr_min_mm" in cam else None
         values["rr_max"] = float(cam["rr_max_mm"]) * 1e-3 if "rr_max_mm" in cam else None
         values["program"] = dict(data.get("program", {}))
-        mech = cls(name=str(data.get("name", source)), source=source, **values)
+        mech = cls(name=str(data.get("name", source)), source=source,
+                   source_sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), **values)
         mech.validate()
         return mech
 

@@ -1,23 +1,48 @@
-"""Dormand-Prince 5(4) building blocks for the compiled (numba) integration loops.
+"""The one compiled Dormand-Prince 5(4) driver of every dynamic model (numba, ``jit``).
 
-The same method, step-size controller and dense output (4th order, Shampine's coefficients) as
-scipy's ``RK45``, so the compiled loops and the scipy reference path differ only in the language,
-not in the numerics; the independent reference is scipy's DOP853 at the ``reference`` preset.
+The method, step-size controller, first step and dense output (4th order, Shampine's
+coefficients) are scipy ``RK45``'s, so the compiled loop and a scipy run of the same equations
+differ only in the language; the independent reference is scipy's DOP853 (models.dynamics.reference).
 
-A model's loop evaluates its own right-hand side at the six stages (numba cannot cache a loop that
-receives a function as an argument, so each model writes its ``step`` with these helpers):
+A model is a ``namedtuple`` of its tables and parameters (the *model struct*) plus six hooks,
+registered once with ``register(ModelClass, ...)`` (numba overloads dispatched on the struct's
+type, so this driver imports no model and every model shares it):
+
+    rhs(model, ph, t, y, out)                 dy/dt of the phase ``ph`` into ``out``
+    event(model, ph, which, t, y) -> g        the phase's event functions, which = 0 .. n - 1
+    n_events(model, ph) -> n                  how many the phase has
+    direction(model, ph, which) -> +1 | -1    the sign change that fires event ``which``
+    state_size(model, ph) -> n                length of the state in this phase (<= Controls.n_state)
+    transition(model, ph, which, t, y, ev, nev) -> (code, nev)
+                                              what the event does: writes its rows of the event
+                                              record into ``ev`` (EV_WIDTH columns,
+                                              models.dynamics.events layout), updates ``ph`` and the
+                                              state ``y`` in place; code END ends the run
+
+``ph`` is the phase: a float array of PHASE_WIDTH numbers whose layout the model defines (entry 0
+is the mode, also the row of Controls.atol). ``run(model, ctl, ph0, y0, t0)`` integrates phase by
+phase: within a phase a smooth right-hand side; an event's sign is read at ``ctl.nsub`` points of
+every step's dense output (not at the step's ends only: a micro-bounce inside one step is an event)
+and located by bisection to the resolution of the step fraction; the earliest event wins (ties
+within 4 eps of time go to the lower index). Limits: ``max_steps`` steps, ``max_events``
+transitions, ``zeno_n`` consecutive phases shorter than ``zeno_dt`` s (endless switching); each
+ends the run with its status code, which the model's wrapper turns into a SolverError.
 
     K[0] = f(t, y)   (FSAL: the previous step's K[6])
-    K[s] = f(t + C[s] h, y + h * sum_j A[s, j] K[j])        s = 1..5      (``stage_state``)
-    y_new = y + h * sum_j B[j] K[j];  K[6] = f(t + h, y_new)            (``stage_state`` with B)
-    err = error_norm(K, h, y, y_new, rtol, atol)  (RMS norm, < 1 accepts)
+    K[s] = f(t + C[s] h, y + h * sum_j A[s, j] K[j])        s = 1..5
+    y_new = y + h * sum_j B[j] K[j];  K[6] = f(t + h, y_new);  err = RMS(h E.K / scale) < 1 accepts
     dense: Q = K.T @ P; y(t + s h) = y + h * (Q[:, 0] s + Q[:, 1] s^2 + Q[:, 2] s^3 + Q[:, 3] s^4)
 
-Time in s, states in the caller's units; tolerances as in scipy (scale = atol + rtol * |y|).
+Time in s, states in the model's units; tolerances as in scipy (scale = atol + rtol * |y|).
 """
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
+from numba import types
+from numba.extending import overload
+
 from models.dynamics.jit import jit
 
 A = np.array([
@@ -42,17 +67,105 @@ P = np.array([
 ])
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 ERROR_EXPONENT = -1.0 / 5.0
+TIE = 8.9e-16          # events closer than TIE * (1 + |t|) s are simultaneous: the lower index wins
 
-# status codes returned by the compiled loops (the Python wrappers turn them into SolverError)
-OK, TOO_MANY_STEPS, TOO_MANY_EVENTS, STEP_TOO_SMALL, NOT_FINITE, NO_PROGRESS = 0, 1, 2, 3, 4, 5
+PHASE_WIDTH = 6        # numbers describing a phase (the model's layout; [0] = mode)
+EV_WIDTH = 20          # columns of an event row (models.dynamics.events: 8 shared, up to 12 the model's own)
+MAX_EVENTS_PER_PHASE = 4
+CONTINUE, END = 0, 1   # transition codes
+
+# status codes of ``run`` (the model wrappers turn them into SolverError)
+OK, TOO_MANY_STEPS, TOO_MANY_EVENTS, STEP_TOO_SMALL, NOT_FINITE, NO_PROGRESS, STALLED = range(7)
 STATUS_TEXT = {
     TOO_MANY_STEPS: "the step cap was reached",
     TOO_MANY_EVENTS: "the event cap was reached",
     STEP_TOO_SMALL: "the step size fell below the floating-point resolution of time",
     NOT_FINITE: "the state became non-finite (NaN or infinity)",
     NO_PROGRESS: "the integration stalled in zero-length phases",
+    STALLED: "the end of the run was not reached before the time bound",
 }
 
+Controls = namedtuple("Controls", [
+    "rtol",          # relative tolerance
+    "atol",          # absolute tolerances, array (modes, n_state): row ph[0]
+    "max_step",      # s
+    "t_bound",       # s, the integration never goes past it
+    "end_at_bound",  # reaching t_bound ends the run (True) or means it stalled (False)
+    "max_steps",     # accepted steps per run
+    "max_events",    # transitions per run
+    "nsub",          # event sign checks per step
+    "zeno_n",        # this many consecutive phases ...
+    "zeno_dt",       # ... each shorter than this (s) is endless switching
+    "n_state",       # largest state size of the model
+])
+
+
+# ------------------------------------------------------------------ the model hooks (overloaded)
+
+def rhs(model, ph, t, y, out):
+    raise NotImplementedError("a model registers its hooks with models.dynamics.kernels.dopri5.register")
+
+
+def event(model, ph, which, t, y):
+    raise NotImplementedError
+
+
+def n_events(model, ph):
+    raise NotImplementedError
+
+
+def direction(model, ph, which):
+    raise NotImplementedError
+
+
+def state_size(model, ph):
+    raise NotImplementedError
+
+
+def transition(model, ph, which, t, y, ev, nev):
+    raise NotImplementedError
+
+
+def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_size_fn, transition_fn):
+    """Make ``model_class`` (a namedtuple class) drivable by ``run``: its structs dispatch the hooks
+    above to the model's functions (``jit`` functions with the hooks' parameter names; their Python
+    source is compiled in place of the hook, so a hook costs no extra call)."""
+
+    def ours(model):
+        return isinstance(model, types.BaseNamedTuple) and model.instance_class is model_class
+
+    @overload(rhs)
+    def _rhs(model, ph, t, y, out):
+        if ours(model):
+            return rhs_fn.py_func
+
+    @overload(event)
+    def _event(model, ph, which, t, y):
+        if ours(model):
+            return event_fn.py_func
+
+    @overload(n_events)
+    def _n_events(model, ph):
+        if ours(model):
+            return n_events_fn.py_func
+
+    @overload(direction)
+    def _direction(model, ph, which):
+        if ours(model):
+            return direction_fn.py_func
+
+    @overload(state_size)
+    def _state_size(model, ph):
+        if ours(model):
+            return state_size_fn.py_func
+
+    @overload(transition)
+    def _transition(model, ph, which, t, y, ev, nev):
+        if ours(model):
+            return transition_fn.py_func
+
+
+# ------------------------------------------------------------------ Dormand-Prince pieces
 
 @jit
 def stage_state(y, h, K, coeffs, n_stages, out):
@@ -114,8 +227,8 @@ def new_step_factor(err, rejected):
 
 @jit
 def grow(a, n_new):
-    """A copy of ``a`` with its first axis enlarged to n_new (the step store doubles as it fills)."""
-    b = np.empty((n_new,) + a.shape[1:], dtype=a.dtype)
+    """A copy of ``a`` with its first axis enlarged to n_new (the stores double as they fill)."""
+    b = np.zeros((n_new,) + a.shape[1:], dtype=a.dtype)
     b[: a.shape[0]] = a
     return b
 
@@ -127,6 +240,260 @@ def rms(v, scale):
         r = v[i] / scale[i]
         acc += r * r
     return np.sqrt(acc / v.size)
+
+
+@jit
+def first_step(model, ph, t0, y0, f0, t_bound, max_step, rtol, atol, y1, f1):
+    """scipy's initial step (Hairer, Norsett & Wanner II.4, order 4); y1, f1 are work arrays."""
+    scale = atol + np.abs(y0) * rtol
+    d0 = rms(y0, scale)
+    d1 = rms(f0, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t_bound - t0)
+    for i in range(y0.size):
+        y1[i] = y0[i] + h0 * f0[i]
+    rhs(model, ph, t0 + h0, y1, f1)
+    for i in range(y0.size):
+        f1[i] -= f0[i]
+    d2 = rms(f1, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** 0.2
+    return min(100.0 * h0, h1, t_bound - t0, max_step)
+
+
+@jit
+def attempt(model, ph, t, y, h_abs, ctl, atol, K, y_new, tmp):
+    """One accepted step from (t, y) with K[0] = f(t, y): (status, t_new, h, next h_abs, rhs calls).
+
+    Rejects and shrinks as scipy does; a non-finite state shrinks by MIN_FACTOR down to the
+    floating-point resolution of time, then is NOT_FINITE."""
+    min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+    h_abs = min(max(h_abs, min_step), ctl.max_step)
+    rejected = False
+    nfev = 0
+    while True:
+        if h_abs < min_step:
+            return STEP_TOO_SMALL, t, 0.0, h_abs, nfev
+        t_new = min(t + h_abs, ctl.t_bound)
+        h = t_new - t
+        for s in range(1, 6):
+            stage_state(y, h, K, A[s], s, tmp)
+            rhs(model, ph, t + C[s] * h, tmp, K[s])
+        stage_state(y, h, K, B, 6, y_new)
+        rhs(model, ph, t_new, y_new, K[6])
+        nfev += 6
+        err = error_norm(K, h, y, y_new, ctl.rtol, atol)
+        finite = np.isfinite(err)
+        for i in range(y.size):
+            finite = finite and np.isfinite(y_new[i])
+        if not finite:
+            if h_abs <= min_step:
+                return NOT_FINITE, t, 0.0, h_abs, nfev
+            h_abs *= MIN_FACTOR
+            rejected = True
+            continue
+        f = new_step_factor(err, rejected)
+        h_abs *= f
+        if err < 1.0:
+            return OK, t_new, h, h_abs, nfev
+        rejected = True
+
+
+@jit
+def _fires(g0, g1, dirn):
+    return (g0 <= 0.0 and g1 >= 0.0 and dirn > 0) or (g0 >= 0.0 and g1 <= 0.0 and dirn < 0)
+
+
+@jit
+def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
+    """Step fraction in (lo, hi] where event ``which`` changes sign (bisection on the dense output)."""
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        dense_eval(y0, h, Q, mid, tmp)
+        g = event(model, ph, which, t + mid * h, tmp)
+        if (g_lo <= 0.0) == (g <= 0.0) and g != 0.0:
+            lo, g_lo = mid, g
+        else:
+            hi = mid
+    return hi
+
+
+@jit
+def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
+    """First step fraction s in (0, 1] where event ``which`` changes sign in its direction, 2.0 if
+    none; the sign is read at ``nsub`` points of the step (its end value g1 given)."""
+    dirn = direction(model, ph, which)
+    s_prev, g_prev = 0.0, g0
+    for k in range(1, nsub + 1):
+        s = k / nsub
+        if k == nsub:
+            g = g1
+        else:
+            dense_eval(y0, h, Q, s, tmp)
+            g = event(model, ph, which, t + s * h, tmp)
+        if _fires(g_prev, g, dirn):
+            return bisect(model, ph, which, t, y0, h, Q, s_prev, s, g_prev, tmp)
+        s_prev, g_prev = s, g
+    return 2.0
+
+
+@jit
+def event_many(model, ph, which, ts, Y, out):
+    """Event ``which`` at many instants ts (s), states Y (len(ts), n): for the scipy reference loop."""
+    for i in range(ts.size):
+        out[i] = event(model, ph, which, ts[i], Y[i])
+
+
+@jit
+def run(model, ctl, ph0, y0, t0):
+    """Integrate phase by phase from (t0, y0) in phase ph0 (module doc). Returns
+    (status, t, y, n_steps, n_phases, n_events, nfev, step t0s, hs, y0s, Qs, phase rows, phase
+    t0s, t1s, first step of each phase, event rows)."""
+    nmax = ctl.n_state
+    cap = min(ctl.max_steps, 4096)
+    st_t = np.zeros(cap)
+    st_h = np.zeros(cap)
+    st_y = np.zeros((cap, nmax))
+    st_Q = np.zeros((cap, nmax, 4))
+    pcap = 64
+    ph_row = np.zeros((pcap, PHASE_WIDTH))
+    ph_t0 = np.zeros(pcap)
+    ph_t1 = np.zeros(pcap)
+    ph_first = np.zeros(pcap, dtype=np.int64)
+    ev = np.full((pcap, EV_WIDTH), np.nan)
+    ynew_all = np.empty(nmax)
+    tmp_all = np.empty(nmax)
+    Q_all = np.empty((nmax, 4))
+    g_old = np.empty(MAX_EVENTS_PER_PHASE)
+    g_new = np.empty(MAX_EVENTS_PER_PHASE)
+    y = np.zeros(nmax)
+    y[: y0.size] = y0
+    ph = ph0.copy()
+    t = t0
+    nst, nph, nev, ntr, nfev, short = 0, 0, 0, 0, 0, 0
+    status = OK
+    while True:
+        if nph == ph_t0.size:
+            pcap = 2 * ph_t0.size
+            ph_row, ph_t0, ph_t1, ph_first = grow(ph_row, pcap), grow(ph_t0, pcap), grow(ph_t1, pcap), grow(ph_first, pcap)
+        if nev + MAX_EVENTS_PER_PHASE > ev.shape[0]:
+            old = ev.shape[0]
+            ev = grow(ev, 2 * old)
+            ev[old:] = np.nan
+        n = state_size(model, ph)
+        ne = n_events(model, ph)
+        atol = ctl.atol[int(ph[0]), :n]
+        yv, y_new, tmp, Q = y[:n], ynew_all[:n], tmp_all[:n], Q_all[:n]
+        K = np.empty((7, n))          # contiguous: the stages' inner loops run over it
+        ph_row[nph] = ph
+        ph_t0[nph] = t
+        ph_first[nph] = nst
+        t_ph0 = t
+        rhs(model, ph, t, yv, K[0])
+        h_abs = first_step(model, ph, t, yv, K[0], ctl.t_bound, ctl.max_step, ctl.rtol, atol, tmp, y_new)
+        nfev += 2
+        for e in range(ne):
+            g_old[e] = event(model, ph, e, t, yv)
+        hit = -1
+        while t < ctl.t_bound:
+            if nst >= ctl.max_steps:
+                status = TOO_MANY_STEPS
+                break
+            status, t_new, h, h_abs, calls = attempt(model, ph, t, yv, h_abs, ctl, atol, K, y_new, tmp)
+            nfev += calls
+            if status != OK:
+                break
+            dense_coeffs(K, Q)
+            if nst == st_t.size:
+                cap = min(2 * st_t.size, ctl.max_steps)
+                st_t, st_h, st_y, st_Q = grow(st_t, cap), grow(st_h, cap), grow(st_y, cap), grow(st_Q, cap)
+            st_t[nst] = t
+            st_h[nst] = h
+            for i in range(n):            # element loops: numba's slice copies cost more per step
+                st_y[nst, i] = yv[i]
+                for c in range(4):
+                    st_Q[nst, i, c] = Q[i, c]
+            nst += 1
+            best = 2.0
+            for e in range(ne):
+                g_new[e] = event(model, ph, e, t_new, y_new)
+                s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], ctl.nsub, tmp)
+                if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
+                    best = s
+                    hit = e
+            if hit >= 0:
+                dense_eval(yv, h, Q, best, tmp)
+                for i in range(n):
+                    yv[i] = tmp[i]
+                t = t + best * h
+                break
+            t = t_new
+            for i in range(n):
+                yv[i] = y_new[i]
+                K[0, i] = K[6, i]
+            for e in range(ne):
+                g_old[e] = g_new[e]
+        if status != OK:
+            break
+        ph_t1[nph] = t
+        nph += 1
+        if hit < 0:                                    # the time bound, without an end event
+            if not ctl.end_at_bound:
+                status = STALLED
+            break
+        short = short + 1 if t - t_ph0 < ctl.zeno_dt else 0
+        code, nev = transition(model, ph, hit, t, y, ev, nev)
+        ntr += 1
+        if code == END:
+            break
+        if short >= ctl.zeno_n:
+            status = NO_PROGRESS
+            break
+        if ntr > ctl.max_events:
+            status = TOO_MANY_EVENTS
+            break
+    return (status, t, y, nst, nph, nev, nfev, st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first, ev)
+
+
+# ------------------------------------------------------------------ the Python side of a run
+
+class DenseRun:
+    """A stretch of steps with the interface the models read from scipy: ``.t`` (step times, s),
+    ``.sol(times)`` / ``__call__`` -> array (n_state, n_times), ``.nfev``."""
+
+    def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0):
+        self.t0s, self.hs, self.y0s, self.Qs = t0s, hs, y0s, Qs
+        self.t = np.append(t0s, t_end)      # the last step may end early, at an event
+        self.nfev = nfev
+
+    def __call__(self, times):
+        out = evaluate_steps(self.t0s, self.hs, self.y0s, self.Qs, times)
+        return out[:, 0] if np.ndim(times) == 0 else out
+
+    @property
+    def sol(self):
+        return self
+
+
+Phase = namedtuple("Phase", "row t0 t1 sol")      # row: the phase array; sol: dense output over [t0, t1]
+
+
+def unpack(out, width):
+    """``run``'s return value -> (status, t, y, phases, event rows, nfev, n_steps); ``width(row)``
+    is the state size of a phase (its dense output keeps that many components)."""
+    (status, t, y, nst, nph, nev, nfev, st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first, ev) = out
+    phases = []
+    for i in range(nph):
+        a = ph_first[i]
+        b = ph_first[i + 1] if i + 1 < nph else nst
+        n = width(ph_row[i])
+        sol = DenseRun(st_t[a:b], st_h[a:b], st_y[a:b, :n], st_Q[a:b, :n], float(ph_t1[i]))
+        phases.append(Phase(ph_row[i].copy(), float(ph_t0[i]), float(ph_t1[i]), sol))
+    return int(status), float(t), y, phases, ev[:nev].copy(), int(nfev), int(nst)
 
 
 def evaluate_steps(t0s, hs, y0s, Qs, times, first=0, last=None):
@@ -149,9 +516,9 @@ def evaluate_steps(t0s, hs, y0s, Qs, times, first=0, last=None):
 def evaluate_runs(runs, times):
     """Dense output of several ``DenseRun``s in one vectorised pass: ``times[k]`` on ``runs[k]``.
 
-    The runs must follow each other in time (the phases of one integration). A time is evaluated
-    on a step of its own run only, so an instant shared by two runs (a phase boundary) takes each
-    run's own value. Returns an array (n_state, sum of len(times[k])) in the order given.
+    The runs must follow each other in time (the phases of one integration) and have the same
+    state width. A time is evaluated on a step of its own run only, so an instant shared by two
+    runs (a phase boundary) takes each run's own value. Returns (n_state, sum of len(times[k])).
     """
     counts = np.array([np.size(tk) for tk in times])
     sizes = np.array([r.t0s.size for r in runs])
@@ -160,21 +527,3 @@ def evaluate_runs(runs, times):
     return evaluate_steps(np.concatenate([r.t0s for r in runs]), np.concatenate([r.hs for r in runs]),
                           np.concatenate([r.y0s for r in runs]), np.concatenate([r.Qs for r in runs]), tt,
                           np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
-
-
-class DenseRun:
-    """A stretch of steps with the interface the models read from scipy: ``.t`` (step times, s) and
-    ``.sol(times)`` / ``__call__`` -> array (n_state, n_times), ``.nfev``."""
-
-    def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0):
-        self.t0s, self.hs, self.y0s, self.Qs = t0s, hs, y0s, Qs
-        self.t = np.append(t0s, t_end)      # the last step may end early, at an event
-        self.nfev = nfev
-
-    def __call__(self, times):
-        out = evaluate_steps(self.t0s, self.hs, self.y0s, self.Qs, times)
-        return out[:, 0] if np.ndim(times) == 0 else out
-
-    @property
-    def sol(self):
-        return self
