@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from common.units import rad_s_to_rpm
+from models.dynamics import validity
 from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
 from models.mechanism.kinematics import analyze, rise_summary
@@ -18,8 +19,10 @@ def cam_speed(scene: Scene) -> float:
 
 def simulate(scene: Scene) -> SimulationResult:
     """Kinematics over one revolution at the cam speed above; MR13D max/min over the rise."""
+    warnings = validity.check_scene(scene, refuse=False)
     ds = analyze(scene.mechanism, scene.program, rad_s_to_rpm(cam_speed(scene)), scene.Fu, scene.jt_factor)
     s = rise_summary(ds)
     ind = empty_indicators()
     ind.update(MR13D_max_Nm=s["MR13D_max_Nm"], MR13D_min_Nm=s["MR13D_min_Nm"], sign_change=s["sign_change"])
-    return SimulationResult(ds, ind, "kinematic")
+    ds.attrs["validity_warnings"] = validity.attribute(warnings)
+    return SimulationResult(ds, ind, "kinematic", warnings=warnings)

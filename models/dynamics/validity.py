@@ -72,25 +72,33 @@ def _groove(mech, program) -> dict:
     return cached(("validity_groove", repr(mech), program), build)
 
 
-def check_scene(scene, gap: float | None = None) -> list[str]:
+def check_scene(scene, gap: float | None = None, refuse: bool = True) -> list[str]:
     """The scene's geometry (every model level): refuse a groove that cannot exist or a
     self-locking pressure angle; warn about a poor pressure angle or a gap large against the
-    groove's curvature. ``gap`` (m): the gap the model crosses (default the scene's backlash)."""
+    groove's curvature. ``gap`` (m): the gap the model crosses (default the scene's backlash).
+    ``refuse=False`` (the kinematic level, which only evaluates the motion law) turns the
+    refusals into warnings."""
     mech = scene.mechanism
     g = _groove(mech, scene.program)
     j = scene.backlash if gap is None else gap
     deg = math.degrees
+    warnings = []
+
+    def meaningless(message: str):
+        if refuse:
+            raise InputError(message)
+        warnings.append(message)
+
     if g["convex_min"] < mech.R or g["concave_min"] < mech.R + scene.backlash:
-        raise InputError(
+        meaningless(
             f"the groove is undercut: the pitch curve's radius of curvature falls to {g['rho_min'] * 1e3:.3g} mm at "
             f"phi1 = {deg(g['rho_at']):.1f} deg, below the roller radius {mech.R * 1e3:g} mm (+ backlash on the "
             "outer flank); no cam realises this motion law; lengthen the rise or shorten the stroke")
-    if g["alpha_max"] >= PRESSURE_ANGLE_LIMIT:
-        raise InputError(f"the pressure angle reaches {g['alpha_max']:.1f} deg at phi1 = {deg(g['alpha_at']):.1f} deg "
-                         f"(limit {PRESSURE_ANGLE_LIMIT:g} deg): the cam cannot drive the follower; "
-                         "lengthen the rise or shorten the stroke")
-    warnings = []
-    if g["alpha_max"] > PRESSURE_ANGLE_WARN:
+    elif g["alpha_max"] >= PRESSURE_ANGLE_LIMIT:
+        meaningless(f"the pressure angle reaches {g['alpha_max']:.1f} deg at phi1 = {deg(g['alpha_at']):.1f} deg "
+                    f"(limit {PRESSURE_ANGLE_LIMIT:g} deg): the cam cannot drive the follower; "
+                    "lengthen the rise or shorten the stroke")
+    if PRESSURE_ANGLE_WARN < g["alpha_max"] < PRESSURE_ANGLE_LIMIT:
         warnings.append(f"the pressure angle reaches {g['alpha_max']:.1f} deg at phi1 = {deg(g['alpha_at']):.1f} deg: "
                         f"the cam drives the follower poorly (above {PRESSURE_ANGLE_WARN:g} deg)")
     if j / g["rho_min"] > GAP_WARN:
