@@ -106,3 +106,46 @@ def test_elastic_contact_options_reject_impossible_values(args, needle, capsys):
     assert main(["simulate", "--model", "elastic", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0]
+
+
+def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
+    """Every Scene field, the mechanism's source and hash, labtool's version: enough to simulate
+    the file again from its attributes alone (models.dynamics.provenance)."""
+    import dataclasses
+    import hashlib
+
+    from models.dynamics.provenance import SCENE_ATTRIBUTES
+    from models.dynamics.scene import Scene
+
+    mech_file = tmp_path / "mech.toml"
+    from importlib import resources
+    text = resources.files("models.data").joinpath("stb216.toml").read_text().replace("R_mm = 8.0", "R_mm = 7.5")
+    mech_file.write_text(text)
+    path = tmp_path / "sim.nc"
+    args = ["simulate", "--model", "elastic", "--accuracy", "fast", "--rpm", "200", "--fu", "10", "--backlash-mm", "0.05",
+            "--jt-factor", "2", "--omega1", "const", "--restitution", "0.7", "--revolutions", "1",
+            "--contact-length-mm", "7", "--kc-factor", "1.5", "--contact-damping", "2", "--elastic-gap", "closed",
+            "--full-cycle", "--mechanism", str(mech_file), "-o", str(path)]
+    assert main(args) == 0
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        a = ds.attrs
+        assert set(SCENE_ATTRIBUTES.values()) <= set(a)
+        assert {f.name for f in dataclasses.fields(Scene)} - {"mechanism"} == set(SCENE_ATTRIBUTES)
+        assert (a["cam_speed_rpm"], a["Fu_N"], a["backlash_m"], a["jt_factor"]) == (200.0, 10.0, 0.05e-3, 2.0)
+        assert (a["restitution"], a["contact_length_m"], a["kc_factor"], a["contact_damping_s_per_m"]) == (0.7, 7e-3, 1.5, 2.0)
+        assert (a["elastic_gap"], a["omega1_mode"], a["accuracy"], a["revolutions"], a["rise_only"]) == \
+            ("closed", "const", "fast", 1.0, 0)
+        assert a["mechanism_source"] == str(mech_file)
+        assert a["mechanism_sha256"] == hashlib.sha256(text.encode()).hexdigest()
+        assert a["labtool_version"] and a["labtool_kernels_sha256"]
+        assert "--contact-damping 2.0" in a["history"] and "--full-cycle" in a["history"]
+        assert a["validity_warnings"] == "[]"
+
+
+def test_kinematics_netcdf_names_the_mechanism_and_the_version(tmp_path):
+    path = tmp_path / "kin.nc"
+    assert main(["kinematics", "--rpm", "200", "-o", str(path)]) == 0
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert ds.attrs["mechanism_source"].startswith("built-in STB-216")
+        assert len(ds.attrs["mechanism_sha256"]) == 64 and ds.attrs["labtool_version"]
+        assert "--rpm 200.0" in ds.attrs["history"]

@@ -59,7 +59,6 @@ from models.mechanism.cam_tables import angle_terms, grid_terms
 from models.mechanism.motor import cam_inertia, transmission_ratio
 
 INTERIOR, FLIGHT, EXTERIOR = eq.INTERIOR, eq.FLIGHT, eq.EXTERIOR
-PHASE_NAMES = ("interior", "flight", "exterior")
 READINGS = ("consistent", "literal")
 
 # solver presets: relative tolerance; absolute tolerances as fractions of the scene's own scales

@@ -141,12 +141,6 @@ def read(ds: xr.Dataset) -> xr.Dataset:
     return ev
 
 
-def empty() -> dict:
-    """A record with no events."""
-    z = np.zeros(0)
-    return record(z, z, np.zeros(0, dtype=int), np.zeros(0, dtype=int), z, z, z, np.zeros(0, dtype=bool))
-
-
 # ------------------------------------------------------------------ one definition of each count
 
 # ``ev`` below: an event record, as a Dataset (``read``) or any mapping of the variable names to

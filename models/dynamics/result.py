@@ -25,11 +25,6 @@ class SimulationResult:
     wall_s: float = 0.0
     warnings: list = dataclasses.field(default_factory=list)
 
-    def summary(self) -> dict:
-        out = {k: self.indicators.get(k) for k in INDICATORS}
-        out.update(model=self.model, reason=self.reason, wall_s=self.wall_s)
-        return out
-
 
 def empty_indicators() -> dict:
     return {k: None for k in INDICATORS}

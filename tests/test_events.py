@@ -1,0 +1,87 @@
+"""The one event record (models.dynamics.events): its layout in both models' datasets, one
+definition of each count, a file round trip."""
+import numpy as np
+import pytest
+import xarray as xr
+
+from common.errors import FileFormatError
+from models.dynamics import events
+from models.dynamics.scene import Scene
+from models.dynamics.simulate import simulate
+
+
+def _record():
+    # lift-off, rebound on the exterior flank (contact + separation at one instant), settle inside
+    return events.record([0.1, 0.2, 0.2, 0.3], [1.0, 2.0, 2.0, 7.0], ["separation", "contact", "separation", "contact"],
+                         ["interior", "exterior", "exterior", "interior"], [0.0, -0.05, 0.05, 0.01],
+                         [0.0, -1.5, 0.0, -0.3], [np.nan, 0.02, np.nan, 0.004], [True, False, False, True])
+
+
+def test_counts_have_one_definition_each():
+    ev = xr.Dataset(_record())
+    assert events.flights(ev) == 2 and events.impacts(ev) == 2
+    assert events.lift_offs(ev) == 1 and events.settles(ev) == 1
+    assert events.flights(ev, side=events.INTERIOR) == 1 and events.impacts(ev, side=events.EXTERIOR) == 1
+    assert np.all(ev["event_v_rel"].values >= 0)            # speeds are stored as magnitudes
+    cols = events.columns(_record())                         # the same counts from plain arrays
+    assert (events.flights(cols), events.impacts(cols), events.lift_offs(cols)) == (2, 2, 1)
+    rise = events.within_rise(ev, 6.0)                       # phi1 = 7 rad lies in the next revolution's rise
+    assert rise.sizes["event"] == 4 and events.within_rise(ev, 0.5).sizes["event"] == 0
+    with pytest.raises(ValueError, match="side"):
+        events.flights(ev, side="left")
+
+
+def test_integer_codes_and_names_agree_and_bad_values_are_refused():
+    by_code = events.record([0.0], [0.0], [events.KIND_CONTACT], [events.SIDE_EXTERIOR], [0.1], [0.0], [0.0], [False])
+    assert by_code["event_kind"][1][0] == "contact" and by_code["event_side"][1][0] == "exterior"
+    with pytest.raises(ValueError, match="unknown"):
+        events.record([0.0], [0.0], ["bounce"], ["interior"], [0.1], [0.0], [0.0], [False])
+    with pytest.raises(ValueError, match="rows"):
+        events.record([0.0, 1.0], [0.0], ["contact"], ["interior"], [0.1], [0.0], [0.0], [False])
+
+
+@pytest.mark.hostile("real_file")
+def test_the_record_survives_a_netcdf_file_and_a_file_without_one_is_refused(tmp_path):
+    path = tmp_path / "ev.nc"
+    xr.Dataset(_record()).to_netcdf(path, engine="h5netcdf")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        ev = events.read(ds)
+        assert list(ev["event_kind"].values) == ["separation", "contact", "separation", "contact"]
+        assert ev["event_persistent"].dtype == bool and events.lift_offs(ev) == 1
+        assert ev["event_percussion"].attrs["units"] == "N s"
+    with pytest.raises(FileFormatError, match="no event record"):
+        events.read(xr.Dataset({"phi1": ("time", [0.0, 1.0])}))
+
+
+@pytest.mark.parametrize("model", ["rigid", "elastic"])
+def test_both_models_write_the_same_record_and_count_from_it(model):
+    res = simulate(Scene(backlash=0.128e-3, accuracy="fast"), model)
+    ds = res.dataset
+    ev = events.read(ds)
+    for name, (units, _) in events.VARIABLES.items():
+        assert ds[name].attrs["units"] == units and ds[name].dims == ("event",)
+    t = ev["event_time"].values
+    assert t.size > 2 and np.all(np.diff(t) >= 0)                # time order
+    landing = events.is_impact(ev)
+    assert np.all(np.isfinite(ev["event_percussion"].values[landing]))
+    assert np.all(ev["event_percussion"].values[landing] > 0)
+    assert np.all(np.isnan(ev["event_percussion"].values[~landing]))
+    jumps = events.flights(ev) if model == "rigid" else events.flights(ev, side=events.INTERIOR)
+    assert res.indicators["jumps"] == jumps and res.indicators["impacts"] == events.impacts(ev)
+    if model == "rigid":
+        # a rebound: a contact and a separation at one instant; the impact's jump in omega2 and its
+        # percussion on the contact row are the impact law's
+        k = int(np.flatnonzero(landing & ~ev["event_persistent"].values)[0])
+        assert t[k + 1] == t[k] and ev["event_kind"].values[k + 1] == "separation"
+        jump = ds["event_omega2_after"].values[k] - ds["event_omega2_before"].values[k]
+        assert ev["event_domega2"].values[k] == pytest.approx(jump, rel=1e-12)
+        assert res.indicators["percussion_max_Ns"] == pytest.approx(np.max(ev["event_percussion"].values[landing]))
+    else:
+        # a bounce on the exterior flank returns near the speed it came with: its omega2 changes by
+        # about 2 v / (l cos alpha), its percussion by about 2 M v
+        k = int(np.flatnonzero(landing & (ev["event_side"].values == events.EXTERIOR))[0])
+        v = ev["event_v_rel"].values[k]
+        i = np.searchsorted(ds["time"].values, t[k])
+        inv_arm = (ds["phi2"] - ds["phi2_kin"]).values[i] / ds["x_el"].values[i]      # 1 / (l cos alpha), eq. 19
+        assert -ev["event_domega2"].values[k] == pytest.approx(2 * v * inv_arm, rel=0.3)
+        assert ev["event_percussion"].values[k] == pytest.approx(2 * ds["reduced_mass"].values[i] * v, rel=0.3)
