@@ -58,6 +58,7 @@ def test_solver_choice():
         accuracy.bound("kinematic", "fast", "err_omega2")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("run", [6, 11])
 def test_elastic_standard_and_fast_within_their_measured_error(run):
     scene = _scene(run)

@@ -26,6 +26,7 @@ def test_output_that_is_a_file_is_refused(tmp_path, capsys):
     assert "not a directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_small_run_writes_csv_png_and_summary(tmp_path):
     out = tmp_path / "wp"
     code = main(["bench", "accuracy", "--runs", "9", "--ladder-runs", "", "--models", "elastic",

@@ -182,6 +182,7 @@ def test_full_model_effects_rebuild_every_cell(levels, seed):
 # ---------------------------------------------------------------------------------------------
 # CLI
 
+@pytest.mark.slow
 def test_cli_text_states_pooling_and_prints_matrix_form(capsys, tmp_path):
     png = tmp_path / "effects.png"
     assert main(["doe", "analyze", "models/data/table2_rigid.csv", "--response", "MR13D_max_Nm",
@@ -297,6 +298,7 @@ def test_constant_response_has_no_significant_term():
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(row=st.integers(0, 15), col=st.integers(0, 10),
        value=st.one_of(st.text(max_size=6), st.floats(allow_nan=True, allow_infinity=True), st.just("")))
+@pytest.mark.slow
 def test_any_corrupted_cell_ends_in_success_or_one_line_exit_2(tmp_path_factory, capsys, row, col, value):
     """Whatever one cell of Table 2 is replaced by, the analysis either runs or fails in one line."""
     t = read_reference("table2_rigid").astype(object)

@@ -33,6 +33,7 @@ def test_demo_runs_the_whole_pipeline_and_prints_where_the_report_is(tmp_path, c
         assert (out / "measured_180rpm.nc").exists()
 
 
+@pytest.mark.slow
 def test_demo_skips_missing_pieces_and_says_so(tmp_path, capsys, monkeypatch):
     """Without acquisition, processing and the dynamic models the demo still ends with a report, on a
     synthetic measurement and the kinematic level, and says which steps it skipped."""

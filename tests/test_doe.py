@@ -113,6 +113,7 @@ def kinematic_2x3(tmp_path_factory):
     return rc, d
 
 
+@pytest.mark.slow
 def test_doe_run_local_processes_writes_table_and_netcdf(kinematic_2x3, capsys):
     rc, d = kinematic_2x3
     assert rc == 0

@@ -247,6 +247,7 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
 @settings(max_examples=8, deadline=None)
 @given(cuts=st.lists(st.integers(1, 29999), max_size=4), clips=st.lists(st.integers(0, 29999), max_size=3),
        kinds=st.lists(st.sampled_from(["gap", "overrun", "fault", "stop"]), min_size=4, max_size=4))
+@pytest.mark.slow
 def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
     """Gaps, overruns and clips anywhere: the run ends cleanly (or with a LabtoolError), never
     integrates across a cut, and whatever omega2 it gives over complete motion intervals is right."""

@@ -101,6 +101,7 @@ session.run(dev, sys.argv[1], 10000, 60.0, flush_interval_s=0.3, on_flush=flushe
 """
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_every_flushed_sample_and_complete_false(tmp_path, capsys):
     p = tmp_path / "killed.h5"
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(p)], stdout=subprocess.PIPE, text=True, cwd=ROOT)
@@ -177,6 +178,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     assert rec["events"][-1][1] == "stop" and "Ctrl-C" in rec["events"][-1][2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig,said", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
 def test_ctrl_c_or_sigterm_to_a_realtime_cli_run_closes_the_file(tmp_path, sig, said):
     p = tmp_path / "int.h5"

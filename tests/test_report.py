@@ -79,6 +79,7 @@ def test_late_measurement_shows_as_a_negative_lag(files):
         assert c["overall"]["peak_max_shift_deg"] == pytest.approx(-3.0, abs=1.0)
 
 
+@pytest.mark.slow
 def test_cli_writes_html_pdf_json_and_escapes_file_strings(files, capsys):
     d = files["dir"]
     html, pdf, js = d / "r.html", d / "r.pdf", d / "s.json"
@@ -104,6 +105,7 @@ def test_cli_writes_html_pdf_json_and_escapes_file_strings(files, capsys):
     assert "kinematic, w1 = ct." in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_thresholds_pass_and_fail_set_the_exit_code(files, capsys):
     d = files["dir"]
     good = d / "good.toml"
@@ -220,6 +222,7 @@ def test_harmonic_lowpass_keeps_low_and_removes_high_harmonics():
     assert np.allclose(align.harmonic_lowpass(y, 10), np.sin(2 * x), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_json_to_stdout_is_one_object(files, capsys, tmp_path):
     rc = main(["report", str(files["exact"]), "--models", "kinematic", "--omega1", "const", "-o",
                str(tmp_path / "r.html"), "--json", "-"])
@@ -348,6 +351,7 @@ def test_predicted_events_of_the_last_revolution():
     assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
 
 
+@pytest.mark.slow
 def test_model_options_reach_the_simulations_and_the_page(files, capsys, tmp_path):
     """--restitution / --contact-damping / --contact-length-mm / --elastic-gap set the models' scene
     (not the paper's idealisations), are shown on the page and in the JSON; bad values exit 2."""

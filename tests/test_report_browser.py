@@ -37,6 +37,7 @@ def report_html(tmp_path_factory):
     return html
 
 
+@pytest.mark.slow
 def test_dom_has_the_tables_and_figures(report_html, tmp_path):
     res = _chromium(["--dump-dom", report_html.as_uri()], tmp_path / "profile")
     dom = res.stdout
@@ -49,6 +50,7 @@ def test_dom_has_the_tables_and_figures(report_html, tmp_path):
     assert "&lt;script&gt;document.title" in dom
 
 
+@pytest.mark.slow
 def test_screenshot_shows_the_figures(report_html, tmp_path):
     """The first figure (omega2, measured vs model) is at the top of the page: its coloured model
     curves (matplotlib tab:blue and tab:red) must appear in the rendered pixels."""

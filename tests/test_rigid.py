@@ -188,6 +188,7 @@ def _toy_model(a2=0.05, J=0.01, M=-0.5, k=0.5, j=1e-3, phi1_end=100.0):
     cam = rigid_tables.make_table([-1.0, 200.0], v1, v1, zeros, zeros).packed()
     v2 = np.array([[J], [0.0], [M], [0.0]])
     fol = rigid_tables.make_table([0.0, 10.0], v2, v2, np.zeros((4, 1)), np.zeros((4, 1))).packed()
+    cam.flags.writeable = fol.flags.writeable = False      # as the model's shared tables: one compiled type
     return rigid.eq.RigidModel(cam, fol, 1.0, 1.0, 1.0, 0.0, True, 0.0, 0.0, 0.0, j, k, phi1_end,
                                contact_stiffness(6e-3))
 
