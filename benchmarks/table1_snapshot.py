@@ -46,13 +46,15 @@ def _scene(run, gap, preset):
                  omega1_mode="var", accuracy=preset, elastic_gap=gap)
 
 
-def snapshot(errors: bool) -> dict:
+def snapshot(errors: bool, models=("rigid", "elastic")) -> dict:
     from models.dynamics import accuracy
     from models.dynamics.simulate import simulate
     from models.study.paper import table1_runs
 
     out = {}
     for model, gap in CASES:
+        if model not in models:
+            continue
         refs = {}
         for preset in PRESETS:
             rows = []
@@ -148,11 +150,12 @@ def main(argv=None) -> int:
     ap.add_argument("-o", "--output", type=pathlib.Path)
     ap.add_argument("--errors", action="store_true", help="also the presets' errors against the reference")
     ap.add_argument("--compare", nargs=2, type=pathlib.Path, metavar=("BEFORE", "AFTER"))
+    ap.add_argument("--models", default="rigid,elastic", help="comma-separated: rigid, elastic")
     args = ap.parse_args(argv)
     if args.compare:
         compare(*(json.loads(p.read_text()) for p in args.compare))
         return 0
-    data = snapshot(args.errors)
+    data = snapshot(args.errors, tuple(args.models.split(",")))
     text = json.dumps(data, indent=1)
     if args.output:
         args.output.write_text(text)
