@@ -34,8 +34,9 @@ Events (models.dynamics.events): a separation when x leaves a flank's contact ra
 a flight ends on a flank. A landing's impact window is its bounce time (the duration of a free
 undamped landing at that speed on the contact law, ``bounce_time``) or the contact, whichever is
 shorter: ``event_domega2`` is the change of x'/(l cos alpha) over it, ``event_percussion`` the
-contact force's impulse over it; a contact that lasts more than twice its bounce time (or to the
-end of the run) is persistent, and so is a separation from one.
+contact force's impulse over it (from the momentum balance, ``complete_events``); a contact that
+lasts more than twice its bounce time (or to the end of the run) is persistent, and so is a
+separation from one.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ from scipy.special import beta as beta_function
 
 from common.errors import InputError, SolverError
 from models.dynamics import events, reference, validity
-from models.dynamics.contact import N_EXP, contact_potential, contact_stiffness, static_penetration
+from models.dynamics.contact import N_EXP, contact_stiffness, static_penetration
 from models.dynamics.kernels import dopri5 as dp
 from models.dynamics.kernels import elastic_nb as eq
 from models.dynamics.kinematic import cam_speed
@@ -83,7 +84,7 @@ BOUNDARY_NUDGE = eq.NUDGE  # m, how far inside the new phase a restart begins
 MAX_STEPS = 2_000_000      # accepted steps per run (memory ~100 B a step)
 MAX_SEGMENTS = 1_000_000   # phases per run
 PERSISTENT_BOUNCES = 2.0   # a contact longer than this many bounce times is persistent
-WINDOW_POINTS = 65         # samples of a landing's impact window (its percussion: trapezoid)
+DRIVE_POINTS = 17          # samples of the drive's impulse over a landing's impact window
 
 
 @dataclass(frozen=True)
@@ -188,7 +189,7 @@ def model_struct(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, omega1=0.0) -
 
 def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
               rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, solver="compiled", method="RK45",
-              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, omega1=0.0, stats=None):
+              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, omega1=0.0, stats=None, model=None):
     """Integrate M x'' = F - drive over the grid, phase by phase: (segments, event rows).
 
     segments: list of (phase, run) with ``run.t`` the step times and ``run(t)`` the dense output
@@ -196,10 +197,11 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     impact columns of landings not yet completed: ``simulate`` does that). ``y0`` = (x0, v0, phase)
     or None for the model's start (static equilibrium; with no drive at the start, at rest until it
     departs from zero). ``solver``: "compiled" (Dormand-Prince 5(4) of kernels.dopri5) or "scipy"
-    (solve_ivp with ``method``). ``stats`` (dict) receives nfev and n_steps.
+    (solve_ivp with ``method``). ``stats`` (dict) receives nfev and n_steps. ``model``: the
+    ``model_struct`` of these arguments when the caller has it already.
     """
     tg = np.asarray(t_grid, dtype=float)
-    model = model_struct(tg, drive_grid, m_grid, kc, gap, damping, omega1)
+    model = model_struct(tg, drive_grid, m_grid, kc, gap, damping, omega1) if model is None else model
     t_end = float(tg[-1] if t_end is None else t_end)
     if y0 is None:
         phase, t0, x0, v0 = eq.start(model)
@@ -272,11 +274,15 @@ def contact_gap(scene: Scene) -> float:
 
 # ---------------------------------------------------------------- the event record
 
-WINDOW_POINTS = 65         # samples of a landing's impact window (its percussion: trapezoid)
+DRIVE_POINTS = 17          # samples of the drive's impulse over a landing's impact window
 
 
 def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
-    """The impact columns of the landings (module doc) and the persistence of every row, in place."""
+    """The impact columns of the landings (module doc) and the persistence of every row, in place.
+
+    Over a landing's impact window [t_c, t_w] the equation of motion M x'' = F - drive gives the
+    contact force's impulse as the momentum change plus the drive's impulse, M (v_w - v_c) +
+    int drive dt (M varies by far less than 1e-3 over a window): two dense-output values a landing."""
     if not rows.size:
         return rows
     starts = np.array([run.t[0] for _, run in segments])
@@ -287,21 +293,23 @@ def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
     k = np.clip(np.searchsorted(starts, t_land, side="right") - 1, 0, len(segments) - 1)
     has = starts[k] == t_land
     duration = np.where(has, ends[k] - t_land, 0.0)
-    mass = np.interp(t_land, model.tab[eq.TG], model.tab[eq.MASS])
-    tau = bounce_time(model.kc, mass, rows[landing, events.COL_V_REL])
+    tg, mass, drive = model.tab[eq.TG], model.tab[eq.MASS], model.tab[eq.DRIVE]
+    tau = bounce_time(model.kc, np.interp(t_land, tg, mass), rows[landing, events.COL_V_REL])
     persistent = np.zeros(rows.shape[0], dtype=bool)
     persistent[landing] = ~has | (duration > PERSISTENT_BOUNCES * tau) | (ends[k] >= ends[-1])
     rows[landing, events.COL_PERCUSSION] = 0.0
     rows[landing, events.COL_DOMEGA2] = 0.0
     sel = np.flatnonzero(has)
     if sel.size:
-        tt = t_land[sel, None] + np.minimum(duration, tau)[sel, None] * np.linspace(0.0, 1.0, WINDOW_POINTS)
-        x, v = (c.reshape(tt.shape) for c in _sample([segments[i] for i in k[sel]], list(tt)))
-        F = np.empty(tt.size)
-        eq.forces(model, np.repeat([segments[i][0] for i in k[sel]], WINDOW_POINTS).astype(np.int64),
-                  x.ravel(), v.ravel(), F)
-        rows[landing[sel], events.COL_PERCUSSION] = np.trapezoid(np.abs(F).reshape(tt.shape), tt, axis=1)
-        rows[landing[sel], events.COL_DOMEGA2] = (v[:, -1] - v[:, 0]) / np.interp(t_land[sel], tab.t, tab.arm)
+        t_c = t_land[sel]
+        t_w = t_c + np.minimum(duration, tau)[sel]
+        v_c, v_w = (_sample([segments[i] for i in k[sel]], list(np.column_stack([t_c, t_w])))[1].reshape(-1, 2).T)
+        frac = np.linspace(0.0, 1.0, DRIVE_POINTS)
+        tt = t_c[:, None] + (t_w - t_c)[:, None] * frac
+        drive_impulse = np.trapezoid(np.interp(tt, tg, drive), tt, axis=1)
+        M = 0.5 * (np.interp(t_c, tg, mass) + np.interp(t_w, tg, mass))
+        rows[landing[sel], events.COL_PERCUSSION] = np.abs(M * (v_w - v_c) + drive_impulse)
+        rows[landing[sel], events.COL_DOMEGA2] = (v_w - v_c) / np.interp(t_c, tab.t, tab.arm)
     # a separation ends the contact the last landing (or the start of the run) began
     since = True
     for i in range(rows.shape[0]):
@@ -340,22 +348,23 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     atol = (preset["atol"] * x_scale, preset["atol"] * x_scale * 2.0 * math.pi / period)
     loop_stats = {} if stats is None else stats
     t0 = time.perf_counter()
+    model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
     segments, rows = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"], atol=atol,
                                max_step=period / preset["steps_per_period"], solver=solver,
-                               method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats)
+                               method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats, model=model)
     loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
-    model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
     complete_events(rows, segments, model, tab)
-    record = events.from_rows(rows, {"event_v_signed": (eq.COL_V, "m/s", "rate of x_el at the event")})
-    ds = _dataset(scene, tab, segments, model, reading, record)
-    ind = _indicators(scene, ds, events.columns(record), segments, reading, kc)
-    warnings += validity.elastic_after(scene, ds, ind)
+    record = events.from_rows(rows)
+    ds, cols = _dataset(scene, tab, segments, model, reading, record)
+    ind = _indicators(scene, cols, events.columns(record), segments, reading, kc)
+    warnings += validity.elastic_after(scene, cols, ind)
     ds.attrs["validity_warnings"] = validity.attribute(warnings)
     return SimulationResult(ds, ind, "elastic", warnings=warnings)
 
 
-def _indicators(scene: Scene, ds: xr.Dataset, ev: dict, segments, reading: str, kc: float) -> dict:
-    x, m_static, m_contact = (ds[k].values for k in ("x_el", "MR13D_static", "MR13D"))
+def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: float) -> dict:
+    """The indicators from the dataset's columns (numpy arrays, ``_dataset``) and event record."""
+    x, m_static, m_contact = (cols[k] for k in ("x_el", "MR13D_static", "MR13D"))
     ind = empty_indicators()
     ind.update(
         MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
@@ -363,24 +372,26 @@ def _indicators(scene: Scene, ds: xr.Dataset, ev: dict, segments, reading: str, 
         # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
         jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
-        deformation_max_mm=float(ds["deformation"].values.max() * 1e3),
+        deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
         contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap,
         contact_length_mm=scene.contact_length * 1e3, Kc_SI=kc,
-        energy_error=energy_error(ds, kc) if scene.contact_damping == 0.0 else None,
+        energy_error=energy_error(cols, kc) if scene.contact_damping == 0.0 else None,
     )
     return ind
 
 
-def energy_error(ds: xr.Dataset, kc: float) -> float:
+def energy_error(cols, kc: float) -> float:
     """The energy balance of an undamped run, relative to its energy scale: with
     M(t) x'' = F(x) - R31(t), d/dt (M v^2/2 + U) = -R31 v + Mdot v^2/2 (U the flanks' Palmgren
-    potential); the residual of its trapezoidal integration over the output samples."""
-    from scipy.integrate import cumulative_trapezoid
-
-    t, v, M = ds["time"].values, ds["dx_el"].values, ds["reduced_mass"].values
-    E = 0.5 * M * v**2 + contact_potential(ds["deformation"].values, kc)
-    W = cumulative_trapezoid(-ds["R31"].values * v + 0.5 * np.gradient(M, t) * v**2, t, initial=0.0)
+    potential, 9/19 Kc p^(19/9) = 9/19 |F| p undamped); the residual of its trapezoidal integration
+    over the output samples. ``cols``: the dataset or its columns (time, dx_el, reduced_mass,
+    deformation, contact_force, R31)."""
+    t, v, M, p, F, R31 = (np.asarray(cols[k]) for k in ("time", "dx_el", "reduced_mass", "deformation",
+                                                          "contact_force", "R31"))
+    E = 0.5 * M * v**2 + (9.0 / 19.0) * np.abs(F) * p
+    power = -R31 * v + 0.5 * np.gradient(M, t) * v**2
+    W = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
     scale = max(float(np.max(np.abs(E))), float(np.max(np.abs(W))), 1e-300)
     return float(np.max(np.abs(E - E[0] - W)) / scale)
 
@@ -400,8 +411,9 @@ def _sample(segments, times):
     return np.concatenate(out, axis=1)
 
 
-def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, record: dict) -> xr.Dataset:
-    """Sample every phase on a uniform time grid (plus the solver's own steps) into a Dataset."""
+def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, record: dict):
+    """Sample every phase on a uniform time grid (plus the solver's own steps) into a Dataset:
+    (dataset, its time series as numpy arrays by name, 'time' included)."""
     t_end = tab.t[-1]
     n = max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2)
     t_uniform = np.linspace(0.0, t_end, n)
@@ -435,10 +447,12 @@ def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, reco
     gap = model.gap
     deformation = np.where(x < 0, -x, np.where(x > gap, x - gap, 0.0))
 
+    cols = {"time": t}
+
     def var(data, units, long_name):
         return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
 
-    return xr.Dataset(
+    ds = xr.Dataset(
         data_vars={
             "phi1": var(tab.omega1 * t, "rad", "cam angle (0 at rise start)"),
             "omega1": var(np.full(t.size, tab.omega1), "rad/s", "cam angular velocity"),
@@ -466,3 +480,6 @@ def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, reco
             "event_record": events.RECORD_VERSION,
         },
     )
+    cols.update({name: ds.variables[name].values for name in ("x_el", "dx_el", "deformation", "MR13D", "contact_force",
+                                                             "MR13D_static", "R31", "reduced_mass", "contact_phase", "phi1")})
+    return ds, cols

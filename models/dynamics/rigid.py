@@ -111,10 +111,10 @@ def build_model(scene: Scene, backlash: float | None = None, phi1_end: float | N
     hi = simulated_span(scene) + 0.2
     # both tables depend on the mechanism and the cam program only: built once per process and
     # shared by every speed, load, inertia factor and backlash (models.mechanism.memo.cached)
-    cam = cached(("rigid_cam_table", repr(mech), program, sense, -0.05, hi),
+    cam = cached(("rigid_cam_table", mech.cache_key, program, sense, -0.05, hi),
                  lambda: cam_table(mech, program, sense, -0.05, hi).packed())
     lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
-    fol = cached(("rigid_follower_table", repr(mech), lo2, hi2), lambda: follower_table(mech, lo2, hi2).packed())
+    fol = cached(("rigid_follower_table", mech.cache_key, lo2, hi2), lambda: follower_table(mech, lo2, hi2).packed())
     j = scene.backlash if backlash is None else backlash
     if not (Jcam > 0 and math.isfinite(Jcam)):
         raise InputError(f"the cam's reduced inertia must be > 0 kg m^2, got {Jcam}")

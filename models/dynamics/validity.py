@@ -69,7 +69,7 @@ def _groove(mech, program) -> dict:
                     rho_min=float(np.abs(rho).min()), rho_at=float(phi1[np.abs(rho).argmin()]),
                     convex_min=float(rho[convex].min()) if convex.any() else math.inf,
                     concave_min=float(-rho[concave].max()) if concave.any() else math.inf)
-    return cached(("validity_groove", repr(mech), program), build)
+    return cached(("validity_groove", mech.cache_key, program), build)
 
 
 def check_scene(scene, gap: float | None = None, refuse: bool = True) -> list[str]:
@@ -149,11 +149,12 @@ def elastic_before(scene, tab) -> list[str]:
     return []
 
 
-def elastic_after(scene, ds, ind) -> list[str]:
-    """The contact law's range and the energy balance of an elastic run."""
+def elastic_after(scene, cols, ind) -> list[str]:
+    """The contact law's range and the energy balance of an elastic run (``cols``: the dataset or
+    its columns: deformation, contact_phase, phi1)."""
     mech = scene.mechanism
     warnings = []
-    deformation = ds["deformation"].values
+    deformation = np.asarray(cols["deformation"])
     d_max = float(deformation.max())
     if d_max >= mech.R:
         raise SolverError(f"the contact deformation reaches {d_max * 1e3:.3g} mm, at least the roller radius "
@@ -162,8 +163,8 @@ def elastic_after(scene, ds, ind) -> list[str]:
     if d_max > 0:
         k = int(np.argmax(deformation))
         g = _groove(mech, scene.program)
-        flank = g["rho_inner"] if int(ds["contact_phase"].values[k]) == 0 else g["rho_outer"]
-        rho = float(np.interp(np.mod(ds["phi1"].values[k], 2.0 * math.pi), g["phi1"], flank, period=2.0 * math.pi))
+        flank = g["rho_inner"] if int(np.asarray(cols["contact_phase"])[k]) == 0 else g["rho_outer"]
+        rho = float(np.interp(np.mod(np.asarray(cols["phi1"])[k], 2.0 * math.pi), g["phi1"], flank, period=2.0 * math.pi))
         scale = min(mech.R, rho)
         if d_max > DEFORMATION_WARN * scale:
             warnings.append(f"the contact deformation reaches {d_max * 1e3:.3g} mm, {100 * d_max / scale:.1f} % of "

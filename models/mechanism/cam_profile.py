@@ -76,7 +76,7 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
 def cached_sense(mech: Mechanism, program: CamProgram) -> int:
     """``choose_sense`` remembered per (mechanism, program) (models.mechanism.memo.cached): it costs
     two 721-point geometry passes and every contact-geometry call needs it."""
-    return cached(("cam_sense", repr(mech), program), lambda: choose_sense(mech, program))
+    return cached(("cam_sense", mech.cache_key, program), lambda: choose_sense(mech, program))
 
 
 def contact_geometry(mech: Mechanism, program: CamProgram, phi1, sense: int | None = None,

@@ -117,7 +117,7 @@ def stroke_spline(mech: Mechanism):
         phi2 = np.linspace(lo, lo + 1.10 * mech.psi_a, STROKE_POINTS)
         return CubicSpline(phi2, np.column_stack(linkage_columns(mech, phi2)))
 
-    return cached(("stroke_spline", repr(mech)), build)
+    return cached(("stroke_spline", mech.cache_key), build)
 
 
 def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
@@ -126,5 +126,5 @@ def grid_terms(mech: Mechanism, program: CamProgram, span: float, n_points: int,
 
     The arrays of a cached table are read-only: they are shared by every caller.
     """
-    key = ("angle_terms", repr(mech), program, float(span), int(n_points), until)
+    key = ("angle_terms", mech.cache_key, program, float(span), int(n_points), until)
     return cached(key, lambda: angle_terms(mech, program, np.linspace(0.0, span, int(n_points)), until))

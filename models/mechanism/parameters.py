@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import math
 import tomllib
@@ -117,6 +118,13 @@ class Mechanism:
     source_sha256: str = ""          # of the TOML text the parameters were read from
 
     # --- derived -------------------------------------------------------------
+    @functools.cached_property
+    def cache_key(self) -> str:
+        """Every parameter as text: the key of the per-process tables (models.mechanism.memo) that
+        depend on the mechanism (a dataclass with a dict field is not hashable; its repr is, and
+        costs 80 us, so it is made once)."""
+        return repr(self)
+
     @property
     def d(self) -> float:
         """Centre distance |AD| in m."""

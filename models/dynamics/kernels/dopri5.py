@@ -467,7 +467,9 @@ class DenseRun:
 
     def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0):
         self.t0s, self.hs, self.y0s, self.Qs = t0s, hs, y0s, Qs
-        self.t = np.append(t0s, t_end)      # the last step may end early, at an event
+        self.t = np.empty(t0s.size + 1)     # the step times; the last step may end early, at an event
+        self.t[:-1] = t0s
+        self.t[-1] = t_end
         self.nfev = nfev
 
     def __call__(self, times):
