@@ -57,16 +57,17 @@ class WelchAccumulator:
             self.skipped += int((~ok).sum())
             starts = starts[ok]
             # detrending by the segment mean commutes with the FFT: X((x - m) w) = X(x w) - m W;
-            # channel-major float32 transforms are ~4x faster and far more precise than needed
-            bt = np.ascontiguousarray(buf.T)
-            for st in starts:
-                seg = bt[:, st:st + self.nperseg]
-                spec = sfft.rfft((seg * self._w32).astype(np.float32), axis=1)
-                spec -= seg.mean(axis=1)[:, None] * self._wfft[None, :]
-                mag = np.abs(spec).astype(np.float64)
-                self.sum_amp += mag.T
-                self.sum_pow += (mag * mag).T
-                self.count += 1
+            # channel-major float32 transforms, all segments of the block in one call (~4x faster
+            # than float64 one by one, and far more precise than needed)
+            if len(starts):
+                bt = np.ascontiguousarray(buf.T, dtype=np.float32)
+                segs = np.lib.stride_tricks.sliding_window_view(bt, self.nperseg, axis=1)[:, starts]
+                spec = sfft.rfft(segs * self._w32, axis=-1)
+                spec -= segs.mean(axis=-1, dtype=np.float64)[:, :, None].astype(np.float32) * self._wfft.astype(np.complex64)
+                mag = np.abs(spec).astype(np.float64)          # (nch, nseg, nfreq)
+                self.sum_amp += mag.sum(axis=1).T
+                self.sum_pow += np.einsum("csf,csf->fc", mag, mag)
+                self.count += len(starts)
             keep_from = nseg * self.hop
         else:
             keep_from = 0

@@ -15,6 +15,8 @@ import math
 import numpy as np
 from matplotlib.figure import Figure
 
+from common.cf import elapsed_seconds
+
 COLORS = {"const": "tab:blue", "var": "tab:red"}
 SIGNAL_LABEL = {"omega2": ("ω2", "rad/s"), "epsilon2": ("ε2", "rad/s²")}
 # jump indicators a simulation may carry: name -> (scale to the plotted unit, unit, label)
@@ -105,7 +107,7 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
         ax.grid(True, alpha=0.3)
     if spectra:
         axes[len(spectra) - 1, 0].set_xlabel("frequency [Hz]")
-    t = np.asarray(ds["time"].values, dtype=float) if series else None
+    t = elapsed_seconds(ds["time"].values) if series else None  # CF time may decode to datetime64
     for i, n in enumerate(series):
         ax = axes[i, 1]
         sel = t <= t[0] + max_time_s

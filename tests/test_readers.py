@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing.readers import open_recording, sniff
-from processing.synthetic import write_v1
+from stand_data import write_v1
 
 NAMES = ["aE_t", "aE_n", "tacho"]
 
