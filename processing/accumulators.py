@@ -28,9 +28,9 @@ class SpikeCollector:
 
     def feed(self, phys, lowpassed, clipped, wa: int, c0: int, c1: int) -> None:
         """phys, lowpassed: (n, 2) over the window starting at sample ``wa``; core [c0, c1)."""
+        res = kernels.residual(phys, lowpassed, ~clipped)
         for j, name in enumerate(("aE_t", "aE_n")):
-            pk, amp, thr = events.detect_spikes(phys[:, j] - lowpassed[:, j], lowpassed[:, j], self.fs,
-                                                self.k_sigma, valid=~clipped)
+            pk, amp, thr = events.detect_spikes(res[:, j], lowpassed[:, j], self.fs, self.k_sigma)
             keep = (pk >= c0) & (pk < c1)
             self.seen += int(keep.sum())
             room = self.max_stored - len(self.index)

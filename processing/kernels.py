@@ -22,20 +22,27 @@ TWO_PI = 2.0 * math.pi
 
 
 @nb.njit(cache=True, nogil=True)
-def _sos_pass(sos, z0, x, out, reverse):
-    """One direct-form-II-transposed SOS pass over ``x`` (m,) into ``out`` (m,), initial state z0."""
+def _sos_pass(sos, zi, x, out, reverse):
+    """Direct-form-II-transposed SOS pass over the columns of ``x`` (m, nch) into ``out``, all
+    channels per sample (independent recursions side by side), initial state zi * first sample."""
     ns = sos.shape[0]
-    z = z0.copy()
-    m = x.shape[0]
+    m, nch = x.shape
+    z = np.empty((nch, ns, 2))
+    i0 = m - 1 if reverse else 0
+    for c in range(nch):
+        for s in range(ns):
+            z[c, s, 0] = zi[s, 0] * x[i0, c]
+            z[c, s, 1] = zi[s, 1] * x[i0, c]
     for t in range(m):
         i = m - 1 - t if reverse else t
-        v = x[i]
-        for s in range(ns):
-            y = sos[s, 0] * v + z[s, 0]
-            z[s, 0] = sos[s, 1] * v - sos[s, 4] * y + z[s, 1]
-            z[s, 1] = sos[s, 2] * v - sos[s, 5] * y
-            v = y
-        out[i] = v
+        for c in range(nch):
+            v = x[i, c]
+            for s in range(ns):
+                y = sos[s, 0] * v + z[c, s, 0]
+                z[c, s, 0] = sos[s, 1] * v - sos[s, 4] * y + z[c, s, 1]
+                z[c, s, 1] = sos[s, 2] * v - sos[s, 5] * y
+                v = y
+            out[i, c] = v
 
 
 @nb.njit(cache=True, nogil=True)
@@ -46,20 +53,28 @@ def sosfiltfilt(sos, zi, x, padlen):
     """
     n, nch = x.shape
     m = n + 2 * padlen
-    out = np.empty((n, nch))
-    ext = np.empty(m)
-    fwd = np.empty(m)
+    ext = np.empty((m, nch))
+    fwd = np.empty((m, nch))
     for c in range(nch):
         x0, x1 = x[0, c], x[n - 1, c]
         for k in range(padlen):  # odd extension at both ends
-            ext[k] = 2.0 * x0 - x[padlen - k, c]
-            ext[padlen + n + k] = 2.0 * x1 - x[n - 2 - k, c]
-        for k in range(n):
-            ext[padlen + k] = x[k, c]
-        _sos_pass(sos, zi * ext[0], ext, fwd, False)
-        _sos_pass(sos, zi * fwd[m - 1], fwd, ext, True)
-        for k in range(n):
-            out[k, c] = ext[padlen + k]
+            ext[k, c] = 2.0 * x0 - x[padlen - k, c]
+            ext[padlen + n + k, c] = 2.0 * x1 - x[n - 2 - k, c]
+    ext[padlen:padlen + n] = x
+    _sos_pass(sos, zi, ext, fwd, False)
+    _sos_pass(sos, zi, fwd, ext, True)
+    return ext[padlen:padlen + n].copy()
+
+
+@nb.njit(cache=True, nogil=True)
+def residual(phys, lp, valid):
+    """(phys - lp) where valid, else 0: the content above the processing band, per channel (n, nch)."""
+    n, nch = phys.shape
+    out = np.zeros((n, nch))
+    for i in range(n):
+        if valid[i]:
+            for c in range(nch):
+                out[i, c] = phys[i, c] - lp[i, c]
     return out
 
 

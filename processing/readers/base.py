@@ -85,7 +85,8 @@ class Recording:
         if name.lower() in low:
             return low.index(name.lower())
         raise FileFormatError(
-            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'})")
+            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'}); "
+            f"name the file's channels with --channels {name}=<channel>")
 
     def rename_channels(self, mapping: dict[str, str]) -> None:
         """Give source channels the names the chain uses, e.g. {"aE_t": "aE180t"} (new: old)."""
