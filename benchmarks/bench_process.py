@@ -6,11 +6,12 @@ continuous). Then, interleaved ``--repeats`` times, each in a fresh single-threa
 (OMP/MKL/OpenBLAS/numba threads = 1):
 
 - **labtool**: ``labtool process`` as the CLI runs it (processing.pipeline.process_recording);
-- **plain**: the chain a skilled user writes with numpy/scipy (``plain_chain`` below): the same two
+- **plain**: the chain a skilled user writes with numpy/scipy (``plain_chain`` below), at its best
+  chunk size (2^19 samples: 2^17 costs it 1.5x, 2^18 1.3x, 2^20 1.3x on this machine): the same two
   passes and chunk overlap, Ka, scipy.signal.sosfiltfilt, cam angle from the tacho, gravity and
   dwell reference, epsilon2, omega2 by a cumulative trapezoid with the same drift ramp, the normal
   check, spikes (median/MAD + find_peaks), clipping runs, Welch spectra, cycle averages, and the
-  same seven per-sample outputs plus time written with h5py.
+  same seven per-sample outputs plus time written with h5py in the same HDF5 layout (2^17-sample chunks).
 
 Prints wall and CPU time per run, the medians, the ratio labtool / plain (throughput), and each
 child's peak resident memory (ru_maxrss). No asserts: a benchmark reports.
@@ -78,7 +79,7 @@ print("INFO", s["cam_speed_rpm"], s["revolutions_averaged"], s["normal_check_rel
 """
 
 
-def plain_chain(src: str, out: str, chunk: int = 1 << 18) -> dict:
+def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
     """The plain chunked numpy/scipy chain (the peer); same inputs, same work, same outputs."""
     import math
 
@@ -120,7 +121,7 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 18) -> dict:
     moving_tab = prog.direction(grid) != 0
     dm = max(1, int(round(10 / 360 * period)))
     g = h5py.File(out, "w")
-    outs = {k: g.create_dataset(k, (n,), dt, chunks=(65536,)) for k, dt in
+    outs = {k: g.create_dataset(k, (n,), dt, chunks=(1 << 17,)) for k, dt in
             [("time", "f8"), ("aE_t", "f4"), ("aE_n", "f4"), ("epsilon2", "f4"), ("omega2", "f4"), ("phi1", "f4"),
              ("revolution", "i4"), ("clipped", "i1")]}
     nper = 32768
@@ -208,9 +209,9 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 18) -> dict:
             "normal_check_rel_rms": math.sqrt(chk_sq / chk_n) / chk_pk, "spikes": n_spikes}
 
 
-def _child(code: str, src: Path, out: Path) -> dict:
+def _child(code: str, src: Path, out: Path, root: Path = ROOT) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-               NUMBA_NUM_THREADS="1", MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+               NUMBA_NUM_THREADS="1", MPLBACKEND="Agg", PYTHONPATH=str(root))
     before = os.times()
     proc = subprocess.run([sys.executable, "-c", code, str(src), str(out)], env=env, capture_output=True, text=True)
     after = os.times()
@@ -242,6 +243,8 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--keep", action="store_true")
+    ap.add_argument("--main", type=Path, default=None,
+                    help="a checkout of main (git worktree add /tmp/main-check main): its labtool runs too")
     args = ap.parse_args()
     tmpdir = Path(tempfile.mkdtemp(prefix="bench_process_", dir="/tmp"))
     src, out = tmpdir / "rec.h5", tmpdir / "out.nc"
@@ -252,10 +255,13 @@ def main() -> None:
         print(f"recording: {n} samples x 3 channels ({args.minutes:g} min at 10 kHz), "
               f"{src.stat().st_size / 1e6:.0f} MB float32, written in {time.perf_counter() - t0:.1f} s")
         _child(LABTOOL, src, out)  # warm-up: numba's cache, the page cache
-        runs = {"labtool": [], "plain": []}
+        peers = [("labtool", LABTOOL, ROOT), ("plain", plain, ROOT)]
+        if args.main is not None:
+            peers.append(("main", LABTOOL, args.main.resolve()))
+        runs = {name: [] for name, _, _ in peers}
         for k in range(args.repeats):
-            for name, code in (("labtool", LABTOOL), ("plain", plain)):
-                r = _child(code, src, out)
+            for name, code, root in peers:
+                r = _child(code, src, out, root)
                 runs[name].append(r)
                 print(f"  run {k + 1} {name:8s} wall {r['wall']:6.1f} s  cpu {r['cpu']:6.1f} s  "
                       f"({3 * n / r['wall'] / 1e6:.1f} M samples/s)  rpm {float(r['info'][0]):.2f}")
@@ -264,6 +270,9 @@ def main() -> None:
         print(f"median wall: labtool {med['labtool']:.1f} s, plain {med['plain']:.1f} s -> "
               f"labtool is {med['plain'] / med['labtool']:.2f}x the plain chain's throughput "
               f"(CPU time: {cpu['plain'] / cpu['labtool']:.2f}x)")
+        if "main" in med:
+            print(f"main's labtool: {med['main']:.1f} s wall -> labtool is {med['main'] / med['labtool']:.2f}x main "
+                  f"(CPU {cpu['main'] / cpu['labtool']:.2f}x); plain is {med['main'] / med['plain']:.2f}x main")
         print(f"labtool: {3 * n / med['labtool'] / 1e6:.1f} M samples/s (samples x channels, incl. start-up)")
         for name, code in (("labtool", LABTOOL), ("plain", plain)):
             print(f"peak RSS {name}: {_peak_rss_mb(code, src, out):.0f} MB")

@@ -25,6 +25,9 @@ TIME_VARS = {
 }
 FLOAT_OUT = ("aE_t", "aE_n", "epsilon2", "omega2", "phi1")
 STRING = h5py.string_dtype()
+# HDF5 chunk of the per-sample variables: as long as a processing chunk, so a block write fills whole
+# chunks (measured: 2^16-sample chunks cost 6x more CPU per written sample than 2^17 without a cache)
+CHUNK = 1 << 17
 
 
 class MeasuredWriter:
@@ -40,7 +43,7 @@ class MeasuredWriter:
         self.path = path
         self.f = h5netcdf.File(path, "w")
         self.f.dimensions["time"] = n
-        self.chunk = max(1, min(n, 1 << 16))
+        self.chunk = max(1, min(n, CHUNK))
         self.absolute = cf.time_units(start_time_utc) != "s"
         long_name = "time of the sample (the samples lost at gaps are counted)"
         self._new("time", ("time",), "f8", cf.time_attrs(start_time_utc, long_name))
