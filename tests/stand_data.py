@@ -41,10 +41,11 @@ def truth(scene, n: int, fs: float) -> dict:
 
 def write_v1(path, volts: np.ndarray, names=("aE_t", "aE_n", "tacho"), fs: float = 10000.0, ka=None, events=(),
              complete: bool = True, cam_speed_rpm: float | None = 180.0, dtype="float32",
-             start_time_utc: str = "2026-11-22T04:00:00Z", attrs: dict | None = None):
-    """Write DESIGN.md's recording format v1 (events: (index, kind, detail) tuples)."""
+             start_time_utc: str = "2026-11-22T04:00:00Z", attrs: dict | None = None, libver=("v110", "latest")):
+    """Write DESIGN.md's recording format v1 (events: (index, kind, detail) tuples), with the file
+    format bounds the recorder uses (v110: SWMR-capable, superblock version 3)."""
     volts = np.asarray(volts)
-    with h5py.File(path, "w") as f:
+    with h5py.File(path, "w", libver=libver) as f:
         f.attrs["format"] = "labtool.recording"
         f.attrs["format_version"] = 1
         f.attrs["sample_rate_hz"] = float(fs)
