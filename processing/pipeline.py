@@ -274,7 +274,9 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
 def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> dict:
     """Numbers as numbers; an unknown value is left out, never written as text."""
     lp = hist.find(H.Lowpass)
-    attrs = cf.global_attrs("labtool measured follower motion", source=f"labtool process of {rec.source}",
+    # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
+    # from a synthetic one; the file and the command are in source_file and history
+    attrs = cf.global_attrs("labtool measured follower motion", source="recording",
                             history=f"labtool process {rec.source}")
     values = {
         "source_file": rec.source, "source_format": rec.format, "start_time_utc": rec.start_time_utc,

@@ -77,8 +77,8 @@ def test_export_of_a_damaged_measured_file_is_one_line(measured, tmp_path, capsy
     cut.write_bytes(measured.read_bytes()[:2048])
     other = tmp_path / "other.nc"
     xr.Dataset({"a": ("x", [1.0])}).to_netcdf(other, engine="h5netcdf")
-    for bad in (strings, cut, other):
+    for bad, why in ((strings, "'omega2' holds"), (cut, "truncated"), (other, "missing")):
         assert main(["export", str(bad), "--csv", "-o", str(tmp_path / bad.stem)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith("labtool: error:"), err
+        assert len(err) == 1 and err[0].startswith("labtool: error:") and why in err[0], err
         assert not list(tmp_path.glob(f"{bad.stem}_*.csv")) and not list(tmp_path.glob(".*.part"))

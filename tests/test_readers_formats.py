@@ -72,8 +72,8 @@ def _chans(volts, names=("aE_t", "aE_n", "tacho"), props=None):
             for j, n in enumerate(names)]
 
 
-@pytest.mark.hostile("real_file")
 def test_tdms_raw_int16_with_ni_scale(tmp_path, original):
+    """Raw ADC codes with a linear NI_Scale (npTDMS scales them; main read this case too)."""
     volts, ref = original
     slope = 20.0 / 65536
     raw = np.round(volts / slope).astype(np.int16)  # the ADC codes: the float32 volts are exact multiples
