@@ -371,6 +371,7 @@ METRICS = {
     "peak_max_shift_deg": ("low", True),
     "peak_min_shift_deg": ("low", True),
     "lag_deg": ("low", True),
+    "band_overlap": ("high", False),    # reports.pipeline.band_statistics
 }
 
 

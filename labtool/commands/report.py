@@ -6,6 +6,8 @@ threshold failed; exit 2: bad input (one line on stderr), nothing written.
 from __future__ import annotations
 
 import math
+import sys
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -18,8 +20,13 @@ def register(app: typer.Typer) -> None:
     app.command("report")(report)
 
 
-class _Quiet:
-    """Stands in for rich's status spinner when stderr is not a terminal."""
+class _Lines:
+    """Progress when stderr is not a terminal (a pipe, a CI log): one line per step, with the time
+    since the start, so a long report is never silent."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.t0 = time.perf_counter()
 
     def __enter__(self):
         return self
@@ -27,8 +34,8 @@ class _Quiet:
     def __exit__(self, *exc):
         return False
 
-    def update(self, *args, **kwargs):
-        pass
+    def update(self, msg: str) -> None:
+        print(f"report: {msg} ({time.perf_counter() - self.t0:.1f} s)", file=self.stream, flush=True)
 
 
 def _split(value: str) -> list[str]:
@@ -53,7 +60,9 @@ def report(
     contact_length_mm: Optional[float] = typer.Option(None, help="elastic model: contact length lw [mm] (default 6)"),
     elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
     accuracy: str = typer.Option("standard", help="solver preset of the models: fast, standard, reference"),
-    revolutions: float = typer.Option(2.0, help="cam revolutions to simulate; the last one is compared [-]"),
+    revolutions: int = typer.Option(6, help="cam revolutions to simulate [-]: the last one is compared when the model's "
+                                    "motion is periodic, else the cycle statistics of revolutions 2..N"),
+    robustness: bool = typer.Option(True, help="also check the verdict at the other solver preset and half the length"),
     harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
     grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
@@ -64,7 +73,7 @@ def report(
 
     from common.errors import InputError
     from reports.align import Conditioning
-    from reports.pipeline import build_report, headline
+    from reports.pipeline import build_report, closest, headline
     from reports.thresholds import load_thresholds
 
     outputs = [p for p in (output, pdf, json_path) if p is not None and str(p) != "-"]
@@ -83,9 +92,9 @@ def report(
             raise InputError(f"{name} must be a finite number, got {value}")
     err = console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
-    with (err.status("report") if err.is_terminal else _Quiet()) as status:
+    with (err.status("report") if err.is_terminal else _Lines(sys.stderr)) as status:
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
-                           progress=lambda msg: status.update(msg))
+                           progress=lambda msg: status.update(msg), robustness=robustness)
         status.update("drawing the figures")
         from reports.figures import all_figures
         from reports.html import render_html
@@ -106,6 +115,14 @@ def report(
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
                        f"epsilon2 ISO {row['epsilon2_iso_rating']:.3f} ({row['epsilon2_iso_grade']})")
+        best = closest(rep)
+        if best is not None:
+            typer.echo(f"closest to the measurement: {best['label']}")
+        m = rep.measured_events
+        if m is not None and m.get("impacts_per_rev") is not None:
+            first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
+            typer.echo(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
+                       f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
         for n in rep.notes:
             typer.echo(f"note: {n}")
         typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else ""))
