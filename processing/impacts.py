@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-DEFAULT_K_SIGMA = 6.0          # detection threshold in robust standard deviations of S
+DEFAULT_K_SIGMA = 8.0          # detection threshold in robust standard deviations of x (as the spike detector)
 DEFAULT_SEQUENCE_GAP_S = 5e-3  # a quiet time longer than this starts a new jump
 FLOOR_FRACTION = 0.05          # smallest visible pulse, fraction of the cam law's peak |epsilon2|
 SIDE_S = 2e-3                  # side windows of the normal channel's check (s)
@@ -157,8 +157,10 @@ def split_flights(times: np.ndarray, steps: np.ndarray, threshold: float, det: D
     A flight through the backlash shows as a gradual change of omega2 away from the cam law (the
     follower keeps its speed while the cam's changes), the impact that ends it as an abrupt step
     back. Behind the low-pass both look like steps, but of opposite signs: in each sequence of
-    components (``sequence_gap_s`` apart), the first belongs to the contact loss that starts it,
-    and the impacts are the components of the opposite sign, merged within ``resolution_s``.
+    components (``sequence_gap_s`` apart), the first visible one starts the jump; when visible
+    components of the opposite sign follow, it is the flight's drift and those are the impacts,
+    else (a flight that shows nothing, e.g. in a dwell) it is an impact itself with the rest.
+    Impacts are merged within ``resolution_s``.
     Returns (impact times, impact steps, jump times)."""
     t, d = merge_close(times, steps, 0.25 * det.resolution_s)
     imp_t, imp_d, jumps = [], [], []
@@ -169,9 +171,12 @@ def split_flights(times: np.ndarray, steps: np.ndarray, threshold: float, det: D
         if first is None:
             continue
         jumps.append(t[first])
-        later = seq[seq > first]
+        later = seq[(seq > first) & (np.abs(d[seq]) >= threshold)]
         opp = later[np.sign(d[later]) == -np.sign(d[first])]
-        mt, md = merge_close(t[opp], d[opp], det.resolution_s)
+        # a first component followed by steps back is the flight's drift; without them (a flight in
+        # a dwell, where the law does not accelerate, shows nothing) it is an impact itself
+        imp = opp if opp.size else np.concatenate([[first], later])
+        mt, md = merge_close(t[imp], d[imp], det.resolution_s)
         keep = np.abs(md) >= threshold
         imp_t.extend(mt[keep])
         imp_d.extend(md[keep])

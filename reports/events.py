@@ -43,6 +43,13 @@ def model_events(sim: xr.Dataset) -> EventRecord | None:
     the elastic model's attributes (``event_times_s``, ``event_kinds`` leave_* / land_*; the step of
     omega2 over each contact from the dataset's omega2). None for a simulation without events
     (the kinematic level). When models/dynamics/events.py lands, this reads its record instead."""
+    if all(n in sim for n in ("event_time", "event_phi1", "event_kind", "event_domega2")) \
+            and np.asarray(sim["event_kind"].values).dtype.kind in "USO":
+        # the one record (EVENTS.md, models/dynamics/events.py): kinds by name, the step recorded
+        kinds = np.asarray(sim["event_kind"].values, dtype=str).astype(object)
+        d = np.where(kinds == "contact", np.asarray(sim["event_domega2"].values, float), np.nan)
+        return EventRecord(np.asarray(sim["event_time"].values, float), np.asarray(sim["event_phi1"].values, float),
+                           kinds, d)
     if "event_kind" in sim and "event_time" in sim and "event_phi1" in sim:
         meanings = str(sim["event_kind"].attrs.get("flag_meanings", "")).split()
         values = list(np.atleast_1d(sim["event_kind"].attrs.get("flag_values", range(1, len(meanings) + 1))))
