@@ -164,11 +164,11 @@ def revolution_blocks(ds: xr.Dataset, max_revolutions: int = MAX_REVOLUTIONS,
         return None
     t = ds["time"].values                         # the index coordinate is in memory already
     n_blocks = max(1, max_revolutions // per_block)
-    starts = np.linspace(0, marks.size - per_block - 2, n_blocks).round().astype(int)
+    starts = np.linspace(0, marks.size - per_block - 1, n_blocks).round().astype(int)
     out = []
     for i in starts:
         a = int(np.searchsorted(t, marks[i], side="left"))
-        b = int(np.searchsorted(t, marks[i + per_block + 1], side="right"))
+        b = int(np.searchsorted(t, marks[i + per_block], side="right"))
         # a few samples either side so the end marks' revolutions are whole in the slice
         out.append((slice(max(a - 4, 0), min(b + 4, t.size)), int(i)))
     return out, int(marks.size)
