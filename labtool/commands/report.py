@@ -21,12 +21,15 @@ def register(app: typer.Typer) -> None:
 
 
 class _Lines:
-    """Progress when stderr is not a terminal (a pipe, a CI log): one line per step, with the time
-    since the start, so a long report is never silent."""
+    """Progress when stderr is not a terminal (a pipe, a CI log): the current step with the time
+    since the start, at most every ``period`` s and not before ``quiet`` s, so a long report is
+    never silent and a quick one (or one that ends in a bad-input line) prints nothing extra."""
 
-    def __init__(self, stream):
+    def __init__(self, stream, quiet: float = 2.0, period: float = 5.0):
         self.stream = stream
-        self.t0 = time.perf_counter()
+        self.t0 = self.last = time.perf_counter()
+        self.quiet, self.period = quiet, period
+        self.printed = False
 
     def __enter__(self):
         return self
@@ -35,7 +38,10 @@ class _Lines:
         return False
 
     def update(self, msg: str) -> None:
-        print(f"report: {msg} ({time.perf_counter() - self.t0:.1f} s)", file=self.stream, flush=True)
+        now = time.perf_counter()
+        if now - self.t0 >= self.quiet and (not self.printed or now - self.last >= self.period):
+            print(f"report: {msg} ({now - self.t0:.0f} s)", file=self.stream, flush=True)
+            self.last, self.printed = now, True
 
 
 def _split(value: str) -> list[str]:
