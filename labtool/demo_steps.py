@@ -145,7 +145,7 @@ def step_report(out: Path, console: Console, measured: Path, recording: Path) ->
     from reports.figures import all_figures
     from reports.html import render_html
     from reports.pdf import write_pdf
-    from reports.pipeline import build_report, closest, headline, robust_verdict
+    from reports.pipeline import build_report, headline, verdict_lines
     from reports.summary import to_json
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
@@ -167,18 +167,6 @@ def step_report(out: Path, console: Console, measured: Path, recording: Path) ->
         rows.append(f"{h['label']:36s} omega2: ISO {h['omega2_iso_rating']:.2f} ({h['omega2_iso_grade']}), "
                     f"S&G C {h['omega2_sg_comprehensive']:.2f}; epsilon2: ISO {h['epsilon2_iso_rating']:.2f} "
                     f"({h['epsilon2_iso_grade']}), S&G C {h['epsilon2_sg_comprehensive']:.2f}; {h['motion']}")
-    best = closest(rep)
-    if best is not None:
-        rows.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
-    verdict = robust_verdict(rep.robustness)
-    if verdict is not None:
-        rows.append("verdict robust: the same closest model at fast and standard, full and half length" if verdict["robust"]
-                    else "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}"
-                                                            for r in rep.robustness))
-    m = rep.measured_events
-    if m is not None:
-        first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
-        rows.append(f"measured events: {m['impacts_per_rev']:.2f} visible impacts/rev, {m['jumps_per_rev']:.2f} jumps/rev, "
-                    f"first impact {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+    rows += verdict_lines(rep)
     rows += [f"note: {n}" for n in rep.notes]
     return html_path, rows

@@ -9,7 +9,7 @@ from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
 from reports.figures import all_figures
-from reports.pipeline import Report, closest, headline, robust_verdict
+from reports.pipeline import Report, headline, verdict_lines
 
 
 def _dash(v, spec=".2f") -> str:
@@ -29,14 +29,7 @@ def _summary_lines(report: Report) -> list[str]:
         lines.append(f"{h['label'][:26]:26s} {('periodic' if h['periodic'] else 'NOT periodic'):13s} "
                      f"{h['omega2_iso_rating']:8.3f} {h['omega2_sg_comprehensive']:8.3f} {h['epsilon2_iso_rating']:8.3f} "
                      f"{h['epsilon2_sg_comprehensive']:8.3f} {100 * h['epsilon2_band_overlap']:6.0f}%")
-    best = closest(report)
-    if best is not None:
-        lines.append(f"closest: {best['label']}")
-    verdict = robust_verdict(report.robustness)
-    if verdict is not None:
-        lines.append("robustness: " + ("the same closest model at both presets and lengths" if verdict["robust"] else
-                                       "NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}"
-                                                                   for r in report.robustness)))
+    lines += verdict_lines(report)
     m = report.measured_events
     lines += ["", f"{'events':26s} {'visible/rev':>11s} {'all/rev':>8s} {'jumps/rev':>9s} {'first [deg]':>11s}  angles [deg]"]
     if m is not None:

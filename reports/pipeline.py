@@ -417,6 +417,34 @@ def robustness_rows(rep: Report, accuracy: str, revolutions: float, say) -> list
     return rows
 
 
+def verdict_lines(report: "Report") -> list[str]:
+    """The verdict in plain lines (console, demo, PDF): the closest model, whether that is robust,
+    and the measured events with their detectability."""
+    lines = []
+    best = closest(report)
+    if best is not None:
+        lines.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
+    sentence = robustness_sentence(report.robustness)
+    if sentence is not None:
+        lines.append(sentence)
+    m = report.measured_events
+    if m is not None and m.get("impacts_per_rev") is not None:
+        first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
+        lines.append(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
+                     f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+    return lines
+
+
+def robustness_sentence(rows: list[dict]) -> str | None:
+    """One line for the console, the demo and the PDF: robust, or which model wins where."""
+    verdict = robust_verdict(rows)
+    if verdict is None:
+        return None
+    if verdict["robust"]:
+        return "verdict robust: the same closest model at both presets and both simulated lengths"
+    return "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}" for r in rows)
+
+
 def robust_verdict(rows: list[dict]) -> dict | None:
     """Whether the closest model is the same in every robustness row (None without rows)."""
     names = [r["closest"] for r in rows if r.get("closest") is not None]

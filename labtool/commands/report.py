@@ -79,7 +79,7 @@ def report(
 
     from common.errors import InputError
     from reports.align import Conditioning
-    from reports.pipeline import build_report, closest, headline
+    from reports.pipeline import build_report, headline, verdict_lines
     from reports.thresholds import load_thresholds
 
     outputs = [p for p in (output, pdf, json_path) if p is not None and str(p) != "-"]
@@ -121,14 +121,8 @@ def report(
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
                        f"epsilon2 ISO {row['epsilon2_iso_rating']:.3f} ({row['epsilon2_iso_grade']})")
-        best = closest(rep)
-        if best is not None:
-            typer.echo(f"closest to the measurement: {best['label']}")
-        m = rep.measured_events
-        if m is not None and m.get("impacts_per_rev") is not None:
-            first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
-            typer.echo(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
-                       f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+        for line in verdict_lines(rep):
+            typer.echo(line)
         for n in rep.notes:
             typer.echo(f"note: {n}")
         typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else ""))
