@@ -168,3 +168,25 @@ def test_elastic_truth_run_records_the_models_motion(tmp_path):
         base = ["acquire", "--truth", "elastic", "--fast", "--duration", "0.5", "-o", str(tmp_path / "x.h5")]
         assert main(base + argv) == 2
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_scene_file_truth_table(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text('[stand]\ncam_speed_rpm = 300\nduration_s = 0.3\n\n[truth]\ncontact_damping_s_per_m = 25.0\n'
+                     'mode_hz = 1500\nfriction_radius_mm = 0.02\npersistence_ms = 3\n')
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--scene", str(scene), "--fast", "--restitution", "0.4", "-o", str(out)]) == 0
+    a = read_recording(out)["attrs"]
+    assert a["truth_contact_damping_s_per_m"] == 25.0 and a["truth_mode_hz"] == 1500.0 and a["resonance_hz"] == 1500.0
+    assert a["truth_friction_radius_m"] == pytest.approx(2e-5) and a["truth_persistence_s"] == pytest.approx(3e-3)
+    assert a["truth_restitution"] == 0.4
+    o = str(tmp_path / "o.h5")
+    for body in ('[truth]\nmode_hz = "fast"\n', '[truth]\nfrction_torque_Nm = 1\n', '[truth]\ndrive = "belt"\n',
+                 '[truth]\nmodel = "fem"\n', 'truth = 3\n', '[truth]\nrevolutions = 1.5\n'):
+        bad = tmp_path / "bad.toml"
+        bad.write_text("[stand]\nduration_s = 0.2\n" + body if body.startswith("[") else body + "[stand]\n")
+        capsys.readouterr()
+        assert main(["acquire", "--scene", str(bad), "--fast", "-o", o]) == 2, body
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("labtool: error: "), (body, err)
+    assert not (tmp_path / "o.h5").exists()

@@ -279,3 +279,66 @@ def test_model_truth_scene_rules():
     for bad in (-1, 500, 2.5):
         with pytest.raises(InputError):
             sc.StandScene(truth_model="rigid", ripple=0.0, truth_revolutions=bad)
+
+
+def test_the_twins_bending_mode_is_not_applied_twice():
+    """The twin carries the follower's mode as a degree of freedom: the chain's resonance filter
+    then shapes the roughness noise only, so with that noise off the chain's resonance setting
+    does not change a sample."""
+    scene = sc.StandScene(cam_speed_rpm=300)
+    quiet = dict(mech_noise_m_s2=0.0)
+    a = np.concatenate([b.data for b in record(scene, sc.ChainParams(resonance_hz=1200.0, **quiet), duration=0.5)[1]])
+    b = np.concatenate([b.data for b in record(scene, sc.ChainParams(resonance_hz=2500.0, resonance_zeta=0.2, **quiet), duration=0.5)[1]])
+    np.testing.assert_array_equal(a, b)
+    kin = sc.StandScene(cam_speed_rpm=300, truth_model="kinematic")   # the kinematic truth has no mode of its own
+    c = np.concatenate([b.data for b in record(kin, sc.ChainParams(resonance_hz=1200.0, **quiet), duration=0.5)[1]])
+    d = np.concatenate([b.data for b in record(kin, sc.ChainParams(resonance_hz=2500.0, resonance_zeta=0.2, **quiet), duration=0.5)[1]])
+    assert not np.array_equal(c, d)
+
+
+def test_every_truth_parameter_survives_the_recordings_attributes():
+    from models.dynamics.twin import TwinPhysics
+
+    physics = TwinPhysics(drive="input", mode_hz=1500.0, mode_zeta=0.03, mode_mass_share=0.2, friction_torque=0.01,
+                          friction_radius=2e-5, friction_speed=2e-3, persistence_s=3e-3, warmup_revolutions=2)
+    scene = sc.StandScene(cam_speed_rpm=250, Fu=5.0, backlash=0.1e-3, jt_factor=1.5, ripple=0.01, restitution=0.4,
+                          contact_damping=25.0, contact_length=7e-3, kc_factor=1.2, truth_accuracy="standard", twin=physics)
+    again = sc.scene_from_attrs({"device": "sim", **scene.attrs()})
+    assert again == scene
+    t = np.linspace(0.0, 0.3, 301)
+    np.testing.assert_array_equal(sc.truth(again, t)["omega2"], sc.truth(scene, t)["omega2"])
+
+
+def test_the_recordings_truth_events_are_the_stands():
+    """truth_events rebuilds the twin from the scene: the first impact after each lift-off is where
+    the recorded aE_t, quiet during the flight before it, jumps."""
+    scene = sc.StandScene(cam_speed_rpm=300)
+    dev, blocks = record(scene, duration=1.0)
+    v = np.concatenate([b.data for b in blocks]).astype(float)[:, 0] * dev.params.ka_m_s2_per_v[0]
+    ev = sc.truth_events(scene, 1.0)
+    lift = np.r_[False, (ev["event_kind"][:-1] == "separation") & ev["event_persistent"][:-1]]
+    big = (ev["event_kind"] == "contact") & (np.abs(ev["event_domega2"]) > 0.5) & lift
+    assert big.sum() >= 8                               # two landings a turn, five turns
+    fs = dev.actual_rate_hz
+    for t0 in ev["event_time"][big]:
+        i = int(round(t0 * fs))
+        window = np.abs(v[i:i + 15]).max()              # the impact's pulse, within the anti-alias delay
+        quiet = np.abs(v[max(0, i - 60):i - 10]).max()
+        assert window > 3 * quiet, (t0, window, quiet)
+
+
+@pytest.mark.parametrize("rpm", [180, 300, 500])
+def test_the_default_chain_has_room_for_the_twins_impacts(rpm):
+    dev, blocks = record(sc.StandScene(cam_speed_rpm=rpm), duration=1.0)
+    v = np.concatenate([b.data for b in blocks])
+    assert not [e for b in blocks for e in b.events if e.kind == "clip"]
+    assert 1.0 < np.abs(v[:, 0]).max() < 8.0            # used, with headroom below the 10 V rails
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_sensitive_range_clips_and_says_so():
+    """The paper's x10 chain (Ka = 86.43) cannot hold the twin's impacts at 300 rpm: clip events."""
+    dev, blocks = record(sc.StandScene(cam_speed_rpm=300), sc.ChainParams(ka_m_s2_per_v=(86.43, 86.43)), duration=1.0)
+    clips = [e for b in blocks for e in b.events if e.kind == "clip"]
+    assert clips and clips[0].detail.startswith("aE_t")
+    assert dev.params.conditioner_gain == pytest.approx(10.0)
