@@ -541,7 +541,7 @@ def truth_events(scene: StandScene, duration: float) -> dict:
         step = 0.05
         for k in range(int(math.ceil(duration / step))):
             run.sample(np.array([min((k + 1) * step, duration)]))
-        ev = run.take_events()
+        ev = run.take_events(final=True)
         keep = ev["event_time"] <= duration
         return {k: v[keep] for k, v in ev.items()}
     tab = model_table(scene)

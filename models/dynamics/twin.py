@@ -39,7 +39,12 @@ recording begins on a stand that has been running.
 Events follow EVENTS.md (the one event record): a contact phase ending is a ``separation``, one
 beginning a ``contact``; ``event_domega2`` is the change of the follower's speed relative to the
 flank (q' = omega2 - psi' omega1) and ``event_percussion`` the integral of the contact force, over
-the contact or its first ``persistence_s`` if it lasts longer (then it is ``persistent``).
+the contact or its first ``persistence_s`` if it lasts longer (then it is ``persistent``, and so
+is the separation that ends it; its domega2 is 0, a rebound's separation has NaN). With j = 0 a
+change of flank is a separation only (no flight ends). These follow models.dynamics.events; the
+persistence is the twin's own: its rebounds last 1-3 times the elastic model's bounce time (the
+damping and the bending mode lengthen them), so "longer than two bounce times" would call its
+rebounds lift-offs (docs/twin.md).
 """
 from __future__ import annotations
 
@@ -374,14 +379,33 @@ class TwinRun:
         self._last_t = float(t[-1])
         return {c: out[:, i] for i, c in enumerate(COLUMNS)}
 
-    def take_events(self) -> dict:
-        """Closed events since the last call (global times >= 0) as arrays of the event record."""
+    def take_events(self, final: bool = False) -> dict:
+        """Closed events since the last call (global times >= 0) as arrays of the event record.
+
+        ``final``: the run ends here: a contact still open is included too, persistent (it lasted
+        to the end), its figures over what has elapsed of it (or its persistence window)."""
         nb = self._nb
+        self._drain()
+        if final and self._S[nb.S_CIDX] >= 0:
+            row = self._ev[int(self._S[nb.S_CIDX])].copy()
+            # the impulse and the change of q' of the open contact from its start to the state now
+            row[nb.E_P] = abs(self._Y[6])
+            row[nb.E_DW2] = self._open_qdot() - self._S[nb.S_CQD0]
+            row[nb.E_PERS] = 1.0
+            self._chunks.append(row[None, :])
+            self._S[nb.S_CIDX] = -1.0
+            self._S[nb.S_NEV] = 0.0
         rows = np.concatenate(self._chunks) if self._chunks else np.zeros((0, nb.NE))
         self._chunks = []
         rows[:, nb.E_T] -= self.t_zero           # kernel time -> recording time
         rows = rows[rows[:, nb.E_T] >= 0.0]
         return event_arrays(rows)
+
+    def _open_qdot(self) -> float:
+        """q' = omega2 - psi'(phi1) omega1 of the current state (rad/s)."""
+        cam = np.zeros(6)
+        self._nb.cam_eval(*self.plant.cam, float(self._Y[0]), cam)
+        return float(self._Y[3] - cam[1] * self._Y[1])
 
     @property
     def position(self) -> float:
@@ -456,7 +480,7 @@ def simulate(scene: Scene, physics: TwinPhysics | None = None, duration: float |
     data = {k: ("time", s[k], {"units": u, "long_name": ln}) for k, (u, ln) in meta.items()}
     data["aE_n"] = ("time", s["omega2"] ** 2 * DE, {"units": "m/s^2", "long_name": "normal acceleration of E, towards D"})
     ds = xr.Dataset(data, coords={"time": ("time", t, {"units": "s", "long_name": "time from the start of the first rise"})})
-    ds = ds.merge(event_dataset(run.take_events()))
+    ds = ds.merge(event_dataset(run.take_events(final=True)))
     ds.attrs.update(title="labtool stand twin (docs/twin.md)", law=scene.law, cam_speed_rpm=scene.cam_speed_rpm,
                     Fu_N=scene.Fu, backlash_m=scene.backlash, jt_factor=scene.jt_factor,
                     contact_length_m=scene.contact_length, kc_factor=scene.kc_factor,

@@ -266,11 +266,11 @@ def _push_event(ev, S, t, phi1u, kind, side, vrel, dw2, P, pers):
 
 @njit(cache=True)
 def _finalize_contact(ev, S, P, qd, t_end, window):
-    """Close the pending contact record: impulse and change of q' over the contact or its first
-    ``window`` seconds, persistent if it lasted the window."""
+    """Close the pending contact record: impulse (>= 0) and change of q' over the contact or its
+    first ``window`` seconds, persistent if it lasted the window."""
     k = int(S[S_CIDX])
     if k >= 0:
-        ev[k, E_P] = P
+        ev[k, E_P] = abs(P)
         ev[k, E_DW2] = qd - S[S_CQD0]
         ev[k, E_PERS] = 1.0 if t_end - S[S_CT0] >= window else 0.0
         S[S_CIDX] = -1.0
@@ -374,15 +374,15 @@ def take_step(cn, ch, cc, fn, fh, fc, p, atol, rtol, S, Y, K0, Y0, Q, ev, K, Qs,
         S[S_NFEV] += 1
         gd, qd, A2 = aux[2], aux[7], aux[6]
         phi1u = S[S_SREV] * TWO_PI + tmp[0]
-        if phase != FLIGHT:                   # a contact ends: separation
+        if phase != FLIGHT:                   # a contact ends: separation (domega2 0 for a lift-off)
             _finalize_contact(ev, S, tmp[6], qd, t_end, window)
             side = SIDE_INTERIOR if phase == INTERIOR else SIDE_EXTERIOR
             pers = 1.0 if t_end - S[S_CT0] >= window else 0.0
-            _push_event(ev, S, t_end, phi1u, KIND_SEPARATION, side, abs(gd), np.nan, np.nan, pers)
-        if new_phase != FLIGHT:               # a contact begins
-            side = SIDE_INTERIOR if new_phase == INTERIOR else SIDE_EXTERIOR
-            k = _push_event(ev, S, t_end, phi1u, KIND_CONTACT, side, abs(gd), np.nan, np.nan, 0.0)
-            S[S_CIDX] = k
+            _push_event(ev, S, t_end, phi1u, KIND_SEPARATION, side, abs(gd), 0.0 if pers > 0.0 else np.nan, np.nan, pers)
+        if new_phase != FLIGHT:               # a contact begins (with j = 0 a change of flank: no landing row)
+            if phase == FLIGHT:
+                side = SIDE_INTERIOR if new_phase == INTERIOR else SIDE_EXTERIOR
+                S[S_CIDX] = _push_event(ev, S, t_end, phi1u, KIND_CONTACT, side, abs(gd), np.nan, np.nan, 0.0)
             S[S_CT0] = t_end
             S[S_CQD0] = qd
             tmp[6] = 0.0
