@@ -90,6 +90,9 @@ def test_bad_input_one_line_exit_2(tmp_path, capsys):
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fault", "drop@1", "-o", o],
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fast", "-o", o],
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "-o", o],  # no NI-DAQmx runtime here
+        ["acquire", "--fast", "--fu", "500000", "-o", o],          # the twin's motor stalls: a solver error
+        ["acquire", "--fast", "--truth", "rigid", "--restitution", "1.5", "-o", o],
+        ["acquire", "--fast", "--contact-damping", "nan", "-o", o],
     ]
     for argv in cases:
         assert main(argv) == 2, argv
