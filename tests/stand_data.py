@@ -1,6 +1,6 @@
 """Recordings for processing tests, from the one sensor chain (acquisition's simulated stand).
 
-``stand_volts`` runs acquisition.sim_stand.SimStand (acquisition/signal_chain.py: gravity,
+``stand_volts`` runs acquisition.sim_stand.SimStand with the kinematic truth (acquisition/signal_chain.py: gravity,
 resonance, noise, Ka, AC coupling, anti-alias, ADC) without the recorder; ``write_v1`` writes
 DESIGN.md's recording format v1 with plain h5py, so a test can damage or vary any part of it;
 ``truth`` is the chain's own noise-free truth at the samples' times. Benchmarks use it too.
@@ -19,8 +19,11 @@ from acquisition.sim_stand import SimStand
 def stand_volts(duration_s: float, rpm: float = 180.0, fs: float = 10000.0, seed: int = 1,
                 scene: dict | None = None, params: dict | None = None):
     """(volts (n, 3) float32 of aE_t, aE_n, tacho; scene; chain params; the rate really used, Hz)."""
-    st = sc.StandScene(cam_speed_rpm=rpm, **(scene or {}))
-    pa = sc.ChainParams(**(params or {}))
+    # the kinematic truth (the cam as input, a speed ripple): smooth and known in closed form, what the
+    # processing accuracy tests compare with; the stand's default twin truth is for the model checks
+    st = sc.StandScene(cam_speed_rpm=rpm, **{"truth_model": "kinematic", **(scene or {})})
+    # the paper's chain (480C02 at gain x10, Ka = 86.43 m/s^2/V), which the kinematic truth never clips
+    pa = sc.ChainParams(**{"ka_m_s2_per_v": (sc.PAPER_KA, sc.PAPER_KA), **(params or {})})
     dev = SimStand(st, pa, seed=seed, duration_s=duration_s, realtime=False)
     rate = dev.configure(fs)
     dev.start()
