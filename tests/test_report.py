@@ -182,14 +182,6 @@ def test_other_bad_inputs(files, capsys, tmp_path):
     assert existing.read_text() == "keep me"
 
 
-def test_a_model_that_is_not_there_is_replaced_by_the_kinematic_level_and_said(files, monkeypatch):
-    monkeypatch.setattr(pipeline, "model_available", lambda name: False)
-    rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
-    assert rep.sims[0].model == "kinematic" and rep.sims[0].requested == "elastic"
-    assert any("elastic model is not available" in n for n in rep.notes)
-    assert rep.comparisons[0]["overall"]["iso_rating"] == pytest.approx(1.0, abs=2e-3)
-
-
 def test_a_gap_makes_its_revolution_partial():
     ds = synthetic_measured(noise=0.0, revolutions=4.3)
     t = ds["time"].values
@@ -326,7 +318,6 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
         return real(scene, model)
 
     monkeypatch.setattr(ms, "simulate", broken)
-    monkeypatch.setattr(pipeline, "model_available", lambda name: True)
     with pytest.raises(InputError, match="elastic model cannot simulate 180 rpm"):
         pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
     rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",), stand_in_on_failure=True)
@@ -334,21 +325,25 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
     assert any("elastic model failed (ValueError: step size too small)" in n for n in rep.notes)
 
 
-def test_predicted_events_of_the_last_revolution():
-    """The report reads the one event record (models.dynamics.events): landings are impacts, every
-    separation begins a flight (a jump), in the last whole revolution only."""
+def test_model_events_read_the_one_record():
+    """The report reads a simulation's events from the one record (models.dynamics.events): contacts
+    with the step of omega2 the model recorded, separations with none; no record, no events."""
     import xarray as xr
-    from models.dynamics import events
+    from models.dynamics import events as model_events
+    from reports import events
     two = 2 * math.pi
     phi = np.array([0.5, 1.0, 1.0, two + 0.3, two + 0.4, two + 0.4, two + 0.9])
     kind = ["separation", "contact", "separation", "separation", "contact", "separation", "contact"]
     side = ["interior", "exterior", "exterior", "interior", "exterior", "exterior", "interior"]
     n = phi.size
-    record = events.record(phi / two, phi, kind, side, np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool))
+    d_omega2 = np.array([0.0, -0.8, 0.0, 0.0, -0.5, 0.0, -0.5])
+    record = model_events.record(phi / two, phi, kind, side, np.zeros(n), d_omega2, np.zeros(n), np.zeros(n, dtype=bool))
     sim = xr.Dataset({"phi1": ("time", np.linspace(0, 2 * two, 50)), **record}, coords={"time": np.linspace(0, 2, 50)})
-    ev = pipeline.predicted_events(sim)
-    assert np.allclose(ev["impacts"], [0.4, 0.9]) and np.allclose(ev["jumps"], [0.3, 0.4])
-    assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
+    rec = events.model_events(sim)
+    assert list(rec.kind) == kind
+    assert np.allclose(rec.d_omega2[rec.contacts], [-0.8, -0.5, -0.5]) and np.isnan(rec.d_omega2[~rec.contacts]).all()
+    assert np.allclose(rec.phi1, phi)
+    assert events.model_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
 
 
 @pytest.mark.slow

@@ -62,13 +62,22 @@ def interp_row(t, tab, row):
 
 
 @jit
-def force(m, phase, x, v):
-    """Groove-on-follower normal force along +x (N) in ``phase``."""
+def flank_force(phase, x, v, kc, gap, damping):
+    """Groove-on-follower normal force along +x (N) in ``phase`` at the normal offset x (m) from the
+    interior flank, moving at v (m/s): the contact law (models.dynamics.contact.normal_force) on the
+    flank in contact, + from the interior one, - from the exterior one at x = gap. The twin
+    (models.dynamics.kernels.twin_nb) applies the same."""
     if phase == INTERIOR:
-        return normal_force(-x, -v, m.kc, m.damping)
+        return normal_force(-x, -v, kc, damping)
     if phase == EXTERIOR:
-        return -normal_force(x - m.gap, v, m.kc, m.damping)
+        return -normal_force(x - gap, v, kc, damping)
     return 0.0
+
+
+@jit
+def force(m, phase, x, v):
+    """``flank_force`` with the model's contact law and gap."""
+    return flank_force(phase, x, v, m.kc, m.gap, m.damping)
 
 
 @jit
