@@ -115,7 +115,7 @@ def acquire(
         if rpm is not None:
             attrs["cam_speed_rpm"] = float(rpm)
     attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch)
+    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force)
 
 
 def _sim_device(opts, realtime, faults, dur):
@@ -147,7 +147,7 @@ def _sim_device(opts, realtime, faults, dur):
     return dev, [k, k, float("nan")], attrs
 
 
-def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
+def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool):
     from labtool.output import console
 
     from acquisition import session
@@ -160,7 +160,8 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
     try:  # session.run turns Ctrl-C and SIGTERM into a clean stop between blocks
         if live is not None:
             live.start()
-        result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=progress)
+        result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=progress,
+                             replace=force)
         if live is not None:
             progress.finish(result.wall_s)
     finally:
@@ -176,7 +177,8 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
     if result.outcome == "interrupted":
         typer.echo(f"labtool: {result.message}; the recording is closed and complete", err=True)
     if result.outcome in ("disconnected", "disk_full", "write_error"):
-        raise InputError(f"{result.message}; {result.n_samples} samples kept in {output}")
+        raise InputError(f"{result.message}; {result.n_samples} samples ({result.n_samples / result.rate_hz:.3f} s) "
+                         f"kept in {output}, complete={str(result.complete).lower()}")
 
 
 def _live_display(console, dev, duration):
