@@ -70,9 +70,11 @@ def utc_now() -> str:
 
 
 def _attr(value):
-    """h5py-friendly attribute value (None -> skipped by the caller)."""
+    """h5py-friendly attribute value (None -> skipped by the caller); text arrays as UTF-8 strings."""
     if isinstance(value, (list, tuple)):
-        return np.asarray(value)
+        value = np.asarray(value)
+    if isinstance(value, np.ndarray) and value.dtype.kind in "UO":
+        return np.array([str(v) for v in value.ravel()], dtype=h5py.string_dtype("utf-8")).reshape(value.shape)
     return value
 
 

@@ -26,6 +26,7 @@ import numpy as np
 from acquisition import signal_chain as sc
 from acquisition.device import Block, Device, DeviceDisconnected, Event
 from common.errors import InputError
+from common.recording_attrs import source_name
 
 BOARD_CLOCK_HZ = 12.8e6  # the simulated board divides a 12.8 MHz timebase (as NI DSA boards do)
 MIN_RATE_HZ = 1000.0
@@ -118,8 +119,13 @@ class SimStand(Device):
         self._k = 0  # next internal block to generate
         self._n_total = None if self.duration_s is None else int(round(self.duration_s * self._rate))
         self._fault_at = [(int(f.at_s * self._rate), f) for f in self.faults]
-        self.metadata = {"device": "sim", "seed": self.seed, **self.scene.attrs(), **self.params.attrs(),
-                         "block_samples": self._block}
+        chain = self.params.attrs()
+        self.metadata = {"device": "sim", "seed": self.seed, **self.scene.attrs(), **chain,
+                         "block_samples": self._block, "sensor_model": chain.get("sensor", ""),
+                         "conditioner_model": chain.get("conditioner", "")}
+        if self.scene.mode == "run":  # the operating point is the simulated scene's own (common/recording_attrs)
+            for name in ("law", "cam_speed_rpm", "Fu_N", "backlash_mm", "jt_factor"):
+                self.metadata[source_name(name)] = "simulated stand scene"
         return self._rate
 
     @property
