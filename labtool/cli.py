@@ -37,6 +37,7 @@ COMMAND_MODULES = (
     "labtool.commands.report",
     "labtool.commands.doe",
     "labtool.commands.acquire",
+    "labtool.commands.devices",
     "labtool.commands.calibrate",
     "labtool.commands.process",
     "labtool.commands.bench",

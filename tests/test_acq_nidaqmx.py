@@ -297,3 +297,57 @@ def test_software_trigger_keeps_the_pretrigger_samples(tmp_path):
     full = np.concatenate([b.data for b in iter(ref.read_block, None)])
     at = int(np.flatnonzero((full[1:, 2] >= 2.5) & (full[:-1, 2] < 2.5))[0]) + 1
     np.testing.assert_array_equal(x, full[at - 500: at - 500 + 5000])  # the same samples, re-based
+
+
+def _fake_system(devices):
+    from unittest import mock
+
+    import nidaqmx.types
+    from nidaqmx.system import Device as NIDevice
+    from nidaqmx.system import PhysicalChannel, System
+
+    system = mock.create_autospec(System, instance=True, spec_set=True)
+    system.driver_version = nidaqmx.types.DriverVersion(2025, 3, 0)
+    out = []
+    for name, product, n in devices:
+        d = mock.create_autospec(NIDevice, instance=True, spec_set=True)
+        d.name, d.product_type, d.serial_num, d.is_simulated = name, product, 0, True
+        d.ai_max_single_chan_rate = 102400.0
+        d.ai_voltage_rngs = [-10.0, 10.0, -3.16, 3.16]
+        chans = []
+        for i in range(n):
+            pc = mock.create_autospec(PhysicalChannel, instance=True, spec_set=True)
+            pc.name = f"{name}/ai{i}"
+            chans.append(pc)
+        d.ai_physical_chans = chans
+        out.append(d)
+    system.devices = out
+    return system
+
+
+def test_devices_lists_what_nidaqmx_sees(monkeypatch, capsys):
+    import nidaqmx.system
+    from labtool.cli import main
+
+    monkeypatch.setattr(nidaqmx.system.System, "local", staticmethod(lambda: _fake_system([("SimDev1", "PCI-4462", 4)])))
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    assert "NI-DAQmx driver 2025.3.0: 1 device(s)" in out
+    assert "SimDev1: PCI-4462 (simulated), serial 0, 4 AI channels (SimDev1/ai0 .. SimDev1/ai3), max 102400.0 S/s" in out
+    assert "ranges -10..10, -3.16..3.16 V" in out and "--device nidaqmx:SimDev1/ai0:2" in out
+    assert main(["devices", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["nidaqmx"][0]["ai_channels"] == [f"SimDev1/ai{i}" for i in range(4)] and doc["nidaqmx_error"] is None
+
+
+def test_devices_says_when_the_driver_is_absent(monkeypatch, capsys):
+    import nidaqmx.system
+    from nidaqmx.errors import DaqNotFoundError
+    from labtool.cli import main
+
+    def absent():
+        raise DaqNotFoundError("Could not find an installation of NI-DAQmx.")
+    monkeypatch.setattr(nidaqmx.system.System, "local", staticmethod(absent))
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    assert "sim: the simulated stand" in out and "NI-DAQmx: not available: NI-DAQmx driver not found" in out
