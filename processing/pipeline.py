@@ -29,6 +29,7 @@ from typing import Callable
 import numpy as np
 import xarray as xr
 
+from common import recording_attrs
 from common.errors import InputError
 from processing import cam_angle, cycles, events, filters, follower, spectra
 from processing.calibration_file import PAPER_KA_M_S2_PER_V, ChannelCalibration
@@ -357,6 +358,8 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
         "n_samples_lost": int(lost_n.sum()),
         "processing_history": hist.to_json(),
     })
+    # the run's operating point (with its sources), metadata and headroom, as the recording states them
+    small.attrs.update({k: rec.attrs[k] for k in recording_attrs.carried() if k in rec.attrs and k not in small.attrs})
     try:
         small.to_netcdf(tmp, mode="a", engine="h5netcdf")
     except OSError as exc:

@@ -34,11 +34,13 @@ class FakeBoard:
     script       {read number: "overrun" | "unplug"}
     terminal     if set, the only terminal configuration the board has (a DSA board: PSEUDO_DIFF)
     teds_mv_per_g  sensitivity the TEDS chips report
+    source       (first sample, n) -> (n, channels) volts the inputs see (e.g. the simulated stand's)
     """
 
     def __init__(self, coerce=lambda r: r, script=None, reject_rate=False, ranges=(0.316, 1.0, 3.16, 10.0),
-                 terminal=None, teds_mv_per_g=9.87):
+                 terminal=None, teds_mv_per_g=9.87, source=None):
         self.coerce, self.script, self.reject_rate = coerce, dict(script or {}), reject_rate
+        self.source = source  # (first sample, n) -> (n, channels) volts; None: the ramp
         self.ranges, self.terminal, self.teds_mv_per_g = ranges, terminal, teds_mv_per_g
         self.chans: dict[str, mock.NonCallableMagicMock] = {}
         self.order: list[str] = []
@@ -175,8 +177,9 @@ class FakeBoard:
         if action == "unplug":
             raise DaqError("Device has been removed.", -88709)
         ramp = np.arange(self.produced, self.produced + n, dtype=float)
+        wired = None if self.source is None else self.source(self.produced, n)
         for c, name in enumerate(self.order):
-            v = ramp + 0.001 * c
+            v = ramp + 0.001 * c if wired is None else wired[:, c]
             data[c, :] = v / (self.chans[name].ai_accel_sensitivity / 1000.0) if self.kinds[name] == "teds" else v
         self.produced += n
         s.total_samp_per_chan_acquired += n
@@ -189,3 +192,23 @@ class FakeBoard:
         pc.teds_mfg_id, pc.teds_model_num, pc.teds_serial_num = 12, 352, 4711
         self.physical[name] = pc
         return pc
+
+
+def stand_source(scene=None, seed=0):
+    """Volts of the simulated stand as the board's inputs: the fake board wired to the stand."""
+    from acquisition import signal_chain as sc
+    from acquisition.sim_stand import SimStand
+
+    dev = SimStand(scene or sc.StandScene(), seed=seed, realtime=False)
+    dev.configure(10000)
+    dev.start()
+    buf = {"data": np.empty((0, 3)), "first": 0}
+
+    def read(first, n):
+        while buf["first"] + buf["data"].shape[0] < first + n:
+            buf["data"] = np.concatenate([buf["data"], dev.read_block().data.astype(float)])
+        lo = first - buf["first"]
+        out = buf["data"][lo:lo + n]
+        buf["data"], buf["first"] = buf["data"][lo + n:], first + n
+        return out
+    return read
