@@ -12,6 +12,7 @@ from nidaqmx_fake import FakeBoard, stand_source
 
 
 @pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
 def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_path, monkeypatch, capsys):
     import nidaqmx
 
@@ -47,6 +48,7 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
     assert "T-042" in html and "stated by the operator (--fu)" in html
 
 
+@pytest.mark.hostile("silent_wrong")
 def test_a_value_not_in_the_file_is_said_to_be_the_papers():
     import xarray as xr
 
