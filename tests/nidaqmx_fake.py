@@ -199,7 +199,7 @@ def stand_source(scene=None, seed=0):
     from acquisition import signal_chain as sc
     from acquisition.sim_stand import SimStand
 
-    dev = SimStand(scene or sc.StandScene(), seed=seed, realtime=False)
+    dev = SimStand(scene or sc.StandScene(truth_model="kinematic"), seed=seed, realtime=False)
     dev.configure(10000)
     dev.start()
     buf = {"data": np.empty((0, 3)), "first": 0}

@@ -28,7 +28,7 @@ def blocks_of(dev, seconds):
 
 @pytest.mark.parametrize("rpm", [180.0, 500.0])
 def test_cam_speed_peak_rms_and_headroom_from_the_simulated_stand(rpm):
-    dev = SimStand(sc.StandScene(cam_speed_rpm=rpm), seed=2, duration_s=3.0, realtime=False)
+    dev = SimStand(sc.StandScene(cam_speed_rpm=rpm, truth_model="kinematic"), seed=2, duration_s=3.0, realtime=False)
     blocks = blocks_of(dev, 3.0)
     ka = [86.43, 86.43, np.nan]
     mon = Monitor(dev.channel_names, 10000.0, ka, dev.input_range_v, duration_s=3.0)
@@ -91,7 +91,7 @@ def test_tacho_peak_is_the_anti_alias_filters_step_overshoot():
     """6.033 V for a 5 V pulse: the order-8 Butterworth at 0.4 x rate overshoots a step by 20.7 %
     (its analog prototype by 16.3 %); the filter keeps the pulse's area (DC gain 1): 5 V x 1 ms."""
     p = sc.ChainParams()
-    dev = SimStand(sc.StandScene(), seed=0, duration_s=1.0, realtime=False)
+    dev = SimStand(sc.StandScene(truth_model="kinematic"), seed=0, duration_s=1.0, realtime=False)
     x = np.concatenate([b.data for b in blocks_of(dev, 1.0)])[:, 2].astype(float)
     st = sc.new_chain_state(p, 10000.0)
     overshoot = signal.sosfilt(st.sos_aa, np.ones(400)).max()

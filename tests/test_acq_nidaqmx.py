@@ -282,7 +282,7 @@ def test_software_trigger_keeps_the_pretrigger_samples(tmp_path):
     assert first_crossing(np.array([3.0, 3.0]), 2.5, "rising", None) is None  # high from the start: no edge
     assert first_crossing(np.array([3.0, 0.0]), 2.5, "falling", None) == 1
     # the tacho rises at phi1 = 0: t = 0.333 s, 0.667 s, ... at 180 rpm; start 0.05 s past the first full turn
-    dev = SimStand(sc.StandScene(), seed=3, duration_s=1.2, realtime=False, faults=[])
+    dev = SimStand(sc.StandScene(truth_model="kinematic"), seed=3, duration_s=1.2, realtime=False, faults=[])
     trig = SoftwareTrigger(dev, channel=2, level_v=2.5, pretrigger=500)
     res = session.run(trig, tmp_path / "t.h5", 10000, 0.5)
     rec = read_recording(tmp_path / "t.h5")
@@ -291,7 +291,7 @@ def test_software_trigger_keeps_the_pretrigger_samples(tmp_path):
     starts = [(i, d) for i, k, d in rec["events"] if k == "start"]
     assert starts[1][0] == 500 and "software trigger" in starts[1][1]
     assert x[499, 2] < 2.5 <= x[500, 2]  # the trigger row is the first sample past the level
-    ref = SimStand(sc.StandScene(), seed=3, duration_s=1.2, realtime=False)
+    ref = SimStand(sc.StandScene(truth_model="kinematic"), seed=3, duration_s=1.2, realtime=False)
     ref.configure(10000)
     ref.start()
     full = np.concatenate([b.data for b in iter(ref.read_block, None)])
