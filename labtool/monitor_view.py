@@ -84,15 +84,19 @@ def render(s, title: str, width: int = 100):
 
 
 def trace_text(trace: dict, width: int = 80, height: int = 12) -> Text:
-    """aE_t and aE_n over the last revolution as a terminal plot (plotext), as rich Text."""
+    """aE_t and aE_n over the last revolution, side by side, each on its own scale (plotext), as rich Text."""
     import plotext as plt
 
-    plt.clf()
-    plt.plotsize(width, height)
-    plt.theme("clear")
-    for name, marker in (("aE_t", "dot"), ("aE_n", "+")):
-        if name in trace:
-            plt.plot(list(map(float, trace["x"])), list(map(float, trace[name])), label=name, marker=marker)
-    plt.title(f"{trace['what']}: aE_t, aE_n [{trace['unit']}]")
-    plt.xlabel(trace["x_unit"])
-    return Text.from_ansi(plt.build())
+    names = [n for n in ("aE_t", "aE_n") if n in trace]
+    panels = []
+    for name in names:
+        plt.clf()
+        plt.plotsize(width // len(names), height)
+        plt.theme("clear")
+        plt.plot(list(map(float, trace["x"])), list(map(float, trace[name])), marker="dot")
+        plt.title(f"{name} [{trace['unit']}], {trace['what']}")
+        plt.xlabel(trace["x_unit"])
+        panels.append(plt.build().splitlines())
+    rows = max(len(p) for p in panels)
+    lines = ["".join(p[i] if i < len(p) else "" for p in panels) for i in range(rows)]
+    return Text.from_ansi("\n".join(lines))
