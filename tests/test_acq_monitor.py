@@ -125,3 +125,19 @@ def test_a_piped_realtime_run_reports_while_it_runs(tmp_path):
     assert len(status) >= 4
     assert ("cam 179.9" in status[-1] or "cam 180.0" in status[-1]) and "aE_t peak" in status[-1] and "% of +-10 V" in status[-1]
     assert "wrote" in rest_out and proc.returncode == 0
+
+
+def test_the_terminal_panel_shows_headroom_and_both_traces():
+    from rich.console import Console
+
+    dev = SimStand(sc.StandScene(cam_speed_rpm=500.0, truth_model="kinematic"), seed=2, duration_s=1.0, realtime=False)
+    mon = Monitor(dev.channel_names, 10000.0, [86.43, 86.43, np.nan], [10.0] * 3, duration_s=2.0)
+    for b in blocks_of(dev, 1.0):
+        mon.update(b)
+    con = Console(record=True, width=100, force_terminal=True, color_system="truecolor")
+    con.print(monitor_view.render(mon.snapshot(1.0), "simulated stand", width=100))
+    text = con.export_text()
+    assert "LOW HEADROOM" in text and "96." in text and "500.0" in text
+    assert "aE_t [m/s^2], last revolution" in text and "aE_n [m/s^2], last revolution" in text
+    assert "ETA" in text and "50.0 % of 2.0 s" in text
+    assert max(len(line) for line in text.splitlines()) <= 100
