@@ -106,19 +106,25 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     finally:
         stop.restore()
         _try(device.stop)
-        if outcome == "error" and rec.n_samples == 0:
-            rec.discard()  # nothing was recorded: leave no empty file behind
-        elif not rec.healthy:
-            rec.abandon(message)
-        else:
-            try:
-                rec.close(complete=complete, reason=message)
-            except OSError:
-                rec.abandon("disk full while closing")
-                outcome, message, complete = "disk_full", "disk full (ENOSPC) while closing", False
+        outcome, message, complete = _close(rec, outcome, message, complete)
     wall = time.perf_counter() - t0
     return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
                      rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)
+
+
+def _close(rec: Recorder, outcome: str, message: str, complete: bool):
+    """Close the recording as the run ended; returns (outcome, message, complete) as they stand after."""
+    if outcome == "error" and rec.n_samples == 0:
+        rec.discard()  # nothing was recorded: leave no empty file behind
+    elif not rec.healthy:
+        rec.abandon(message)
+    else:
+        try:
+            rec.close(complete=complete, reason=message)
+        except OSError:
+            rec.abandon("disk full while closing")
+            return "disk_full", "disk full (ENOSPC) while closing", False
+    return outcome, message, complete
 
 
 class _StopRequest:

@@ -123,22 +123,28 @@ def acquire(
     meta_given = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
                       conditioner_gain=conditioner_gain, notes=notes)
 
+    dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
+                                iepe_excitation, meta_given, motor_setting)
+    attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
+    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
+
+
+def _device(kind, arg, opts, given, realtime, faults, dur, device_file, ni, iepe_excitation, meta_given,
+            motor_setting):
+    """The device, its per-channel Ka and the recording's attributes (operating point, metadata)."""
     if kind == "sim":
         if device_file is not None or ni:
             raise InputError("--device-file and --ni configure NI-DAQmx devices; use them with --device nidaqmx")
-        dev, ka_ch, attrs = _sim_device(opts, realtime, fault or [], dur)
+        dev, ka_ch, attrs = _sim_device(opts, realtime, faults, dur)
         attrs.update(run_metadata_attrs(meta_given))
         if motor_setting is not None:
             attrs.update(operating_point_attrs({"motor_setting": motor_setting}, "stated by the operator (--motor-setting)"))
-    else:
-        if fault:
-            raise InputError("--fault works with --device sim only")
-        if not realtime:
-            raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
-        dev, ka_ch, attrs = _nidaqmx_device(arg, device_file, ni or [], iepe_excitation, opts, given, meta_given,
-                                            motor_setting)
-    attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
+        return dev, ka_ch, attrs
+    if faults:
+        raise InputError("--fault works with --device sim only")
+    if not realtime:
+        raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
+    return _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting)
 
 
 def _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting):
