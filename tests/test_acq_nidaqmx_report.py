@@ -20,17 +20,17 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
     monkeypatch.setattr(nidaqmx, "Task", lambda: board.task)
     monkeypatch.setattr(drv, "_reader", board.reader)
     rec_path, nc, js = tmp_path / "ni.h5", tmp_path / "ni.nc", tmp_path / "ni.json"
-    sens = ["--ni", "aE_t.sensitivity_mv_per_g=11.346", "--ni", "aE_t.conditioner_gain=10",
-            "--ni", "aE_n.sensitivity_mv_per_g=11.346", "--ni", "aE_n.conditioner_gain=10"]
+    sens = ["--ni", "aE_t.sensitivity_mv_per_g=11.346", "--ni", "aE_t.conditioner_gain=1",
+            "--ni", "aE_n.sensitivity_mv_per_g=11.346", "--ni", "aE_n.conditioner_gain=1"]
     assert main(["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--duration", "4", "--rpm", "180", "--law", "sine",
                  "--fu", "5", "--backlash-mm", "0.1", "--jt-factor", "1.2", "--motor-setting", "variator 3.5",
                  "--test-id", "T-042", "--operator", "M. Ionescu", "--sensor-model", "PCB 352A76",
-                 "--sensor-serial", "LW001", "--conditioner-gain", "10", "--notes", "after greasing",
+                 "--sensor-serial", "LW001", "--conditioner-gain", "1", "--notes", "after greasing",
                  *sens, "-o", str(rec_path)]) == 0
     a = read_recording(rec_path)["attrs"]
     assert a["device"] == "nidaqmx" and a["Fu_N"] == 5.0 and a["Fu_N_source"] == "stated by the operator (--fu)"
     ka = read_recording(rec_path)["ka_m_s2_per_v"]
-    np.testing.assert_allclose(ka[:2], 9806.65 / 113.46, rtol=1e-9)  # nominal: sensitivity x gain
+    np.testing.assert_allclose(ka[:2], 9806.65 / 11.346, rtol=1e-9)  # nominal: sensitivity x gain (x1, as the stand)
     assert main(["process", str(rec_path), "-o", str(nc)]) == 0
     capsys.readouterr()
     assert main(["report", str(nc), "--models", "rigid", "--omega1", "const", "-o", str(tmp_path / "r.html"),
@@ -42,7 +42,7 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
     assert op["backlash_mm_source"] == "file attribute backlash_mm, stated by the operator (--backlash-mm)"
     run = doc["measured"]["run"]
     assert run["test_id"] == "T-042" and run["operator"] == "M. Ionescu" and run["sensor_serial"] == "LW001"
-    assert run["conditioner_gain"] == 10.0 and run["motor_setting"] == "variator 3.5"
+    assert run["conditioner_gain"] == 1.0 and run["motor_setting"] == "variator 3.5"
     assert "aE_t" in run["headroom_summary"] and "% of +-10 V" in run["headroom_summary"]
     html = (tmp_path / "r.html").read_text()
     assert "T-042" in html and "stated by the operator (--fu)" in html
