@@ -168,7 +168,9 @@ class Monitor:
     def _binned(self, v: np.ndarray, what: str, x_unit: str, x_span: float) -> dict:
         npts = min(self.trace_points, v.shape[0])
         edges = np.linspace(0, v.shape[0], npts + 1).astype(int)
-        means = np.add.reduceat(v, edges[:-1], axis=0) / np.diff(edges)[:, None]
+        # each bin shows its extreme sample (signed), so an impact of one sample stays visible
+        hi, lo = np.maximum.reduceat(v, edges[:-1], axis=0), np.minimum.reduceat(v, edges[:-1], axis=0)
+        means = np.where(np.abs(hi) >= np.abs(lo), hi, lo)
         ka = self.ka[self._accel]
         scaled = np.all(np.isfinite(ka))
         out = {"what": what, "x": (edges[:-1] + np.diff(edges) / 2) / v.shape[0] * x_span, "x_unit": x_unit,

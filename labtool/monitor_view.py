@@ -31,6 +31,12 @@ def _num(v, fmt=".3g") -> str:
     return "-" if v is None or not math.isfinite(v) else format(v, fmt)
 
 
+def _pct(fraction: float) -> str:
+    """A percentage with two significant figures below 10 % (0.2 %, not 0 %)."""
+    p = 100 * fraction
+    return f"{p:.1f}" if p < 10 else f"{p:.0f}"
+
+
 def speed_text(s) -> str:
     if s.rpm is None:
         return "no tacho pulse yet" if s.revolutions == 0 else "-"
@@ -49,7 +55,7 @@ def status_line(s) -> str:
     parts = [f"acquire {progress_text(s)}", f"cam {speed_text(s)}"]
     for c in s.channels:
         flag = f" {STATE_WORD[c.state]}" if c.state != "ok" else ""
-        rng = f" = {100 * c.fraction:.0f} % of +-{c.range_v:g} V" if math.isfinite(c.fraction) else ""
+        rng = f" = {_pct(c.fraction)} % of +-{c.range_v:g} V" if math.isfinite(c.fraction) else ""
         parts.append(f"{c.name} peak {_num(c.peak)} {c.unit}{rng}, 1 s rms {_num(c.rms_recent)} {c.unit}{flag}")
     parts.append(f"overruns {s.overruns}, gaps {s.gaps} ({s.samples_lost} samples lost)")
     if s.buffer_fill is not None:
