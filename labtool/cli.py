@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "labtool.commands.devices",
     "labtool.commands.calibrate",
     "labtool.commands.process",
+    "labtool.commands.export",
     "labtool.commands.bench",
 )
 
