@@ -52,6 +52,7 @@ import numpy as np
 
 from acquisition.device import Block, Event
 from acquisition.writer_lock import WriterLock
+from common.hdf5 import open_file
 
 FORMAT = "labtool.recording"
 FORMAT_VERSION = 1
@@ -417,13 +418,17 @@ def _classify(exc: Exception) -> OSError:
 
 
 def read_recording(path) -> dict:
-    """Minimal reader for tests and calibration: attrs, signals (float64), channel names, Ka, events.
+    """Minimal reader for tests and tools: attrs, signals (float64), channel names, Ka, events.
 
-    (The full reader, with checks and warnings, is processing's job.)
+    Opened through common.hdf5.open_file (superblock and file size checked first, so a truncated
+    file is one FileFormatError, never a hang; SWMR read for a file still marked open for writing).
+    The full reader, with checks and warnings, is processing's.
     """
-    with h5py.File(path, "r", swmr=True) as f:
+    from common.errors import FileFormatError
+
+    f, _note = open_file(path)
+    with f:
         if f.attrs.get("format") != FORMAT:
-            from common.errors import FileFormatError
             raise FileFormatError(f"{path} is not a labtool recording (format attribute missing)")
         names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["signals"].attrs["channel_names"]]
         ev = f["events"][...]

@@ -185,3 +185,20 @@ def test_two_acquires_started_together(tmp_path, force):
     rec = read_recording(f)
     n = rec["signals"].shape[0]
     assert bool(rec["attrs"]["complete"]) and n == 20000 and f"{n} samples" in winner
+
+
+@pytest.mark.hostile("hang")
+@pytest.mark.parametrize("keep", [100, 512, 4096])
+def test_read_recording_of_a_truncated_file_is_one_error_not_a_hang(tmp_path, keep):
+    full = tmp_path / "full.h5"
+    assert main(["acquire", "--fast", "--duration", "0.3", "-o", str(full)]) == 0
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(full.read_bytes()[:keep])
+    code = ("import sys\nfrom acquisition.recorder import read_recording\nfrom common.errors import FileFormatError\n"
+            "try:\n    read_recording(sys.argv[1])\nexcept FileFormatError as e:\n    print('refused:', e)\n")
+    try:  # in a child with a bound: before the safe opener, h5py looped for ever on such a file
+        proc = subprocess.run([sys.executable, "-c", code, str(cut)], cwd=ROOT, capture_output=True, text=True,
+                              timeout=90)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"read_recording hung on a file cut to {keep} bytes")
+    assert proc.returncode == 0 and proc.stdout.startswith("refused:"), (proc.stdout, proc.stderr[-500:])
