@@ -117,7 +117,7 @@ class Outcome:
 def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *,
                 chunk_items: int | None = None, target_task_s: float = TARGET_TASK_S,
                 on_estimate: Callable | None = None, progress: Callable | None = None,
-                auto_workers: int | None = None) -> Outcome:
+                auto_workers: int | None = None, unit: str = "items") -> Outcome:
     """Compute ``fn(item)`` for every item not yet in ``store``; see the module docstring.
 
     backend       an ``execution.backends`` backend; None = decide from the measured cost: this
@@ -153,7 +153,7 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
             store.write(r.start, r.stop, r.frame)
         except DiskFull as exc:
             kept = state["done"]
-            raise DiskFull(f"disk full ({exc}): {kept} of {n} items are finished and kept in "
+            raise DiskFull(f"disk full ({exc}): {kept} of {n} {unit} are finished and kept in "
                            f"{store.folder}; free space and rerun the same command to resume") from None
         state["done"] += r.stop - r.start
         out.done_now += r.stop - r.start
@@ -193,7 +193,7 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
         if state["buffer"]:
             accept()
     except KeyboardInterrupt:
-        raise InputError(f"interrupted: {state['done']} of {n} items are finished and kept in {store.folder}; "
+        raise InputError(f"interrupted: {state['done']} of {n} {unit} are finished and kept in {store.folder}; "
                          "rerun the same command to resume") from None
     finally:
         active.close()

@@ -31,9 +31,9 @@ from execution.parts import DiskFull, PartStore, _is_disk_full
 
 EXTRA_COLUMNS = ("wall_s", "error")
 MAX_LISTED_FAILURES = 100
-# disk needed per run (bytes): a part row, the CSV row, the NetCDF values, with margin; checked
-# against the free space before anything runs
-BYTES_PER_RUN = 400
+# disk needed per run at the least (bytes: its CSV row and NetCDF values), checked against the free
+# space before anything runs; a disk that fills later is caught where it fills
+BYTES_PER_RUN = 100
 
 
 @dataclasses.dataclass
@@ -61,13 +61,17 @@ def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_ite
                       design.columns + list(EXTRA_COLUMNS), fresh=fresh)
     try:
         out = map_chunked(design.row, range(len(design)), store, backend, chunk_items=chunk_items,
-                          on_estimate=on_estimate, progress=progress)
+                          on_estimate=on_estimate, progress=progress, unit="runs")
         if out.failed_chunks:
             a, b, msg = out.failed_chunks[0]
             runs = sum(y - x for x, y, _ in out.failed_chunks)
             raise InputError(f"{len(out.failed_chunks)} chunk(s) ({runs} runs, first runs {a + 1}-{b}) failed on the "
                              f"workers: {msg}; the finished runs are kept in {store.folder}, rerun to retry")
         failures, n_failed = assemble(design, store, csv_path, nc_path, history)
+    except BaseException:
+        if not store.part_files():      # refused or failed before any run finished: leave nothing
+            store.remove()
+        raise
     finally:
         store.close()
     store.remove()
