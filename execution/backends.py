@@ -10,7 +10,11 @@ is reported as a :class:`TaskFailed` result, never lost silently; Ctrl-C and err
 """
 from __future__ import annotations
 
+import os
 import re
+import signal
+import threading
+import time
 from collections.abc import Callable, Iterable
 
 from common.errors import InputError
@@ -42,6 +46,28 @@ class InProcess:
         pass
 
 
+def die_with_parent(parent_pid: int) -> None:
+    """In a worker process: end when ``parent_pid`` ends, even by SIGKILL (which leaves the pool no
+    chance to stop its workers: they would go on computing chunks nobody writes). Linux: the
+    kernel's parent-death signal; elsewhere a thread that watches the parent's pid."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:      # the parent died before the signal was armed
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+    threading.Thread(target=watch, daemon=True).start()
+
+
 class LocalProcesses:
     """Chunks run on ``n`` local worker processes (spawned: a forked child could inherit a lock
     held by another thread of this one)."""
@@ -53,7 +79,8 @@ class LocalProcesses:
         import multiprocessing as mp
         self.workers = n
         self.where = f"{n} local processes"
-        self._pool = cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"))
+        self._pool = cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"),
+                                            initializer=die_with_parent, initargs=(os.getpid(),))
 
     def run(self, tasks, on_result, window: int | None = None) -> None:
         import concurrent.futures as cf

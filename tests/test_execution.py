@@ -188,6 +188,18 @@ def _doe(tmp_path, out="r.csv", *extra, model="rigid", accuracy="fast"):
                       "-o", str(tmp_path / out), *extra]
 
 
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d.name))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
 def _wait_for_parts(folder: Path, n: int, proc, timeout=120.0):
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
@@ -203,12 +215,18 @@ def _wait_for_parts(folder: Path, n: int, proc, timeout=120.0):
 @pytest.mark.hostile("interrupted")
 def test_a_killed_doe_run_keeps_its_chunks_and_resumes(tmp_path):
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    proc = subprocess.Popen(_doe(tmp_path, "r.csv", "--workers", "1", "--chunk-runs", "4"),
+    proc = subprocess.Popen(_doe(tmp_path, "r.csv", "--workers", "2", "--chunk-runs", "4"),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     folder = parts_folder(tmp_path / "r.csv")
     _wait_for_parts(folder, 3, proc)
+    workers = _children(proc.pid)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+    assert workers
+    t0 = time.monotonic()          # the worker processes end with their parent (no orphans computing)
+    while any(Path(f"/proc/{w}").exists() for w in workers) and time.monotonic() - t0 < 10:
+        time.sleep(0.1)
+    assert not any(Path(f"/proc/{w}").exists() for w in workers)
     kept = sorted(folder.glob("items-*.csv"))
     assert len(kept) >= 3 and not (tmp_path / "r.csv").exists()
     kept_runs = sum(len(pd.read_csv(p)) for p in kept)
