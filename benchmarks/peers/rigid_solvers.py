@@ -220,36 +220,7 @@ def _make_driver(solve):
                 raise RuntimeError("too many contact events")
             ev_t[n_ev] = tc
             n_ev += 1
-            if mode == CONTACT:                                       # lift-off
-                r = _contact(p, yc[0], yc[1], flank)
-                y = np.array([yc[0], yc[1], r[6], r[2]])
-                mode = FREE
-            else:                                                     # impact on a flank
-                hit_flank = INNER if which == 0 else OUTER
-                phi1, omega1, q, omega2 = yc[0], yc[1], yc[2], yc[3]
-                r = _free(p, phi1, omega1, q, omega2)
-                A2, d1, dA2, phi2 = r[5], r[6], r[7], r[4]
-                q = 0.0 if hit_flank == INNER else p[10] / A2
-                G1 = A2 * d1 - dA2 * q
-                J2 = _table(p, 1, phi2, 0) * p[3]
-                kk = p[11]
-                v_before = A2 * omega2 - G1 * omega1
-                settle = False
-                if min(-v_before * hit_flank, -kk * v_before * hit_flank) < v_settle:
-                    P0 = -v_before / (A2 * A2 / J2 + G1 * G1 * p[5])
-                    w1 = omega1 - P0 * G1 * p[5]
-                    settle = hit_flank * _contact(p, phi1, w1, hit_flank)[5] > 0.0
-                    if settle:
-                        kk = 0.0
-                P = -(1.0 + kk) * v_before / (A2 * A2 / J2 + G1 * G1 * p[5])
-                omega1 = omega1 - P * G1 * p[5]
-                omega2 = omega2 + P * A2 / J2
-                if settle:
-                    mode, flank = CONTACT, hit_flank
-                    y = np.array([phi1, omega1])
-                else:
-                    flank = hit_flank
-                    y = np.array([phi1, omega1, q, omega2])
+            mode, flank, y = _after_event(p, yc, mode, flank, which, v_settle)
             while k < n_out and t_out[k] <= t0:
                 U[k, :y.size] = y
                 MODE[k], FL[k] = mode, flank
@@ -340,25 +311,30 @@ def scipy_solve(prob, method, rtol):
     return U, MODE, FL, ev, p, time.perf_counter() - t0c
 
 
+@nb.njit(cache=True)
 def _after_event(p, yc, mode, flank, which, v_settle):
-    """The state after a lift-off or an impact (the same law as the numbalsoda driver's)."""
+    """(mode, flank, state) after a lift-off (contact mode) or an impact on the inner (which 0) or
+    outer (which 1) flank: q projected onto the flank, Newton's k on the normal velocity of C, a
+    grazing impact (|v| < v_settle) made plastic when the flank then presses the follower."""
     if mode == CONTACT:
         r = _contact(p, yc[0], yc[1], flank)
         return FREE, flank, np.array([yc[0], yc[1], r[6], r[2]])
     hit_flank = INNER if which == 0 else OUTER
-    phi1, omega1, q, omega2 = (float(v) for v in yc)
-    _, _, _, _, phi2, A2, d1, dA2 = _free(p, phi1, omega1, q, omega2)
+    phi1, omega1, q, omega2 = yc[0], yc[1], yc[2], yc[3]
+    r = _free(p, phi1, omega1, q, omega2)
+    phi2, A2, d1, dA2 = r[4], r[5], r[6], r[7]
     q = 0.0 if hit_flank == INNER else p[10] / A2
     G1 = A2 * d1 - dA2 * q
     J2 = _table(p, 1, phi2, 0) * p[3]
     kk = p[11]
     v_before = A2 * omega2 - G1 * omega1
-    settle = False
+    denominator = A2 * A2 / J2 + G1 * G1 * p[5]
     if min(-v_before * hit_flank, -kk * v_before * hit_flank) < v_settle:
-        P0 = -v_before / (A2 * A2 / J2 + G1 * G1 * p[5])
-        settle = hit_flank * _contact(p, phi1, omega1 - P0 * G1 * p[5], hit_flank)[5] > 0.0
-        kk = 0.0 if settle else kk
-    P = -(1.0 + kk) * v_before / (A2 * A2 / J2 + G1 * G1 * p[5])
+        w1_plastic = omega1 + v_before / denominator * G1 * p[5]
+        if hit_flank * _contact(p, phi1, w1_plastic, hit_flank)[5] > 0.0:
+            kk = -1.0                       # settle: a plastic impact, then stay on the flank
+    settle = kk < 0.0
+    P = -(1.0 + max(kk, 0.0)) * v_before / denominator
     omega1, omega2 = omega1 - P * G1 * p[5], omega2 + P * A2 / J2
     if settle:
         return CONTACT, hit_flank, np.array([phi1, omega1])
