@@ -91,7 +91,7 @@ def main(argv=None) -> dict:
                     client.run(_warm, model)
             direct = direct_per_run(model, factors, args.sample)
             rec = {"direct_ms_per_run": direct * 1e3, "in_process": [], "dask_1": [], "dask_2": []}
-            base = ["--model", model, "--factors", str(factors)]
+            base = ["--model", model, "--factors", str(factors), "--yes"]
             for rep in range(args.repeats):
                 wall, line = doe_run(base + ["--workers", "1"], tmp / "w1.csv")
                 rec["in_process"].append(wall)

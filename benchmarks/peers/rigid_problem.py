@@ -48,4 +48,5 @@ def build(scene, t_out=None) -> RigidProblem:
               for t in (P.tab1, P.tab2)]
     if t_out is None:     # labtool's standard sampling, on the rise duration at the start speed
         t_out = np.linspace(0.0, scene.program.rise_angle / omega1_0, 4001)[:-1]
-    return RigidProblem(header, tables, P.j, omega1_0, span, PRESETS["standard"]["v_settle"], np.asarray(t_out, float))
+    return RigidProblem(header, tables, P.j, omega1_0, span, PRESETS["standard"]["v_settle"],
+                        np.ascontiguousarray(t_out, dtype=float))

@@ -39,6 +39,7 @@ INNER, OUTER = 1, -1
 CONTACT, FREE = 0, 1
 MAX_EVENTS = 20000
 ANGLE_TIE = 1e-12
+MAX_WINDOW = 64        # output instants per numbalsoda call at most (see numbalsoda_solve)
 # s: solve_ivp's own first step after an impact can be so small that the state does not change and
 # the flank just left reads as a new contact at once; this one is far below any flight's duration
 FIRST_STEP = 1e-7
@@ -182,7 +183,7 @@ def _make_driver(solve):
                         MODE[k + jj], FL[k + jj] = mode, flank
                 t0, y = tev[W], usol[W].copy()
                 k += W
-                window = min(2 * window, 4096)
+                window = min(2 * window, MAX_WINDOW)
                 continue
             for jj in range(1, hit):
                 U[k + jj - 1, :y.size] = usol[jj]
