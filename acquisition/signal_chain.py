@@ -423,53 +423,12 @@ def _is_periodic(tab: dict) -> bool:
 
 
 def model_events(ds) -> dict:
-    """A model dataset's contact events as EVENTS.md's arrays (times in s of the run).
+    """A model dataset's contact events as the event record's arrays (models.dynamics.events, times
+    in s of the run)."""
+    from models.dynamics import events
 
-    Takes the dataset's own event record when it has one (``event_side``); else converts the
-    rigid model's (event_kind 1 lift-off, 2 rebound, 3 settle; event_flank +-1) and the elastic
-    model's (attrs event_times_s / event_kinds) formats."""
-    names = ("event_time", "event_phi1", "event_kind", "event_side", "event_v_rel", "event_domega2",
-             "event_percussion", "event_persistent")
-    if "event_side" in ds:
-        return {k: np.asarray(ds[k].values) for k in names}
-    if "event_flank" in ds:                     # rigid
-        kind = np.asarray(ds["event_kind"].values)
-        flank = np.asarray(ds["event_flank"].values)
-        side = np.where(flank > 0, "interior", "exterior").astype(object)
-        t = np.asarray(ds["event_time"].values, float)
-        rows = []
-        for i in range(t.size):
-            if kind[i] == 1:                        # lift-off: a persistent contact ends
-                rows.append((t[i], ds["event_phi1"].values[i], "separation", side[i], 0.0, np.nan, np.nan, True))
-                continue
-            v = abs(float(ds["event_v_before"].values[i]))
-            dw = float(ds["event_omega2_after"].values[i] - ds["event_omega2_before"].values[i])
-            P = float(ds["event_percussion"].values[i])
-            rows.append((t[i], ds["event_phi1"].values[i], "contact", side[i], v, dw, P, kind[i] == 3))
-            if kind[i] == 2:                        # a rebound: the contact ends at once
-                rows.append((t[i], ds["event_phi1"].values[i], "separation", side[i],
-                             abs(float(ds["event_v_after"].values[i])), np.nan, np.nan, False))
-        return _rows_to_events(rows, names)
-    t = np.atleast_1d(np.asarray(ds.attrs.get("event_times_s", []), float))   # elastic
-    kinds = [k for k in str(ds.attrs.get("event_kinds", "")).split(",") if k]
-    w1 = float(ds.attrs.get("omega1_rad_s", np.nan))
-    rows = [(ti, w1 * ti, "separation" if k.startswith("leave") else "contact",
-             "interior" if k.endswith("interior") else "exterior", np.nan, np.nan, np.nan, False)
-            for ti, k in zip(t, kinds)]
-    return _rows_to_events(rows, names)
-
-
-def _rows_to_events(rows, names) -> dict:
-    cols = list(zip(*rows)) if rows else [[] for _ in names]
-    out = {}
-    for name, col in zip(names, cols):
-        if name in ("event_kind", "event_side"):
-            out[name] = np.asarray(col, dtype=object)
-        elif name == "event_persistent":
-            out[name] = np.asarray(col, dtype=bool)
-        else:
-            out[name] = np.asarray(col, dtype=float)
-    return out
+    ev = events.read(ds)
+    return {name: np.asarray(ev[name].values) for name in events.VARIABLES}
 
 
 def model_truth_span(scene: StandScene) -> float:
@@ -532,10 +491,11 @@ def truth_events(scene: StandScene, duration: float) -> dict:
     """The truth's event record (EVENTS.md arrays) over [0, duration] s of a recording: the twin
     integrated again from its attributes, or a model truth's events (its steady turn repeated).
     The kinematic truth has none."""
-    names = ("event_time", "event_phi1", "event_kind", "event_side", "event_v_rel", "event_domega2",
-             "event_percussion", "event_persistent")
+    from models.dynamics import events
+
     if scene.mode != "run" or scene.truth_model == "kinematic":
-        return _rows_to_events([], names)
+        n = np.zeros(0)
+        return events.columns(events.record(n, n, n.astype(int), n.astype(int), n, n, n, n.astype(bool)))
     if scene.truth_model == "twin":
         run = new_twin_run(scene, keep_events=True)
         step = 0.05

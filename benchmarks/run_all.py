@@ -74,7 +74,7 @@ def table1_timing(repeat: int = 3) -> dict:
     except (AttributeError, OSError):
         pass
     sys.path.insert(0, str(ROOT))
-    from models.mechanism import cam_tables
+    from models.mechanism import memo
     from models.study.paper import table1_runs
     from models.dynamics.scene import Scene
     from models.dynamics.simulate import simulate
@@ -86,7 +86,7 @@ def table1_timing(repeat: int = 3) -> dict:
     for model in ("rigid", "elastic"):
         best = float("inf")
         for _ in range(repeat):
-            cam_tables.clear_cache()      # the sweep computes its cam-angle table once, inside the timing
+            memo.clear_cache()      # the sweep computes its cam-angle table once, inside the timing
             t0 = time.perf_counter()
             for sc in scenes:
                 simulate(sc, model)

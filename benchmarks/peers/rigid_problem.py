@@ -37,16 +37,26 @@ class RigidProblem:
 
 
 def build(scene, t_out=None) -> RigidProblem:
-    from models.dynamics.rigid import PRESETS, build_plant, interp, simulated_span
+    import math
 
-    span = simulated_span(scene)
-    P, _ = build_plant(scene, phi1_hi=span)
-    omega1_0 = scene.omega1_nominal if P.const else (P.m0 + float(interp(P.tab1, 0.0)[6])) / P.m1
+    from models.dynamics import rigid
+    from models.dynamics.rigid_tables import cam_table, follower_table
+
+    span = rigid.simulated_span(scene)
+    m, info = rigid.build_model(scene)
+    omega1_0 = rigid.start_speed(scene, m)
     header = np.zeros(20)
-    header[2:12] = [P.phi20, P.jt, P.Jcam, P.inv_Jcam, 1.0 if P.const else 0.0, P.m0, P.m1, P.Fu, P.j, P.k]
-    tables = [(np.asarray(t.nodes, float), np.asarray(t.inv_h, float), np.asarray(t.coef, float))
-              for t in (P.tab1, P.tab2)]
+    header[2:12] = [m.phi20, m.jt, m.Jcam, m.inv_Jcam, 1.0 if m.const else 0.0, m.m0, m.m1, m.Fu, m.j, m.k]
+    mech, program = scene.mechanism, scene.program
+    lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
+    # the model's tables (the same nodes and cubics as its packed ones), unpacked for the peers
+    tabs = (cam_table(mech, program, info["sense"], -0.05, span + 0.2), follower_table(mech, lo2, hi2))
+    tables = [(np.asarray(t.nodes, float), np.asarray(t.inv_h, float), np.asarray(t.coef, float)) for t in tabs]
     if t_out is None:     # labtool's standard sampling, on the rise duration at the start speed
         t_out = np.linspace(0.0, scene.program.rise_angle / omega1_0, 4001)[:-1]
-    return RigidProblem(header, tables, P.j, omega1_0, span, PRESETS["standard"]["v_settle"],
-                        np.ascontiguousarray(t_out, dtype=float))
+    # the peers settle an impact below a fixed speed (labtool's rule is the contact's deformation,
+    # models.dynamics.kernels.rigid_nb.settles; no Table 1 impact settles under either)
+    return RigidProblem(header, tables, m.j, omega1_0, span, V_SETTLE, np.ascontiguousarray(t_out, dtype=float))
+
+
+V_SETTLE = 1e-6    # m/s, the former standard preset's grazing speed
