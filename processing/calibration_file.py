@@ -1,62 +1,243 @@
-"""Reading the calibration TOML written by ``labtool calibrate``.
+"""The calibration file (TOML): its schema, reader, writer, merging, and which Ka a channel gets.
 
-Format (this module's contract until acquisition/calibration.py fixes its own; unknown keys are
-ignored so the writer may add more)::
+Written by ``labtool calibrate`` (through ``write_calibration``, with tomli-w: never by string
+formatting, so any channel name or file name is quoted as TOML requires) and read by
+``labtool process --calibration`` (``read_calibration``). Format version 1::
 
-    [channels.aE_t]
-    ka_m_s2_per_v = 86.43            # m/s^2 per V, multiplies the recorded volts
-    uncertainty_m_s2_per_v = 0.5     # optional, standard uncertainty of Ka
+    format = "labtool.calibration"
+    format_version = 1
+    created_utc = "2026-11-22T04:30:00+00:00"
+    source = "sample_data/calibration_79p6Hz.h5"   # optional: the reference recording(s), "; "-joined
+    [reference]                  # optional: the exciter, as given to 'labtool calibrate'
+    accel_m_s2 = 9.81            # what the exciter gives, m/s^2 (> 0)
+    convention = "peak"          # "peak" or "rms": what accel_m_s2 means
+    freq_hz = 79.6               # nominal frequency, Hz
+    rel_uncertainty = 0.0        # of the exciter, relative, in [0, 1)
+    [channels.aE_t]              # one table per channel; the name is a quoted TOML key if it must be
+    ka_m_s2_per_v = 86.43        # the factor: acceleration = Ka * volts, m/s^2/V, 1e-3 < Ka < 1e6
+    uncertainty_m_s2_per_v = 0.01  # optional: standard uncertainty (k = 1), fit and reference combined
+    ka_std_fit_m_s2_per_v = 0.01   # optional: the fit's part of it
+    fitted_freq_hz = 79.6          # optional, Hz
+    amplitude_v_peak = 0.1135      # optional, V
+    residual_rms_v = 0.0006        # optional, V
+    harmonic_distortion = 0.001    # optional: (2f, 3f amplitudes) / fundamental
+    n_samples = 20000              # optional
+    n_references = 1               # optional: reference recordings merged into this Ka
+    birge_ratio = 1.0              # optional: their scatter / their stated uncertainty (> 1: inflated)
+    source = "ref.h5"              # optional: where this channel's Ka comes from
 
-This is the layout acquisition/calibration.py writes (there the uncertainty is named
-``ka_std_m_s2_per_v``; both names are read). A flat form ``[aE_t] ka_m_s2_per_v = ...`` and the key ``ka`` are accepted too.
+Strict: a key this schema does not know, a bool or a string where a number belongs, a number out
+of range, NaN or inf is refused with one line naming the file and the key. The header
+(``format``, ``format_version``) may be left out of a hand-written file; if present it must match.
 """
 from __future__ import annotations
 
 import dataclasses
+import datetime as _dt
 import math
-import tomllib
 from pathlib import Path
+from typing import Annotated, Literal
 
-from common.errors import FileFormatError, InputError
+from pydantic import BaseModel, Field, StringConstraints, field_validator
 
-# The paper's calibration (sec. 3, Figure 6): B&K 4291 exciter, 9.81 m/s^2 at 79.6 Hz.
+from common.errors import InputError
+from common.schema import STRICT, load_toml, shown, validate
+
+CAL_FORMAT = "labtool.calibration"
+CAL_VERSION = 1
+# The paper's calibration (sec. 2.4): B&K 4291 exciter, 9.81 m/s^2 at 79.6 Hz -> Ka = 86.43 m/s^2/V.
 PAPER_KA_M_S2_PER_V = 86.43
+# what an accelerometer chain's Ka can be (m/s^2 per V): 1e-3 (a 1 kV/(m/s^2) chain) .. 1e6
+KA_MIN, KA_MAX = 1e-3, 1e6
+
+ChannelName = Annotated[str, StringConstraints(min_length=1, max_length=64)]
+
+
+class Reference(BaseModel):
+    """The reference excitation (exciter) a calibration was made with."""
+    model_config = STRICT
+    accel_m_s2: float = Field(gt=0, le=1e5)
+    convention: Literal["peak", "rms"]
+    freq_hz: float = Field(gt=0, le=1e5)
+    rel_uncertainty: float = Field(ge=0, lt=1)
+
+
+class ChannelEntry(BaseModel):
+    """One channel's Ka (m/s^2/V) and what it was fitted from."""
+    model_config = STRICT
+    ka_m_s2_per_v: float = Field(gt=KA_MIN, lt=KA_MAX)
+    uncertainty_m_s2_per_v: float | None = Field(default=None, ge=0)
+    ka_std_fit_m_s2_per_v: float | None = Field(default=None, ge=0)
+    fitted_freq_hz: float | None = Field(default=None, gt=0)
+    amplitude_v_peak: float | None = Field(default=None, gt=0)
+    residual_rms_v: float | None = Field(default=None, ge=0)
+    harmonic_distortion: float | None = Field(default=None, ge=0)
+    n_samples: int | None = Field(default=None, ge=1)
+    n_references: int | None = Field(default=None, ge=1)
+    birge_ratio: float | None = Field(default=None, ge=0)
+    source: str | None = None
+
+    @field_validator("uncertainty_m_s2_per_v")
+    @classmethod
+    def _below_ka(cls, v, info):
+        ka = info.data.get("ka_m_s2_per_v")
+        if v is not None and ka is not None and not v < ka:
+            raise ValueError(f"the uncertainty must be smaller than Ka ({ka:g} m/s^2/V)")
+        return v
+
+
+class CalibrationDoc(BaseModel):
+    """A whole calibration file."""
+    model_config = STRICT
+    format: Literal["labtool.calibration"] = CAL_FORMAT
+    format_version: Literal[1] = CAL_VERSION
+    created_utc: str | None = None
+    source: str | None = None
+    reference: Reference | None = None
+    channels: dict[ChannelName, ChannelEntry] = Field(min_length=1)
+
+    @field_validator("channels")
+    @classmethod
+    def _printable_names(cls, v):
+        for name in v:
+            if not name.isprintable() or name != name.strip():
+                raise ValueError(f"channel name {shown(repr(name))} holds control characters or blanks at its ends")
+        return v
 
 
 @dataclasses.dataclass(frozen=True)
 class ChannelCalibration:
-    """Ka (m/s^2/V) of one channel and its standard uncertainty (m/s^2/V, NaN if not stated)."""
+    """Ka (m/s^2/V) of one channel, its standard uncertainty (m/s^2/V, NaN if not stated) and
+    where it comes from (the calibration file)."""
     ka_m_s2_per_v: float
     uncertainty_m_s2_per_v: float = math.nan
+    source: str = "the calibration"
 
 
 def read_calibration(path) -> dict[str, ChannelCalibration]:
-    """{channel name: ChannelCalibration}; InputError/FileFormatError on a missing or bad file."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"calibration file {p} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise FileFormatError(f"{p}: not a calibration TOML file: {exc}") from None
-    table = data.get("channels", None)
-    if table is None:
-        table = {k: v for k, v in data.items() if isinstance(v, dict) and ("ka_m_s2_per_v" in v or "ka" in v)}
-    if not isinstance(table, dict) or not table:
-        raise FileFormatError(f"{p}: calibration file has no [channels.<name>] table with ka_m_s2_per_v")
-    out = {}
-    for name, entry in table.items():
-        if not isinstance(entry, dict):
-            raise FileFormatError(f"{p}: calibration entry '{name}' is not a table")
-        ka = entry.get("ka_m_s2_per_v", entry.get("ka"))
-        if ka is None:
-            raise FileFormatError(f"{p}: channel '{name}' has no ka_m_s2_per_v")
-        try:
-            ka = float(ka)
-            unc = float(entry.get("uncertainty_m_s2_per_v", entry.get("ka_std_m_s2_per_v", math.nan)))
-        except (TypeError, ValueError):
-            raise FileFormatError(f"{p}: channel '{name}': Ka and its uncertainty must be numbers") from None
-        if not (math.isfinite(ka) and ka != 0.0):
-            raise InputError(f"{p}: channel '{name}': Ka = {ka} m/s^2/V is not usable")
-        out[str(name)] = ChannelCalibration(ka, unc)
+    """{channel name: ChannelCalibration} from one file; InputError/FileFormatError (one line) if bad."""
+    doc = load_toml(path, CalibrationDoc, "calibration file")
+    return {name: ChannelCalibration(c.ka_m_s2_per_v,
+                                     math.nan if c.uncertainty_m_s2_per_v is None else c.uncertainty_m_s2_per_v,
+                                     f"calibration file {shown(path)}")
+            for name, c in doc.channels.items()}
+
+
+def read_calibrations(paths) -> dict[str, ChannelCalibration]:
+    """Several calibration files merged into one table; a channel in two of them is refused.
+
+    Two files that both calibrate a channel may disagree; which one holds is the user's call, not
+    labtool's (``labtool calibrate`` on both reference recordings at once merges them with their
+    uncertainties instead)."""
+    out: dict[str, ChannelCalibration] = {}
+    for p in paths:
+        for name, cal in read_calibration(p).items():
+            if name in out or name.lower() in {k.lower() for k in out}:
+                first = next(v for k, v in out.items() if k.lower() == name.lower())
+                raise InputError(f"channel {shown(name)} is calibrated in both {first.source.removeprefix('calibration file ')} "
+                                 f"and {shown(p)}; give one of them, or calibrate both reference recordings in one "
+                                 "'labtool calibrate' call to merge them with their uncertainties")
+            out[name] = cal
     return out
+
+
+def calibration_document(channels: dict[str, dict], reference: dict | None, source: str | None,
+                         created_utc: str | None = None) -> CalibrationDoc:
+    """A validated document from plain values (the writer's input); InputError if a value is out of range."""
+    created = created_utc or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    data = {"format": CAL_FORMAT, "format_version": CAL_VERSION, "created_utc": created,
+            "channels": {k: {kk: vv for kk, vv in v.items() if vv is not None} for k, v in channels.items()}}
+    if source is not None:
+        data["source"] = source
+    if reference is not None:
+        data["reference"] = reference
+    return validate(data, CalibrationDoc, "calibration")
+
+
+def calibration_text(doc: CalibrationDoc) -> str:
+    """The file's text: TOML written by tomli-w (every key and string quoted as TOML needs)."""
+    import tomli_w
+
+    body = tomli_w.dumps(doc.model_dump(exclude_none=True))
+    return "# labtool calibration file: acceleration (m/s^2) = ka_m_s2_per_v * volts\n" + body
+
+
+def write_calibration(path, doc: CalibrationDoc) -> None:
+    """Write the file atomically (temp file + rename), readable by others (a calibration is shared)."""
+    from common.files import atomic_write
+
+    text = calibration_text(doc)
+
+    def _write(tmp: Path):
+        try:
+            tmp.write_text(text, encoding="utf-8")
+            tmp.chmod(0o644)  # mkstemp makes it private; the user's umask still rules the directory
+        except OSError as exc:
+            raise InputError(f"cannot write {shown(path)}: {exc.strerror or exc}") from None
+    atomic_write(Path(path), _write)
+
+
+# --------------------------------------------------------------------------- which Ka a channel gets
+
+@dataclasses.dataclass(frozen=True)
+class KaChoice:
+    """The Ka applied to a channel (m/s^2/V), its uncertainty (NaN: unknown), where it comes from,
+    and a warning for the user when it is not a calibration of this chain (else "")."""
+    ka_m_s2_per_v: float
+    uncertainty_m_s2_per_v: float
+    source: str
+    warning: str = ""
+
+
+def resolve_ka(channel: str, calibration: dict[str, ChannelCalibration] | None, recording_ka: float,
+               where: str = "the recording") -> KaChoice:
+    """Ka for ``channel``: the calibration file's, else the recording's ``ka_m_s2_per_v`` attribute,
+    else the paper's 86.43 m/s^2/V, with a warning in both fallback cases.
+
+    A recording attribute that is present but unusable (0, negative, inf) is refused: falling
+    back to the paper's Ka would be a silent wrong answer."""
+    if calibration:
+        cal = calibration.get(channel) or next(
+            (v for k, v in calibration.items() if k.lower() == channel.lower()), None)
+        if cal is not None:
+            return KaChoice(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, cal.source)
+    rec = float(recording_ka)
+    if not math.isnan(rec) and not (math.isfinite(rec) and KA_MIN < rec < KA_MAX):
+        raise InputError(f"{shown(where)} states Ka = {rec:g} m/s^2/V for channel {shown(channel)}, which is not usable; "
+                         "give a calibration file (--calibration) for it")
+    if math.isfinite(rec):
+        choice = KaChoice(rec, math.nan, "recording attribute ka_m_s2_per_v")
+    else:
+        choice = KaChoice(PAPER_KA_M_S2_PER_V, math.nan, f"paper default (Ka = {PAPER_KA_M_S2_PER_V} m/s^2/V)")
+    if calibration:
+        # say what is used instead, so the user can tell whether to calibrate that channel too
+        names = sorted({c.source for c in calibration.values()})
+        return dataclasses.replace(choice, warning=(
+            f"{'; '.join(names)} has no entry for channel {shown(channel)}; "
+            f"using the {choice.source} (Ka = {choice.ka_m_s2_per_v:.4g} m/s^2/V)"))
+    if choice.source.startswith("paper default"):
+        return dataclasses.replace(choice, warning=_paper_warning([channel], where))
+    return choice
+
+
+def _paper_warning(channels, where) -> str:
+    return (f"no calibration for channel {', '.join(shown(c) for c in channels)} (no --calibration, no Ka in "
+            f"{shown(where)}): using the paper's Ka = {PAPER_KA_M_S2_PER_V} m/s^2/V, not a calibration of this chain "
+            "(labtool calibrate makes one)")
+
+
+def resolve_channels(channels, calibration: dict[str, ChannelCalibration] | None, recording_ka,
+                     where: str = "the recording") -> tuple[dict[str, KaChoice], list[str]]:
+    """``resolve_ka`` for several channels: their choices, and the warnings with the paper-default
+    ones said once for all the channels they concern."""
+    choices = {c: resolve_ka(c, calibration, k, where) for c, k in zip(channels, recording_ka)}
+    paper = [c for c, ch in choices.items() if ch.warning and not calibration and ch.source.startswith("paper")]
+    warnings = [ch.warning for c, ch in choices.items() if ch.warning and c not in paper]
+    if paper:
+        warnings.append(_paper_warning(paper, where))
+    return choices, warnings
+
+
+__all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "Reference", "ChannelEntry",
+           "CalibrationDoc", "ChannelCalibration", "read_calibration", "read_calibrations", "calibration_document",
+           "calibration_text", "write_calibration", "KaChoice", "resolve_ka", "resolve_channels"]

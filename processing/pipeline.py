@@ -31,7 +31,7 @@ import xarray as xr
 
 from common.errors import InputError
 from processing import cam_angle, cycles, events, filters, follower, spectra
-from processing.calibration_file import PAPER_KA_M_S2_PER_V, ChannelCalibration
+from processing.calibration_file import ChannelCalibration, resolve_channels
 from common.history import History
 from processing.readers import Recording
 
@@ -56,8 +56,7 @@ class ProcessingWarning(UserWarning):
 @dataclasses.dataclass
 class ProcessOptions:
     """Processing parameters (SI, except rpm); None means: from the file or the default."""
-    calibration: dict[str, ChannelCalibration] | None = None
-    calibration_source: str = ""
+    calibration: dict[str, ChannelCalibration] | None = None   # each entry says its source file
     law: str | None = None
     cam_speed_rpm: float | None = None
     lowpass_hz: float | None = None
@@ -90,24 +89,13 @@ def process_recording(rec: Recording, output: Path, options: ProcessOptions | No
 
 
 def _calibration(rec: Recording, opts: ProcessOptions, warn, hist: History) -> dict[str, tuple[float, float, str]]:
-    out = {}
-    for name in REQUIRED:
-        j = rec.channel_index(name)
-        cal = None
-        if opts.calibration is not None:
-            cal = opts.calibration.get(name) or next(
-                (v for k, v in opts.calibration.items() if k.lower() == name.lower()), None)
-        if cal is not None:
-            out[name] = (cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, f"calibration file {opts.calibration_source}")
-            continue
-        if math.isfinite(rec.ka_m_s2_per_v[j]) and rec.ka_m_s2_per_v[j] != 0:
-            out[name] = (float(rec.ka_m_s2_per_v[j]), math.nan, "recording attribute ka_m_s2_per_v")
-        else:
-            out[name] = (PAPER_KA_M_S2_PER_V, math.nan, "paper default (Ka = 86.43 m/s^2/V)")
-        if opts.calibration is not None:
-            # say what is used instead, so the user can tell whether to calibrate that channel too
-            warn(f"calibration file {opts.calibration_source} has no entry for channel {name}; "
-                 f"using the {out[name][2]} (Ka = {out[name][0]:.4g} m/s^2/V)")
+    """Ka of aE_t and aE_n: the calibration's, else the recording's, else the paper's (with a
+    warning in both fallback cases; processing.calibration_file.resolve_channels)."""
+    choices, warnings = resolve_channels(REQUIRED, opts.calibration,
+                                         [rec.ka_m_s2_per_v[rec.channel_index(n)] for n in REQUIRED], rec.source)
+    for w in warnings:
+        warn(w)
+    out = {k: (c.ka_m_s2_per_v, c.uncertainty_m_s2_per_v, c.source) for k, c in choices.items()}
     hist.add("apply_ka", **{f"{k}_ka_m_s2_per_v": v[0] for k, v in out.items()},
              **{f"{k}_uncertainty_m_s2_per_v": v[1] for k, v in out.items()},
              **{f"{k}_source": v[2] for k, v in out.items()})

@@ -127,8 +127,8 @@ def test_sample_data_is_what_its_scene_makes(tmp_path, name):
 
 
 def test_sample_calibration_gives_the_papers_ka():
-    from acquisition.calibration import load_calibration
-    assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(86.43, rel=0.005)
+    from processing.calibration_file import read_calibration
+    assert read_calibration(SAMPLE / "calibration.toml")["aE_t"].ka_m_s2_per_v == pytest.approx(86.43, rel=0.005)
 
 
 def test_truth_from_a_recordings_attributes(tmp_path):

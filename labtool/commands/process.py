@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -17,7 +17,8 @@ def register(app: typer.Typer) -> None:
 def process(
     recording: Path = typer.Argument(..., help="recording to process: labtool HDF5 (v1), LabVIEW TDMS or CSV"),
     output: Path = typer.Option(..., "-o", "--output", help="NetCDF file to write (measured.nc)"),
-    calibration: Optional[Path] = typer.Option(None, help="calibration TOML from 'labtool calibrate' (Ka per channel)"),
+    calibration: Optional[List[Path]] = typer.Option(None, help="calibration TOML from 'labtool calibrate' (Ka per channel); "
+                                                     "repeatable: the files' channels are merged, a channel in two is refused"),
     sample_rate: Optional[float] = typer.Option(None, help="sample rate [Hz] for TDMS/CSV files that state none"),
     law: Optional[str] = typer.Option(None, help="motion law of the cam (default: the recording's, else sine)"),
     rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
@@ -31,7 +32,7 @@ def process(
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
     averages and spikes, with every step in the processing history (docs/processing.md)."""
     from common.errors import InputError
-    from processing.calibration_file import read_calibration
+    from processing.calibration_file import read_calibrations
     from processing.pipeline import ProcessOptions, process_recording
     from processing.readers import open_recording
 
@@ -47,7 +48,7 @@ def process(
 
     mapping = _channel_map(channels) if channels else {}
     mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
-    cal = read_calibration(calibration) if calibration is not None else None
+    cal = read_calibrations(calibration) if calibration else None
     rec = open_recording(recording, sample_rate_hz=sample_rate)
     try:
         rec.rename_channels(mapping)
@@ -58,7 +59,7 @@ def process(
     def warn(msg: str) -> None:
         typer.echo(f"labtool: warning: {msg}", err=True)
 
-    opts = ProcessOptions(calibration=cal, calibration_source=str(calibration or ""), law=law, cam_speed_rpm=rpm,
+    opts = ProcessOptions(calibration=cal, law=law, cam_speed_rpm=rpm,
                           lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples,
                           mechanism=mech)
     try:
