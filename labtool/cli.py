@@ -38,6 +38,7 @@ COMMAND_MODULES = (
     "labtool.commands.calibrate",
     "labtool.commands.process",
     "labtool.commands.bench",
+    "labtool.commands.campaign",
 )
 
 
