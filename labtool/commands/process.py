@@ -77,6 +77,22 @@ def process(
                f"{summary['revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
                f"{summary['spikes']} spikes, {summary['clipped']} clipped samples, "
                f"|omega2| vs sqrt(aE_n/DE): {100 * check:.1f} % rms of peak")
+    typer.echo(_ka_line(summary.get("history", [])))
+
+
+def _ka_line(history) -> str:
+    """'Ka: aE_t 86.43 +- 0.003 m/s^2/V (source), aE_n ...' from the apply_ka step of the history."""
+    from common.schema import shown
+
+    step = next((h["parameters"] for h in history if h.get("step") == "apply_ka"), {})
+    parts = []
+    for ch in ("aE_t", "aE_n"):
+        ka, u = step.get(f"{ch}_ka_m_s2_per_v"), step.get(f"{ch}_uncertainty_m_s2_per_v")
+        if ka is None:
+            continue
+        unc = f" +- {u:.4g}" if isinstance(u, (int, float)) else " (uncertainty unknown)"
+        parts.append(f"{ch} {ka:.6g}{unc} m/s^2/V ({shown(step.get(f'{ch}_source', '?'))})")
+    return "Ka: " + ", ".join(parts)
 
 
 def _channel_map(text: str) -> dict[str, str]:
