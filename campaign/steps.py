@@ -24,7 +24,7 @@ from common.schema import shown
 # --------------------------------------------------------------------------- acquire
 
 
-def _sim_device(plan, point):
+def _sim_device(plan, point, duration_s: float):
     from acquisition import signal_chain as sc
     from acquisition.sim_stand import SimStand
 
@@ -33,20 +33,20 @@ def _sim_device(plan, point):
     if dev.truth is not None and dev.truth != "kinematic":
         # one turn of margin past the last (whole, 0.1 s) block, as 'labtool acquire' does
         kw = {"truth_model": dev.truth,
-              "truth_revolutions": int(math.ceil((point.duration_s + 0.2) * point.rpm / 60.0)) + 1,
+              "truth_revolutions": int(math.ceil((duration_s + 0.2) * point.rpm / 60.0)) + 1,
               "ripple": 0.0}    # the model's cam runs at constant speed
     elif dev.truth == "kinematic":
         kw = {"truth_model": "kinematic"}
     scene = sc.StandScene(mode="run", law=point.law, cam_speed_rpm=point.rpm, Fu=point.Fu_N,
                           backlash=point.backlash_mm * 1e-3, jt_factor=point.jt_factor, **kw)
     k = float(dev.ka_m_s2_per_v)
-    device = SimStand(scene, sc.ChainParams(ka_m_s2_per_v=(k, k)), seed=point.seed, duration_s=point.duration_s,
+    device = SimStand(scene, sc.ChainParams(ka_m_s2_per_v=(k, k)), seed=point.seed, duration_s=duration_s,
                       realtime=dev.pacing == "realtime")
     attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k, "pacing": dev.pacing}
     return device, [k, k, math.nan], attrs
 
 
-def _nidaqmx_device(plan, point):
+def _nidaqmx_device(plan, point, duration_s: float):
     from acquisition.nidaqmx_driver import NIDAQmxDevice
 
     dev = plan.doc.device
@@ -58,9 +58,11 @@ def _nidaqmx_device(plan, point):
     return device, ka, {"ka_source": "none (the campaign's calibration files are applied by processing)"}
 
 
-def make_device(plan, point):
-    """(device, Ka per channel (NaN: none), extra attributes) for one point."""
-    return (_sim_device if plan.doc.device.kind == "sim" else _nidaqmx_device)(plan, point)
+def make_device(plan, point, duration_s: float | None = None):
+    """(device, Ka per channel (NaN: none), extra attributes) for one point; ``duration_s`` (s) bounds
+    what the simulated stand generates (default: the point's recording)."""
+    make = _sim_device if plan.doc.device.kind == "sim" else _nidaqmx_device
+    return make(plan, point, point.duration_s if duration_s is None else duration_s)
 
 
 def point_attrs(plan, point) -> dict:
@@ -92,7 +94,8 @@ def settle(plan, point, ask=None, say=None):
         return st.wait_for_operator(ask, msg + " and press Enter when its speed is steady")
     if say is not None:
         say(msg + "; waiting on the tacho")
-    device, _, _ = make_device(plan, point)
+    # the simulated stand (a test of this path) generates just enough turns to be judged
+    device, _, _ = make_device(plan, point, (dev.settle_revolutions + 3) * 60.0 / point.rpm)
     return st.wait_for_tacho(device, dev.rate_hz, point.rpm, dev.settle_tolerance, dev.settle_revolutions,
                              dev.settle_timeout_s, say=say)
 

@@ -144,7 +144,8 @@ def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, co
         raise InputError("the HTML, JSON and CSV outputs must be different files")
     for p in outs:
         check_output_path(p, force)
-    rep = collect_inputs(inputs, compare, page_base=html.parent, say=_reporter().say)
+    say = _reporter().say if sys.stderr.isatty() else None   # progress on a terminal, quiet when piped
+    rep = collect_inputs(inputs, compare, page_base=html.parent, say=say)
     write_outputs(rep, html, json_path, csv_path)
     for r in rep.records:
         best = r.summary.get("closest")
