@@ -84,10 +84,17 @@ def same_outputs(a: Path, b: Path) -> None:
 
 @pytest.mark.slow
 def test_a_campaign_runs_every_point_and_a_rerun_keeps_them(tmp_path, capsys):
-    plan = quick_plan(tmp_path)
+    # a limit no measurement meets (a noisy recording is never within 1e-6 of a model): the
+    # campaign runs through every point, writes everything and exits 1
+    (tmp_path / "limits.toml").write_text("[omega2]\nnrmse = { max = 1e-6 }\n[epsilon2]\nnrmse = { max = 10.0 }\n")
+    plan = quick_plan(tmp_path, extra='thresholds = "limits.toml"\n')
     out = tmp_path / "camp"
-    assert main(["campaign", "run", str(plan), "-o", str(out)]) == 0
+    code = main(["campaign", "run", str(plan), "-o", str(out)])
     err = capsys.readouterr().err
+    doc = json.loads((out / "campaign.json").read_text())
+    assert code == 1 and doc["passed"] is False and "threshold checks failed at 2 point(s)" in err
+    assert all(len(p["thresholds"]["rows"]) == 2 for p in doc["points"])
+    assert "Threshold checks FAILED at" in (out / "campaign.html").read_text()
     assert "[1/2] 01_180rpm" in err and "[2/2] 02_300rpm" in err and "2 of 2 points done" in err
     for name in ("01_180rpm", "02_300rpm"):
         f = out / "points" / name
@@ -101,12 +108,11 @@ def test_a_campaign_runs_every_point_and_a_rerun_keeps_them(tmp_path, capsys):
     table = pd.read_csv(out / "campaign.csv")
     assert list(table["point"]) == ["01_180rpm", "02_300rpm"] and list(table["rpm"]) == [180, 300]
     assert table["omega2_iso_rating"].between(0, 1).all() and table["closest"].all()
-    doc = json.loads((out / "campaign.json").read_text())
     assert doc["format"] == "labtool.campaign.summary" and [p["name"] for p in doc["points"]] == ["01_180rpm", "02_300rpm"]
     assert doc["test"]["test_id"] == "T-1" and doc["points"][0]["page"] == "points/01_180rpm/report.html"
     # rerun: nothing is redone, the files are untouched
     mtimes = {p: p.stat().st_mtime_ns for p in (out / "points").rglob("*") if p.is_file()}
-    assert main(["campaign", "run", str(plan), "-o", str(out)]) == 0
+    assert main(["campaign", "run", str(plan), "-o", str(out)]) == code
     err = capsys.readouterr().err
     assert err.count("finished earlier, kept") == 2 and "0 point(s) worked on, 2 kept" in err
     assert {p: p.stat().st_mtime_ns for p in (out / "points").rglob("*") if p.is_file()} == mtimes
