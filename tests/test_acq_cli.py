@@ -116,7 +116,8 @@ def test_any_other_device_name_is_refused(tmp_path_factory, spec):
 SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data"
 
 
-@pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz"])
+@pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz",
+                                  "calibration_79p6Hz_aE_n"])
 def test_sample_data_is_what_its_scene_makes(tmp_path, name):
     out = tmp_path / f"{name}.h5"
     assert main(["acquire", "--scene", str(SAMPLE / "scenes" / f"{name}.toml"), "--fast", "-o", str(out)]) == 0
