@@ -170,13 +170,23 @@ def _run_and_kill(plan, out, when: str) -> subprocess.CompletedProcess:
     return lines
 
 
+@pytest.fixture(scope="module")
+def realtime(tmp_path_factory):
+    """A plan paced in real time (the second point records 3 s of wall time) and its uninterrupted run."""
+    d = tmp_path_factory.mktemp("realtime")
+    plan = quick_plan(d, pacing="realtime", second_duration=3.0)
+    res = cli("campaign", "run", plan, "-o", d / "uninterrupted")
+    assert res.returncode == 0, res.stderr
+    return plan, d / "uninterrupted"
+
+
 @pytest.mark.slow
 @pytest.mark.hostile("interrupted")
 @pytest.mark.parametrize("when", ["[2/2]", "acquire: done"])
-def test_a_campaign_killed_in_its_second_point_resumes_without_redoing_the_first(tmp_path, when):
+def test_a_campaign_killed_in_its_second_point_resumes_without_redoing_the_first(tmp_path, when, realtime):
     # realtime pacing: the second point's acquisition lasts 3 s of wall time, long enough to be
     # killed in the middle of it ("[2/2]"), or right after it ("acquire: done": in its processing)
-    plan = quick_plan(tmp_path, pacing="realtime", second_duration=3.0)
+    plan, ref = realtime
     out = tmp_path / "killed"
     _run_and_kill(plan, out, when)
     first = out / "points" / "01_180rpm"
@@ -201,16 +211,13 @@ def test_a_campaign_killed_in_its_second_point_resumes_without_redoing_the_first
     assert {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in first.iterdir()} == kept
     assert not list(out.rglob(".*.part"))
     # the same plan run without a kill gives the same results
-    ref = tmp_path / "uninterrupted"
-    res = cli("campaign", "run", plan, "-o", ref)
-    assert res.returncode == 0, res.stderr
     same_outputs(out, ref)
 
 
 @pytest.mark.slow
 @pytest.mark.hostile("concurrency")
-def test_a_second_run_on_the_same_folder_is_refused_while_the_first_works(tmp_path):
-    plan = quick_plan(tmp_path, pacing="realtime", second_duration=3.0)
+def test_a_second_run_on_the_same_folder_is_refused_while_the_first_works(tmp_path, realtime):
+    plan, _ = realtime
     out = tmp_path / "camp"
     proc = subprocess.Popen([sys.executable, "-m", "labtool", "campaign", "run", str(plan), "-o", str(out)],
                             stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=ROOT)
