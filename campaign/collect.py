@@ -20,7 +20,7 @@ import pandas as pd
 import xarray as xr
 
 from common.errors import FileFormatError, InputError
-from common.schema import shown
+from common.names import shown
 
 SIGNALS = ("omega2", "epsilon2")
 ROW_METRICS = ("iso_rating", "iso_grade", "sg_comprehensive", "nrmse")
@@ -70,7 +70,7 @@ def load_point_folder(folder: Path, name: str | None = None, page_base: Path | N
         summary = json.loads(s.read_text(encoding="utf-8"))
         cycles = xr.open_dataset(c, engine="h5netcdf").load()
     except (OSError, ValueError) as exc:
-        raise FileFormatError(f"point {shown(folder.name)}: unreadable {shown(exc)}") from None
+        raise FileFormatError(f"point {shown(folder.name)}: unreadable {shown(str(exc))}") from None
     page = str(_relative(folder / "report.html", page_base)) if (folder / "report.html").is_file() else None
     return PointRecord(name or folder.name, str(_relative(folder, page_base)), summary, cycles, page)
 

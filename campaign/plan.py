@@ -67,56 +67,93 @@ import hashlib
 import itertools
 import json
 import math
+import re
+import types
 from pathlib import Path
-from typing import Literal
-
-from pydantic import BaseModel, Field, model_validator
 
 from common.errors import InputError
-from common.schema import STRICT, read_toml, shown, validate
+from common.names import shown
+from common.schema import Bool, Integer, ListOf, Number, SchemaError, String, Table, load_toml
 
 MAX_POINTS = 500
 MAX_RPM = 2000.0      # above the drive's synchronous speed; the models refuse beyond their own limit
-Text = Field(default="", max_length=2000)
+NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")     # a point's folder name
 
 
-class CampaignInfo(BaseModel):
-    model_config = STRICT
-    name: str = Field(default="campaign", min_length=1, max_length=200)
-    description: str = Text
+def _opt(field):
+    field.required = False
+    return field
 
 
-class TestInfo(BaseModel):
-    model_config = STRICT
-    test_id: str = Field(default="", max_length=200)
-    operator: str = Field(default="", max_length=200)
-    notes: str = Text
+POINT_FIELDS = {
+    "name": _opt(String(max_len=60)),
+    "rpm": _opt(Number(gt=0, le=MAX_RPM, unit="rpm")),
+    "law": _opt(String(max_len=40)),
+    "Fu_N": _opt(Number(ge=0, le=1e4, unit="N")),
+    "backlash_mm": _opt(Number(ge=0, le=10, unit="mm")),
+    "jt_factor": _opt(Number(gt=0, le=100)),
+    "revolutions": _opt(Number(ge=2, le=10000)),
+    "duration_s": _opt(Number(gt=0, le=3600, unit="s")),
+    "seed": _opt(Integer(ge=0, le=2**32 - 1)),
+}
+MODELS, MODES = ("rigid", "elastic", "kinematic"), ("const", "var")
+
+PLAN = Table({
+    "campaign": Table({"name": String(default="campaign", max_len=200),
+                       "description": String(default="", max_len=2000, single_line=False)}, default={}),
+    "test": Table({"test_id": String(default="", max_len=200), "operator": String(default="", max_len=200),
+                   "notes": String(default="", max_len=2000, single_line=False)}, default={}),
+    "device": Table({
+        "kind": String(choices=("sim", "nidaqmx"), default="sim"),
+        "rate_hz": Number(ge=1000.0, le=1e6, unit="Hz", default=10000.0),
+        "seed": Integer(ge=0, le=2**32 - 1, default=0),
+        "pacing": String(choices=("fast", "realtime"), default="fast"),
+        "truth": _opt(String(choices=("kinematic", "rigid", "elastic"))),
+        "ka_m_s2_per_v": Number(gt=1e-3, lt=1e6, unit="m/s^2/V", default=86.43),
+        "channels": _opt(String(max_len=200)),
+        "file": _opt(String(max_len=4096)),
+        "iepe_excitation": Bool(default=False),
+        "settle": _opt(String(choices=("none", "prompt", "tacho"))),
+        "settle_tolerance": Number(gt=0, le=0.2, default=0.01),
+        "settle_revolutions": Integer(ge=2, le=1000, default=5),
+        "settle_timeout_s": Number(gt=0, le=3600, unit="s", default=120.0),
+    }, default={}),
+    "calibration": Table({"files": ListOf(String(max_len=4096), max_len=20, default=[])}, default={}),
+    "defaults": Table(POINT_FIELDS, default={}),
+    "points": ListOf(Table(POINT_FIELDS), max_len=MAX_POINTS, default=[]),
+    "grid": Table({"rpm": _opt(ListOf(Number(gt=0, le=MAX_RPM, unit="rpm"), max_len=MAX_POINTS)),
+                   "law": _opt(ListOf(String(max_len=40), max_len=20)),
+                   "Fu_N": _opt(ListOf(Number(ge=0, le=1e4, unit="N"), max_len=100)),
+                   "backlash_mm": _opt(ListOf(Number(ge=0, le=10, unit="mm"), max_len=100)),
+                   "jt_factor": _opt(ListOf(Number(gt=0, le=100), max_len=100))}, required=False),
+    "compare": Table({
+        "models": ListOf(String(choices=MODELS), min_len=1, default=["rigid", "elastic"]),
+        "omega1": ListOf(String(choices=MODES), min_len=1, default=["const", "var"]),
+        "accuracy": String(choices=("fast", "standard", "reference"), default="fast"),
+        "revolutions": Number(ge=1.0, le=20.0, default=1.0),
+        "thresholds": _opt(String(max_len=4096)),
+        "restitution": _opt(Number(ge=0, le=1)),
+        "contact_damping": _opt(Number(ge=0, le=1e4, unit="s/m")),
+        "contact_length_mm": _opt(Number(gt=0, le=100, unit="mm")),
+        "elastic_gap": _opt(String(choices=("physical", "closed"))),
+    }, default={}),
+})
+COMPARE = PLAN.fields["compare"]
 
 
-class Device(BaseModel):
-    model_config = STRICT
-    kind: Literal["sim", "nidaqmx"] = "sim"
-    rate_hz: float = Field(default=10000.0, ge=1000.0, le=1e6)
-    seed: int = Field(default=0, ge=0, lt=2**32)
-    pacing: Literal["fast", "realtime"] = "fast"
-    truth: Literal["kinematic", "rigid", "elastic"] | None = None
-    ka_m_s2_per_v: float = Field(default=86.43, gt=1e-3, lt=1e6)
-    channels: str | None = Field(default=None, min_length=1, max_length=200)
-    file: str | None = Field(default=None, min_length=1, max_length=4096)
-    iepe_excitation: bool = False
-    settle: Literal["none", "prompt", "tacho"] | None = None
-    settle_tolerance: float = Field(default=0.01, gt=0, le=0.2)
-    settle_revolutions: int = Field(default=5, ge=2, le=1000)
-    settle_timeout_s: float = Field(default=120.0, gt=0, le=3600)
+class Section(types.SimpleNamespace):
+    """A checked table of the plan, read by attribute; absent optional keys read as None."""
 
-    @model_validator(mode="after")
-    def _kind_keys(self):
-        if self.kind == "nidaqmx" and not (self.channels or self.file):
-            raise ValueError("a nidaqmx device needs 'channels' (e.g. \"Dev1/ai0:2\") or a device 'file'")
-        if self.kind == "sim" and (self.channels or self.file):
-            raise ValueError("'channels' and 'file' describe a nidaqmx device; the simulated stand has neither")
-        return self
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return None
 
+    def as_dict(self) -> dict:
+        return dict(vars(self))
+
+
+class Device(Section):
     @property
     def settle_mode(self) -> str:
         """The stand's way to a steady speed: the simulated one is steady at once; real hardware
@@ -124,70 +161,33 @@ class Device(BaseModel):
         return self.settle or ("none" if self.kind == "sim" else "tacho")
 
 
-class Calibration(BaseModel):
-    model_config = STRICT
-    files: list[str] = Field(default_factory=list, max_length=20)
+def check_compare(data: dict, where: str) -> Section:
+    """A [compare] table checked (also for 'campaign report' options)."""
+    c = COMPARE.check(data, where=where)
+    for key in ("models", "omega1"):
+        if len(set(c[key])) != len(c[key]):
+            raise SchemaError(f"{where}: [compare] {key}: a value is repeated")
+    return Section(**c)
 
 
-class PointValues(BaseModel):
-    """An operating point's values; None = from [defaults], else the paper's experiment."""
-    model_config = STRICT
-    name: str | None = Field(default=None, min_length=1, max_length=60, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
-    rpm: float | None = Field(default=None, gt=0, le=MAX_RPM)
-    law: str | None = Field(default=None, min_length=1, max_length=40)
-    Fu_N: float | None = Field(default=None, ge=0, le=1e4)
-    backlash_mm: float | None = Field(default=None, ge=0, le=10)
-    jt_factor: float | None = Field(default=None, gt=0, le=100)
-    revolutions: float | None = Field(default=None, ge=2, le=10000)
-    duration_s: float | None = Field(default=None, gt=0, le=3600)
-    seed: int | None = Field(default=None, ge=0, lt=2**32)
-
-    @model_validator(mode="after")
-    def _one_length(self):
-        if self.revolutions is not None and self.duration_s is not None:
-            raise ValueError("give revolutions or duration_s, not both")
-        return self
-
-
-class Grid(BaseModel):
-    """Every combination of the listed values (rpm varies fastest)."""
-    model_config = STRICT
-    rpm: list[float] = Field(default_factory=list, max_length=MAX_POINTS)
-    law: list[str] = Field(default_factory=list, max_length=20)
-    Fu_N: list[float] = Field(default_factory=list, max_length=100)
-    backlash_mm: list[float] = Field(default_factory=list, max_length=100)
-    jt_factor: list[float] = Field(default_factory=list, max_length=100)
-
-
-class Compare(BaseModel):
-    model_config = STRICT
-    models: list[Literal["rigid", "elastic", "kinematic"]] = Field(default=["rigid", "elastic"], min_length=1)
-    omega1: list[Literal["const", "var"]] = Field(default=["const", "var"], min_length=1)
-    accuracy: Literal["fast", "standard", "reference"] = "fast"
-    revolutions: float = Field(default=1.0, ge=1.0, le=20.0)
-    thresholds: str | None = Field(default=None, min_length=1, max_length=4096)
-    restitution: float | None = Field(default=None, ge=0, le=1)
-    contact_damping: float | None = Field(default=None, ge=0, le=1e4)
-    contact_length_mm: float | None = Field(default=None, gt=0, le=100)
-    elastic_gap: Literal["physical", "closed"] | None = None
-
-    @model_validator(mode="after")
-    def _unique(self):
-        if len(set(self.models)) != len(self.models) or len(set(self.omega1)) != len(self.omega1):
-            raise ValueError("models and omega1 must not repeat a value")
-        return self
-
-
-class PlanDoc(BaseModel):
-    model_config = STRICT
-    campaign: CampaignInfo = CampaignInfo()
-    test: TestInfo = TestInfo()
-    device: Device = Device()
-    calibration: Calibration = Calibration()
-    defaults: PointValues = PointValues()
-    points: list[PointValues] = Field(default_factory=list, max_length=MAX_POINTS)
-    grid: Grid | None = None
-    compare: Compare = Compare()
+def check_plan(data: dict, where: str):
+    """The plan checked: (sections by name, the raw point tables); SchemaError (one line) if bad."""
+    d = PLAN.check(data, where=where)
+    dev = d["device"]
+    if dev["kind"] == "nidaqmx" and not (dev.get("channels") or dev.get("file")):
+        raise SchemaError(f"{where}: [device] kind = \"nidaqmx\" needs channels (e.g. \"Dev1/ai0:2\") or a device file")
+    if dev["kind"] == "sim" and (dev.get("channels") or dev.get("file")):
+        raise SchemaError(f"{where}: [device] channels and file describe a nidaqmx device; the simulated stand has neither")
+    for label, p in [("[defaults]", d["defaults"])] + [(f"points[{i}]", p) for i, p in enumerate(d["points"])]:
+        if "revolutions" in p and "duration_s" in p:
+            raise SchemaError(f"{where}: {label}: give revolutions or duration_s, not both")
+        if "name" in p and not NAME.match(p["name"]):
+            raise SchemaError(f"{where}: {label} name = {p['name']!r}: a point name is letters, digits and _ . + - "
+                              "(it names a folder)")
+    sections = {"campaign": Section(**d["campaign"]), "test": Section(**d["test"]), "device": Device(**dev),
+                "calibration": Section(**d["calibration"]), "defaults": d["defaults"], "points": d["points"],
+                "grid": d.get("grid"), "compare": check_compare(d["compare"], where)}
+    return types.SimpleNamespace(**sections)
 
 
 # the paper's experiment (sec. 2.4): what a point is when neither it nor [defaults] says
@@ -220,7 +220,7 @@ class Point:
 class Plan:
     """A validated plan with its points expanded and its paths resolved."""
     path: Path
-    doc: PlanDoc
+    doc: types.SimpleNamespace      # check_plan's sections
     points: tuple
     calibration_files: tuple     # Path
     thresholds: Path | None
@@ -228,7 +228,7 @@ class Plan:
 
     def digest(self, part: str) -> str:
         """sha256 of one part of the plan (canonical JSON): how a step knows its inputs changed."""
-        data = getattr(self.doc, part).model_dump(mode="json")
+        data = getattr(self.doc, part).as_dict()
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
 
@@ -247,19 +247,18 @@ def _duration(v: dict, rpm: float) -> float:
     return (float(v["revolutions"]) + 1.0) * 60.0 / rpm
 
 
-def expand_points(doc: PlanDoc) -> list[Point]:
+def expand_points(doc) -> list[Point]:
     """The plan's points: the [[points]] list, then the [grid]'s combinations, each completed from
     [defaults] and the paper's experiment; InputError for none, too many, or a missing rpm."""
     base = dict(PAPER_POINT)
-    base.update({k: v for k, v in doc.defaults.model_dump().items() if v is not None and k not in ("name", "seed")})
-    if doc.defaults.duration_s is not None:
-        base.pop("revolutions", None)
-    if doc.defaults.name is not None or doc.defaults.seed is not None:
+    if doc.defaults.get("name") is not None or doc.defaults.get("seed") is not None:
         raise InputError("defaults: 'name' and 'seed' belong to a point, not to [defaults]")
-    raw = [p.model_dump() for p in doc.points]
-    if doc.grid is not None:
-        g = doc.grid.model_dump()
-        axes = {k: v for k, v in g.items() if v}
+    base.update(doc.defaults)
+    if "duration_s" in doc.defaults:
+        base.pop("revolutions", None)
+    raw = [dict(p) for p in doc.points]
+    if doc.grid:
+        axes = {k: v for k, v in doc.grid.items() if v}
         if axes:
             n = math.prod(len(v) for v in axes.values())
             if n + len(raw) > MAX_POINTS:
@@ -269,8 +268,6 @@ def expand_points(doc: PlanDoc) -> list[Point]:
                 raw.append(dict(zip(keys, combo)))
     if not raw:
         raise InputError("the plan has no operating points: add [[points]] with an rpm, or a [grid]")
-    if len(raw) > MAX_POINTS:
-        raise InputError(f"the plan has {len(raw)} points; at most {MAX_POINTS} per campaign")
     out, names = [], set()
     for i, p in enumerate(raw):
         given = {k: v for k, v in p.items() if v is not None}
@@ -316,12 +313,15 @@ def load_plan(path, check_files: bool = True) -> Plan:
     ``check_files=False`` (the copy kept in a campaign folder, read for its metadata) leaves the
     calibration, thresholds and device files unresolved."""
     path = Path(path)
-    doc = validate(read_toml(path, "plan"), PlanDoc, str(path))
-    points = expand_points(doc)
+    doc = check_plan(load_toml(path, "plan"), f"plan {shown(path)}")
+    try:
+        points = expand_points(doc)
+    except InputError as exc:
+        raise InputError(f"plan {shown(path)}: {exc}") from None
     from models.mechanism.motion_laws import ALIASES, LAWS
     for p in points:
         if p.law not in LAWS and p.law not in ALIASES:
-            raise InputError(f"{shown(path)}: point {p.name}: unknown motion law {shown(p.law)!r}; known: {', '.join(sorted(LAWS))}")
+            raise InputError(f"plan {shown(path)}: point {p.name}: unknown motion law {shown(p.law)!r}; known: {', '.join(sorted(LAWS))}")
     if not check_files:
         return Plan(path, doc, tuple(points), (), None, None)
     base = path.resolve().parent

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from common.errors import InputError
-from common.schema import shown
+from common.names import shown
 from campaign import collect
 from campaign.figures import all_figures
 
@@ -66,7 +66,7 @@ def _campaign_points(folder: Path, page_base: Path):
         plan = load_plan(plan_file, check_files=False)
         names = [p.name for p in plan.points]
         meta = {"name": plan.doc.campaign.name, "description": plan.doc.campaign.description,
-                "test": plan.doc.test.model_dump()}
+                "test": plan.doc.test.as_dict()}
     if names is None:
         names = sorted(p.name for p in (folder / POINTS_DIR).iterdir() if p.is_dir())
     records, missing = [], []
@@ -82,9 +82,9 @@ def _campaign_points(folder: Path, page_base: Path):
 def collect_inputs(inputs, compare=None, overrides: dict | None = None, page_base: Path | None = None,
                    say=None) -> CampaignReport:
     """A CampaignReport from campaign folders, point folders and measured.nc files."""
-    from campaign.plan import Compare
+    from campaign.plan import check_compare
 
-    compare = compare or Compare()
+    compare = compare or check_compare({}, "options")
     records, missing, meta, notes = [], [], {}, []
     for item in inputs:
         p = Path(item)
@@ -202,12 +202,16 @@ def write_outputs(rep: CampaignReport, html: Path | None, json_path: Path | None
     base = (html or json_path or csv_path).parent
     files = {k: (str(p.relative_to(base)) if p.parent == base else str(p)) for k, p in
              (("html", html), ("json", json_path), ("csv", csv_path)) if p is not None}
+    texts = []
     if csv_path is not None:
-        text = to_csv(rep)
-        atomic_write(csv_path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        texts.append((csv_path, to_csv(rep)))
     if json_path is not None:
-        text = to_json(rep, files)
-        atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        texts.append((json_path, to_json(rep, files) + "\n"))
     if html is not None:
-        page = render_html(rep, files)
-        atomic_write(html, lambda tmp: tmp.write_text(page, encoding="utf-8"))
+        texts.append((html, render_html(rep, files)))
+    for path, text in texts:
+        try:
+            atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        except OSError as exc:
+            raise InputError(f"cannot write {shown(path)}: {exc.strerror or exc}; the points are kept "
+                             "('labtool campaign report' writes the page again)") from None

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from common.errors import InputError, LabtoolError
-from common.schema import shown
+from common.names import shown
 from campaign import steps
 from campaign.plan import Plan
 from campaign.state import CampaignLock, PointState, clean_partials, sha256_file, sha256_json
@@ -56,7 +56,10 @@ def point_folder(folder: Path, point) -> Path:
 def _inputs(plan: Plan, point, state: PointState, step: str) -> str:
     """sha256 of everything ``step`` of ``point`` is made from (plan parts and files read)."""
     if step == "acquire":
-        return sha256_json({"point": point.spec(), "device": plan.digest("device"), "test": plan.digest("test")})
+        # how the stand was paced or waited for does not change what it recorded
+        device = {k: v for k, v in plan.doc.device.as_dict().items()
+                  if k != "pacing" and not k.startswith("settle")}
+        return sha256_json({"point": point.spec(), "device": device, "test": plan.digest("test")})
     if step == "process":
         return sha256_json({"recording": state.output_digest("acquire", "recording.h5"),
                             "calibration": [sha256_file(p) for p in plan.calibration_files],
@@ -95,12 +98,16 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
             continue
         if step == "acquire" and (folder / "recording.h5").exists():
             rep.warn(f"point {point.name}: its acquisition did not finish (killed or stopped); recording it again")
-        state.forget_from(step)
         t0 = time.perf_counter()
-        rep.step(point, step, "running")
-        info = _do(plan, point, folder, step, rep)
-        info["wall_s"] = time.perf_counter() - t0
-        state.record(step, inputs, info)
+        try:
+            state.forget_from(step)
+            rep.step(point, step, "running")
+            info = _do(plan, point, folder, step, rep)
+            info["wall_s"] = time.perf_counter() - t0
+            state.record(step, inputs, info)
+        except OSError as exc:   # a full disk, a read-only folder: what is finished stays finished
+            raise InputError(f"point {point.name} ({step}): cannot write in {shown(folder)}: "
+                             f"{exc.strerror or exc}; the finished points and steps are kept, rerun to resume") from None
         rep.step(point, step, "done", _detail(step, info))
         worked = True
     return worked
@@ -153,8 +160,16 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
         raise InputError(f"cannot create the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
     t0 = time.perf_counter()
     ran, kept, walls = [], [], []
-    with CampaignLock(folder):
-        _keep_plan_copy(plan, folder)
+    lock = CampaignLock(folder)
+    try:
+        lock.__enter__()
+    except OSError as exc:
+        raise InputError(f"cannot write in the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
+    try:
+        try:
+            _keep_plan_copy(plan, folder)
+        except OSError as exc:
+            raise InputError(f"cannot write in the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
         states = [PointState.load(point_folder(folder, p), p.name, p.spec()) for p in plan.points]
         for p, st in zip(plan.points, states):
             _check_existing(plan, p, st, redo)
@@ -171,6 +186,8 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
             left = n - k
             eta = (sum(walls) / len(walls)) * left if walls and left else (0.0 if not left else None)
             rep.point_done(k, n, point, wall, eta, worked)
+    finally:
+        lock.__exit__(None, None, None)
     return CampaignResult(folder, [(p, point_folder(folder, p)) for p in plan.points], ran, kept,
                           time.perf_counter() - t0)
 

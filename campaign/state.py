@@ -29,7 +29,7 @@ from pathlib import Path
 
 from common.errors import FileFormatError, InputError
 from common.files import atomic_write
-from common.schema import shown
+from common.names import shown
 
 POINT_FORMAT = "labtool.campaign.point"
 STEPS = ("acquire", "process", "compare")
@@ -107,7 +107,7 @@ class PointState:
         try:
             doc = json.loads(st.file.read_text(encoding="utf-8"))
         except (OSError, ValueError, UnicodeDecodeError) as exc:
-            raise FileFormatError(f"{shown(st.file)} is not readable JSON ({shown(exc)}); move the point's folder "
+            raise FileFormatError(f"{shown(st.file)} is not readable JSON ({shown(str(exc))}); move the point's folder "
                                   "away to redo it") from None
         if not isinstance(doc, dict) or doc.get("format") != POINT_FORMAT or not isinstance(doc.get("steps"), dict):
             raise FileFormatError(f"{shown(st.file)} is not a labtool campaign point record")

@@ -19,7 +19,7 @@ import numpy as np
 import xarray as xr
 
 from common.errors import InputError
-from common.schema import shown
+from common.names import shown
 
 # --------------------------------------------------------------------------- acquire
 

@@ -16,7 +16,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
 from common.errors import LabtoolError
-from common.schema import shown
+from common.names import shown
 
 app = typer.Typer(
     name="labtool",
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(rv) if isinstance(rv, int) else 0
     except LabtoolError as exc:
         # one line whatever the message quotes (a file or channel name with a newline in it)
-        typer.echo(f"labtool: error: {shown(exc)}", err=True)
+        typer.echo(f"labtool: error: {shown(str(exc))}", err=True)
         code = 2
     except typer.Exit as exc:
         code = exc.exit_code

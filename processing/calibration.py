@@ -32,7 +32,7 @@ import numpy as np
 from scipy import optimize
 
 from common.errors import FileFormatError, InputError
-from common.schema import shown
+from common.names import shown
 
 MAX_FIT_SAMPLES = 2_000_000     # 200 s at 10 kHz: more adds nothing to a sine fit but memory
 MAX_HARMONIC_DISTORTION = 0.05  # (2f, 3f) / fundamental above which the reference is not a clean sine

@@ -26,8 +26,8 @@ formatting, so any channel name or file name is quoted as TOML requires) and rea
     birge_ratio = 1.0              # optional: their scatter / their stated uncertainty (> 1: inflated)
     source = "ref.h5"              # optional: where this channel's Ka comes from
 
-Strict: a key this schema does not know, a bool or a string where a number belongs, a number out
-of range, NaN or inf is refused with one line naming the file and the key. The header
+Strict (common.schema): a key this schema does not know, a bool or a string where a number belongs,
+a number out of range, NaN or inf is refused with one line naming the file and the key. The header
 (``format``, ``format_version``) may be left out of a hand-written file; if present it must match.
 """
 from __future__ import annotations
@@ -36,12 +36,10 @@ import dataclasses
 import datetime as _dt
 import math
 from pathlib import Path
-from typing import Annotated, Literal
-
-from pydantic import BaseModel, Field, StringConstraints, field_validator
 
 from common.errors import InputError
-from common.schema import STRICT, load_toml, shown, validate
+from common.names import shown
+from common.schema import Integer, MapOf, Number, SchemaError, String, Table, load_toml
 
 CAL_FORMAT = "labtool.calibration"
 CAL_VERSION = 1
@@ -49,60 +47,53 @@ CAL_VERSION = 1
 PAPER_KA_M_S2_PER_V = 86.43
 # what an accelerometer chain's Ka can be (m/s^2 per V): 1e-3 (a 1 kV/(m/s^2) chain) .. 1e6
 KA_MIN, KA_MAX = 1e-3, 1e6
+KA = "m/s^2/V"
 
-ChannelName = Annotated[str, StringConstraints(min_length=1, max_length=64)]
+REFERENCE = Table({
+    "accel_m_s2": Number(gt=0, le=1e5, unit="m/s^2"),
+    "convention": String(choices=("peak", "rms")),
+    "freq_hz": Number(gt=0, le=1e5, unit="Hz"),
+    "rel_uncertainty": Number(ge=0, lt=1),
+}, required=False)
 
+CHANNEL = Table({
+    "ka_m_s2_per_v": Number(gt=KA_MIN, lt=KA_MAX, unit=KA),
+    "uncertainty_m_s2_per_v": Number(ge=0, unit=KA, required=False),
+    "ka_std_fit_m_s2_per_v": Number(ge=0, unit=KA, required=False),
+    "fitted_freq_hz": Number(gt=0, unit="Hz", required=False),
+    "amplitude_v_peak": Number(gt=0, unit="V", required=False),
+    "residual_rms_v": Number(ge=0, unit="V", required=False),
+    "harmonic_distortion": Number(ge=0, required=False),
+    "n_samples": Integer(ge=1, required=False),
+    "n_references": Integer(ge=1, required=False),
+    "birge_ratio": Number(ge=0, required=False),
+    # file names, as given: a newline in one is quoted by the writer, shown escaped by labtool
+    "source": String(required=False, single_line=False, max_len=65536),
+})
 
-class Reference(BaseModel):
-    """The reference excitation (exciter) a calibration was made with."""
-    model_config = STRICT
-    accel_m_s2: float = Field(gt=0, le=1e5)
-    convention: Literal["peak", "rms"]
-    freq_hz: float = Field(gt=0, le=1e5)
-    rel_uncertainty: float = Field(ge=0, lt=1)
-
-
-class ChannelEntry(BaseModel):
-    """One channel's Ka (m/s^2/V) and what it was fitted from."""
-    model_config = STRICT
-    ka_m_s2_per_v: float = Field(gt=KA_MIN, lt=KA_MAX)
-    uncertainty_m_s2_per_v: float | None = Field(default=None, ge=0)
-    ka_std_fit_m_s2_per_v: float | None = Field(default=None, ge=0)
-    fitted_freq_hz: float | None = Field(default=None, gt=0)
-    amplitude_v_peak: float | None = Field(default=None, gt=0)
-    residual_rms_v: float | None = Field(default=None, ge=0)
-    harmonic_distortion: float | None = Field(default=None, ge=0)
-    n_samples: int | None = Field(default=None, ge=1)
-    n_references: int | None = Field(default=None, ge=1)
-    birge_ratio: float | None = Field(default=None, ge=0)
-    source: str | None = None
-
-    @field_validator("uncertainty_m_s2_per_v")
-    @classmethod
-    def _below_ka(cls, v, info):
-        ka = info.data.get("ka_m_s2_per_v")
-        if v is not None and ka is not None and not v < ka:
-            raise ValueError(f"the uncertainty must be smaller than Ka ({ka:g} m/s^2/V)")
-        return v
+CALIBRATION = Table({
+    "format": String(choices=(CAL_FORMAT,), required=False),
+    "format_version": Integer(ge=CAL_VERSION, le=CAL_VERSION, required=False),
+    "created_utc": String(required=False, max_len=64),
+    "source": String(required=False, single_line=False, max_len=65536),
+    "reference": REFERENCE,
+    "channels": MapOf(CHANNEL, min_len=1, key_max_len=64, noun="channel"),
+})
 
 
-class CalibrationDoc(BaseModel):
-    """A whole calibration file."""
-    model_config = STRICT
-    format: Literal["labtool.calibration"] = CAL_FORMAT
-    format_version: Literal[1] = CAL_VERSION
-    created_utc: str | None = None
-    source: str | None = None
-    reference: Reference | None = None
-    channels: dict[ChannelName, ChannelEntry] = Field(min_length=1)
-
-    @field_validator("channels")
-    @classmethod
-    def _printable_names(cls, v):
-        for name in v:
-            if not name.isprintable() or name != name.strip():
-                raise ValueError(f"channel name {shown(repr(name))} holds control characters or blanks at its ends")
-        return v
+def check_document(data: dict, where: str) -> dict:
+    """The document checked against CALIBRATION (module docstring), plus what a field schema cannot
+    say: channel names are printable, an uncertainty is smaller than its Ka."""
+    doc = CALIBRATION.check(data, where=where)
+    for name, c in doc["channels"].items():
+        if not name.isprintable() or name != name.strip() or not name:
+            raise SchemaError(f"{where}: channel name {shown(repr(name))} holds control characters or blanks "
+                              "at its ends")
+        u = c.get("uncertainty_m_s2_per_v")
+        if u is not None and not u < c["ka_m_s2_per_v"]:
+            raise SchemaError(f"{where}: [channels.{shown(name)}] uncertainty_m_s2_per_v = {u:g}: must be smaller "
+                              f"than Ka ({c['ka_m_s2_per_v']:g} {KA})")
+    return doc
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,12 +106,11 @@ class ChannelCalibration:
 
 
 def read_calibration(path) -> dict[str, ChannelCalibration]:
-    """{channel name: ChannelCalibration} from one file; InputError/FileFormatError (one line) if bad."""
-    doc = load_toml(path, CalibrationDoc, "calibration file")
-    return {name: ChannelCalibration(c.ka_m_s2_per_v,
-                                     math.nan if c.uncertainty_m_s2_per_v is None else c.uncertainty_m_s2_per_v,
+    """{channel name: ChannelCalibration} from one file; InputError (one line) if bad."""
+    doc = check_document(load_toml(path, "calibration file"), f"calibration file {shown(path)}")
+    return {name: ChannelCalibration(c["ka_m_s2_per_v"], c.get("uncertainty_m_s2_per_v", math.nan),
                                      f"calibration file {shown(path)}")
-            for name, c in doc.channels.items()}
+            for name, c in doc["channels"].items()}
 
 
 def read_calibrations(paths) -> dict[str, ChannelCalibration]:
@@ -142,8 +132,8 @@ def read_calibrations(paths) -> dict[str, ChannelCalibration]:
 
 
 def calibration_document(channels: dict[str, dict], reference: dict | None, source: str | None,
-                         created_utc: str | None = None) -> CalibrationDoc:
-    """A validated document from plain values (the writer's input); InputError if a value is out of range."""
+                         created_utc: str | None = None) -> dict:
+    """A checked document from plain values (the writer's input); InputError if a value is out of range."""
     created = created_utc or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     data = {"format": CAL_FORMAT, "format_version": CAL_VERSION, "created_utc": created,
             "channels": {k: {kk: vv for kk, vv in v.items() if vv is not None} for k, v in channels.items()}}
@@ -151,18 +141,17 @@ def calibration_document(channels: dict[str, dict], reference: dict | None, sour
         data["source"] = source
     if reference is not None:
         data["reference"] = reference
-    return validate(data, CalibrationDoc, "calibration")
+    return check_document(data, "calibration")
 
 
-def calibration_text(doc: CalibrationDoc) -> str:
+def calibration_text(doc: dict) -> str:
     """The file's text: TOML written by tomli-w (every key and string quoted as TOML needs)."""
     import tomli_w
 
-    body = tomli_w.dumps(doc.model_dump(exclude_none=True))
-    return "# labtool calibration file: acceleration (m/s^2) = ka_m_s2_per_v * volts\n" + body
+    return "# labtool calibration file: acceleration (m/s^2) = ka_m_s2_per_v * volts\n" + tomli_w.dumps(doc)
 
 
-def write_calibration(path, doc: CalibrationDoc) -> None:
+def write_calibration(path, doc: dict) -> None:
     """Write the file atomically (temp file + rename), readable by others (a calibration is shared)."""
     from common.files import atomic_write
 
@@ -238,6 +227,6 @@ def resolve_channels(channels, calibration: dict[str, ChannelCalibration] | None
     return choices, warnings
 
 
-__all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "Reference", "ChannelEntry",
-           "CalibrationDoc", "ChannelCalibration", "read_calibration", "read_calibrations", "calibration_document",
+__all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "CALIBRATION", "check_document",
+           "ChannelCalibration", "read_calibration", "read_calibrations", "calibration_document",
            "calibration_text", "write_calibration", "KaChoice", "resolve_ka", "resolve_channels"]

@@ -111,7 +111,7 @@ def test_a_ka_that_is_not_a_usable_number_is_refused(tmp_path, capsys, value):
     out = tmp_path / "m.nc"
     assert main(["process", str(rec), "--calibration", str(cal), "-o", str(out)]) == 2
     line = one_error_line(capsys)
-    assert "channels.aE_t.ka_m_s2_per_v" in line and "cal.toml" in line
+    assert "[channels.aE_t] ka_m_s2_per_v = " in line and "cal.toml" in line
     assert not out.exists()
 
 
@@ -123,7 +123,7 @@ def test_unknown_keys_in_a_calibration_file_are_named(tmp_path, capsys):
     write_synthetic(rec, SynthSpec(duration_s=1.0))
     assert main(["process", str(rec), "--calibration", str(cal), "-o", str(tmp_path / "m.nc")]) == 2
     line = one_error_line(capsys)
-    assert "channels.aE_t.ka_uncertainty: unknown key" in line and "uncertainty_m_s2_per_v" in line
+    assert "unknown key [channels.aE_t] ka_uncertainty" in line and "uncertainty_m_s2_per_v" in line
 
 
 INJECT = "aE_n]\nka_m_s2_per_v = 1.0\n[x"

@@ -37,21 +37,21 @@ def test_a_grid_varies_rpm_fastest_and_names_what_varies(tmp_path):
 
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("text,expect", [
-    ("[device]\nkind = 'sim'\nrate = 10000\n", "device.rate: unknown key (known: "),
-    ("[[points]]\nrpm = 180\nspeed = 3\n", "points[0].speed: unknown key"),
-    ("[defaults]\nFu = 65\n[[points]]\nrpm = 180\n", "defaults.Fu: unknown key"),
-    ("[[points]]\nrpm = 'fast'\n", "points[0].rpm: Input should be a valid number"),
-    ("[[points]]\nrpm = true\n", "points[0].rpm: Input should be a valid number"),
-    ("[[points]]\nrpm = -180\n", "points[0].rpm: Input should be greater than 0"),
-    ("[[points]]\nrpm = 1e6\n", "points[0].rpm: Input should be less than or equal to 2000"),
-    ("[[points]]\nrpm = nan\n", "points[0].rpm: Input should be a finite number"),
+    ("[device]\nkind = 'sim'\nrate = 10000\n", "unknown key [device] rate (did you mean rate_hz?); known: kind, rate_hz"),
+    ("[[points]]\nrpm = 180\nspeed = 3\n", "unknown key [points[0]] speed"),
+    ("[defaults]\nFu = 65\n[[points]]\nrpm = 180\n", "unknown key [defaults] Fu (did you mean Fu_N?)"),
+    ("[[points]]\nrpm = 'fast'\n", "[points[0]] rpm = \"fast\": expected a number [rpm], got a string"),
+    ("[[points]]\nrpm = true\n", "rpm = true: expected a number [rpm], got a boolean"),
+    ("[[points]]\nrpm = -180\n", "rpm = -180: must not be negative"),
+    ("[[points]]\nrpm = 1e6\n", "rpm = 1e+06: must be <= 2000 [rpm]"),
+    ("[[points]]\nrpm = nan\n", "rpm = nan: must be a finite number"),
     ("[[points]]\nrpm = 180\nrevolutions = 5\nduration_s = 3\n", "give revolutions or duration_s, not both"),
-    ("[compare]\nmodels = ['rigid', 'fem']\n[[points]]\nrpm = 180\n", "compare.models[1]"),
-    ("[device]\nkind = 'nidaqmx'\n[[points]]\nrpm = 180\n", "needs 'channels'"),
+    ("[compare]\nmodels = ['rigid', 'fem']\n[[points]]\nrpm = 180\n", "[compare] models[1] = \"fem\": expected one of"),
+    ("[device]\nkind = 'nidaqmx'\n[[points]]\nrpm = 180\n", "needs channels"),
     ("[device]\nchannels = 'Dev1/ai0:2'\n[[points]]\nrpm = 180\n", "describe a nidaqmx device"),
     ("[[points]]\nrpm = 180\nlaw = 'square'\n", "unknown motion law 'square'"),
     ("[[points]]\nrpm = 180\nname = 'a'\n[[points]]\nrpm = 300\nname = 'a'\n", "two points are named a"),
-    ("[[points]]\nrpm = 180\nname = '../../etc'\n", "points[0].name: String should match pattern"),
+    ("[[points]]\nrpm = 180\nname = '../../etc'\n", "a point name is letters, digits"),
     ("[campaign]\nname = 'x'\n", "no operating points"),
     ("[[points]]\nlaw = 'sine'\n", "point 1: no rpm"),
     ("[grid]\nrpm = [100, 200, 300, 400, 500, 600, 700, 800, 900, 1000]\nFu_N = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]\n"
@@ -85,11 +85,11 @@ def test_a_plan_that_is_a_folder_or_missing(tmp_path, capsys):
 
 
 def test_defaults_and_points_combine():
-    from campaign.plan import PlanDoc
-    doc = PlanDoc.model_validate({"defaults": {"law": "cosine", "duration_s": 2.0, "backlash_mm": 0.016},
-                                  "points": [{"rpm": 180}, {"rpm": 300, "revolutions": 4, "jt_factor": 1.5}]})
+    from campaign.plan import check_plan
+    doc = check_plan({"defaults": {"law": "cosine", "duration_s": 2.0, "backlash_mm": 0.016},
+                      "points": [{"rpm": 180}, {"rpm": 300, "revolutions": 4, "jt_factor": 1.5}]}, "plan")
     a, b = expand_points(doc)
     assert (a.law, a.duration_s, a.backlash_mm) == ("cosine", 2.0, 0.016)
     assert b.duration_s == pytest.approx(5 * 60 / 300) and b.jt_factor == 1.5
     with pytest.raises(InputError, match="belong to a point"):
-        expand_points(PlanDoc.model_validate({"defaults": {"seed": 3}, "points": [{"rpm": 180}]}))
+        expand_points(check_plan({"defaults": {"seed": 3}, "points": [{"rpm": 180}]}, "plan"))

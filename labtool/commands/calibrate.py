@@ -50,7 +50,7 @@ def _print_table(results, reference, sources) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from common.schema import shown
+    from common.names import shown
     from labtool.output import console
     from processing.calibration_file import PAPER_KA_M_S2_PER_V as PAPER_KA
 

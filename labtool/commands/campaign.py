@@ -31,7 +31,7 @@ def _reporter():
     them as well as a terminal); on a terminal the acquisition's sample count runs live."""
     from campaign.runner import Reporter
     from common.errors import InputError
-    from common.schema import shown
+    from common.names import shown
 
     class Lines(Reporter):
         def __init__(self):
@@ -123,11 +123,10 @@ def report_cmd(
         output = folders[0] / "campaign.html"
     json_path = json_path or output.with_suffix(".json")
     csv_path = csv_path or output.with_suffix(".csv")
-    from campaign.plan import Compare
-    from common.schema import validate
+    from campaign.plan import check_compare
 
-    cmp = validate({"models": _split(models), "omega1": _split(omega1), "accuracy": accuracy,
-                    "revolutions": float(revolutions)}, Compare, "options")
+    cmp = check_compare({"models": _split(models), "omega1": _split(omega1), "accuracy": accuracy,
+                         "revolutions": float(revolutions)}, "options")
     _report(inputs, output, json_path, csv_path, force, cmp)
 
 

@@ -82,7 +82,7 @@ def process(
 
 def _ka_line(history) -> str:
     """'Ka: aE_t 86.43 +- 0.003 m/s^2/V (source), aE_n ...' from the apply_ka step of the history."""
-    from common.schema import shown
+    from common.names import shown
 
     step = next((h["parameters"] for h in history if h.get("step") == "apply_ka"), {})
     parts = []
