@@ -99,6 +99,7 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
         if step == "acquire" and (folder / "recording.h5").exists():
             rep.warn(f"point {point.name}: its acquisition did not finish (killed or stopped); recording it again")
         t0 = time.perf_counter()
+        _ensure_space(folder, point, step, plan)
         try:
             state.forget_from(step)
             rep.step(point, step, "running")
@@ -111,6 +112,26 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
         rep.step(point, step, "done", _detail(step, info))
         worked = True
     return worked
+
+
+def _need_bytes(folder: Path, point, step: str, plan: Plan) -> int:
+    """A generous estimate of what ``step`` writes (bytes), from the files it reads: measured.nc
+    was 2.6 x its recording and a point's pages 0.9 x its measured.nc on the paper's points."""
+    if step == "acquire":
+        return int(point.duration_s * plan.doc.device.rate_hz * 3 * 4 * 1.2) + (64 << 10)
+    if step == "process":
+        return 3 * (folder / "recording.h5").stat().st_size + (64 << 10)
+    return int(1.2 * (folder / "measured.nc").stat().st_size) + (256 << 10)
+
+
+def _ensure_space(folder: Path, point, step: str, plan: Plan) -> None:
+    """Refuse a step that would not fit on the disk, before it writes anything: HDF5 may crash
+    (not raise) when a write fails for lack of space, and the finished steps must stay finished."""
+    need = _need_bytes(folder, point, step, plan)
+    free = shutil.disk_usage(folder).free
+    if free < need:
+        raise InputError(f"point {point.name} ({step}): {free / 1e6:.1f} MB free in {shown(folder)}, about "
+                         f"{need / 1e6:.1f} MB needed; the finished points and steps are kept: free space and rerun")
 
 
 def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter) -> dict:

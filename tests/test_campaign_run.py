@@ -262,3 +262,25 @@ def test_a_failing_point_stops_the_campaign_with_one_line_and_keeps_the_finished
     assert main(["campaign", "run", str(plan), "-o", str(out)]) == 0
     err = capsys.readouterr().err
     assert "acquire: done" not in err and err.count("process: done") == 1
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("full_disk")
+def test_a_full_disk_stops_before_the_step_that_does_not_fit_and_resumes(tmp_path, small_disk):
+    disk = small_disk(1000)
+    plan = tmp_path / "plan.toml"
+    plan.write_text(f'[calibration]\nfiles = ["{CAL}"]\n[defaults]\nrevolutions = 3\n[[points]]\nrpm = 180.0\n'
+                    '[compare]\nmodels = ["kinematic"]\nomega1 = ["const"]\n')
+    out = disk / "camp"
+    res = cli("campaign", "run", plan, "-o", out)
+    assert res.returncode == 2, res.stderr
+    err = [x for x in res.stderr.strip().splitlines() if x.startswith("labtool: error")]
+    assert len(err) == 1 and "(process)" in err[0] and "MB free" in err[0] and "kept" in err[0]
+    state = json.loads((out / "points" / "01_180rpm" / "point.json").read_text())
+    assert list(state["steps"]) == ["acquire"] and not list(out.rglob(".*.part"))
+    # more room: the rerun keeps the recording and goes on
+    subprocess.run(["mount", "-o", "remount,size=16m", str(disk)], check=True)
+    res = cli("campaign", "run", plan, "-o", out)
+    assert res.returncode == 0, res.stderr
+    assert "acquire: done" not in res.stderr and "process: done" in res.stderr
+    assert (out / "campaign.csv").exists()
