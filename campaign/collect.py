@@ -120,15 +120,34 @@ def table(records: list[PointRecord]) -> pd.DataFrame:
                     row[f"{sig}_{k}"] = h.get(f"{sig}_{k}")
             row["mean_iso_rating"] = _mean(h.get("omega2_iso_rating"), h.get("epsilon2_iso_rating"))
             row["closest"] = h.get("label") == s.get("closest")
-            for k in ("impacts_measured_per_rev", "impacts_predicted_per_rev", "jumps_measured_per_rev",
-                      "jumps_predicted_per_rev", "first_impact_deg_measured", "first_impact_deg_predicted"):
-                row[k] = ev.get(k)
+            row.update(event_columns(ev, m.get("events")))
             row["sim_note"] = (sims.get(h.get("label")) or {}).get("note") or ""
             row["thresholds_passed"] = s.get("passed")
             row["ka_m_s2_per_v"] = m.get("ka_m_s2_per_v")
             row["source"] = r.source
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+EVENT_COLUMNS = ("impacts_measured_per_rev", "impacts_predicted_per_rev", "impacts_detectable_per_rev",
+                 "jumps_measured_per_rev", "jumps_predicted_per_rev", "first_impact_deg_measured",
+                 "first_impact_deg_predicted")
+
+
+def event_columns(ev: dict, measured: dict | None) -> dict:
+    """Measured and predicted events of one simulation row, from a report summary: format 2
+    (measured.events, and per simulation impacts_per_rev, detectable_impacts_per_rev, ...) or 1
+    (impacts_measured_per_rev, ... per simulation)."""
+    if "impacts_per_rev" in ev or measured is not None:
+        m = measured or {}
+        return {"impacts_measured_per_rev": m.get("impacts_per_rev"), "impacts_predicted_per_rev": ev.get("impacts_per_rev"),
+                "impacts_detectable_per_rev": ev.get("detectable_impacts_per_rev"),
+                "jumps_measured_per_rev": m.get("jumps_per_rev"), "jumps_predicted_per_rev": ev.get("jumps_per_rev"),
+                "first_impact_deg_measured": m.get("first_impact_deg"),
+                "first_impact_deg_predicted": ev.get("first_impact_deg")}
+    out = {k: ev.get(k) for k in EVENT_COLUMNS}
+    out["impacts_detectable_per_rev"] = ev.get("impacts_predicted_per_rev")
+    return out
 
 
 def _mean(a, b):

@@ -130,22 +130,20 @@ def fig_overlays(records):
     return "ω2 and ε2 at each point: measured vs every model (Figs 12-14 per speed)", fig
 
 
+EVENT_PANELS = (("first_impact_deg_predicted", "first_impact_deg_measured", "cam angle of the first impact [deg]"),
+                ("impacts_detectable_per_rev", "impacts_measured_per_rev", "visible impacts per revolution"))
+
+
 def fig_events(df: pd.DataFrame):
-    """First impact angle and impacts per revolution, measured against predicted, against speed."""
-    cols = ("first_impact_deg", "impacts")
+    """First impact angle and visible impacts per revolution, measured against predicted, against speed."""
     if df.empty:
         return None
-    have = {c: pd.to_numeric(df[f"{c}_predicted" if c == "first_impact_deg" else f"{c}_predicted_per_rev"],
-                             errors="coerce").notna().any() or
-            pd.to_numeric(df[f"{c}_measured" if c == "first_impact_deg" else f"{c}_measured_per_rev"],
-                          errors="coerce").notna().any() for c in cols}
-    if not any(have.values()):
+    have = [pd.to_numeric(df[c], errors="coerce").notna().any() for p in EVENT_PANELS for c in p[:2]]
+    if not any(have):
         return None
     fig = Figure(figsize=(11, 4.0), layout="constrained")
     axes = fig.subplots(1, 2)
-    for ax, c, what in zip(axes, cols, ("cam angle of the first impact [deg]", "impacts per revolution")):
-        pred = f"{c}_predicted" if c == "first_impact_deg" else f"{c}_predicted_per_rev"
-        meas = f"{c}_measured" if c == "first_impact_deg" else f"{c}_measured_per_rev"
+    for ax, (pred, meas, what) in zip(axes, EVENT_PANELS):
         for (model, mode, gi), label, sub in _series(df):
             ax.plot(sub["rpm"], pd.to_numeric(sub[pred], errors="coerce"), marker=MARKERS[gi % len(MARKERS)], ms=5,
                     lw=1.0, label=f"{label}, predicted", **_style(model, mode))
@@ -154,11 +152,9 @@ def fig_events(df: pd.DataFrame):
         ax.set_xlabel("cam speed n1 [rpm]")
         ax.set_ylabel(what)
         ax.grid(True, alpha=0.3)
-        if not have[c]:
-            ax.text(0.5, 0.5, "none measured or predicted", transform=ax.transAxes, ha="center", color="0.5")
     axes[0].legend(fontsize=7)
-    fig.suptitle("Events: measured (spikes found by the processing) against predicted (last simulated revolution)",
-                 fontsize=10)
+    fig.suptitle("Events: measured (found in the recording by the processing and report) against predicted "
+                 "(last simulated revolution, as the chain would show them)", fontsize=10)
     return "Measured vs predicted events against the cam speed", fig
 
 

@@ -17,8 +17,9 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     rate_hz = 10000.0                    # sample rate (Hz)
     seed = 1                             # sim: noise seed of the first point; point k uses seed + k
     pacing = "fast"                      # sim: fast | realtime
-    truth = "kinematic"                  # sim: what moves the follower (default: the stand's own)
-    ka_m_s2_per_v = 86.43                # sim: the chain's Ka
+    truth = "twin"                       # sim: what moves the follower (twin, kinematic, rigid, elastic;
+                                         #      default: the stand's own, the twin)
+    ka_m_s2_per_v = 864.3                # sim: the chain's Ka (default: the stand's, the 480C02 at x1)
     channels = "Dev1/ai0:2"              # nidaqmx: physical channels of aE_t, aE_n, tacho
     file = "stand_device.toml"           # nidaqmx: the device file (channels by role, ranges, ...)
     settle = "none"                      # none | prompt | tacho: how to wait for a steady cam speed
@@ -108,8 +109,8 @@ PLAN = Table({
         "rate_hz": Number(ge=1000.0, le=1e6, unit="Hz", default=10000.0),
         "seed": Integer(ge=0, le=2**32 - 1, default=0),
         "pacing": String(choices=("fast", "realtime"), default="fast"),
-        "truth": _opt(String(choices=("kinematic", "rigid", "elastic"))),
-        "ka_m_s2_per_v": Number(gt=1e-3, lt=1e6, unit="m/s^2/V", default=86.43),
+        "truth": _opt(String(choices=("twin", "kinematic", "rigid", "elastic"))),
+        "ka_m_s2_per_v": _opt(Number(gt=1e-3, lt=1e6, unit="m/s^2/V")),
         "channels": _opt(String(max_len=200)),
         "file": _opt(String(max_len=4096)),
         "iepe_excitation": Bool(default=False),

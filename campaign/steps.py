@@ -29,19 +29,17 @@ def _sim_device(plan, point, duration_s: float):
     from acquisition.sim_stand import SimStand
 
     dev = plan.doc.device
-    kw = {}
-    if dev.truth is not None and dev.truth != "kinematic":
-        # one turn of margin past the last (whole, 0.1 s) block, as 'labtool acquire' does
-        kw = {"truth_model": dev.truth,
-              "truth_revolutions": int(math.ceil((duration_s + 0.2) * point.rpm / 60.0)) + 1,
-              "ripple": 0.0}    # the model's cam runs at constant speed
-    elif dev.truth == "kinematic":
-        kw = {"truth_model": "kinematic"}
+    kw = {} if dev.truth is None else {"truth_model": dev.truth}
+    if dev.truth in sc.MODEL_TRUTHS:
+        kw["ripple"] = 0.0    # a model truth's cam runs at constant speed, as 'labtool acquire' does
     scene = sc.StandScene(mode="run", law=point.law, cam_speed_rpm=point.rpm, Fu=point.Fu_N,
                           backlash=point.backlash_mm * 1e-3, jt_factor=point.jt_factor, **kw)
-    k = float(dev.ka_m_s2_per_v)
-    device = SimStand(scene, sc.ChainParams(ka_m_s2_per_v=(k, k)), seed=point.seed, duration_s=duration_s,
-                      realtime=dev.pacing == "realtime")
+    if dev.truth in sc.MODEL_TRUTHS and sc.model_truth_span(scene) < duration_s:
+        raise InputError(f"the {dev.truth} truth does not reach a periodic steady state, so it cannot cover "
+                         f"{duration_s:g} s of point {point.name}; record fewer revolutions or use the twin truth")
+    k = float(dev.ka_m_s2_per_v or sc.DEFAULT_KA)
+    params = sc.ChainParams(ka_m_s2_per_v=(k, k), resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
+    device = SimStand(scene, params, seed=point.seed, duration_s=duration_s, realtime=dev.pacing == "realtime")
     attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k, "pacing": dev.pacing}
     return device, [k, k, math.nan], attrs
 

@@ -134,7 +134,11 @@ def _harmonics(residual, tc, f) -> float:
 
 def check_volts(x: np.ndarray, where: str, adc_range_v: float | None = None) -> None:
     """Refuse samples that cannot be a clean reference sine in volts (InputError naming ``where``):
-    raw integer ADC counts, samples at the ADC's rails, a flat top or bottom (clipping)."""
+    raw integer ADC counts, samples at the ADC's rails, a flat top or bottom (clipping).
+
+    A flat top is a share of the samples at the extreme value larger than 2 % plus twice what the
+    quantisation explains (a sine of amplitude A sampled with step q stays within q of its peak for
+    acos(1 - q/A)/pi of a period: 7 % for the 480C02 at gain x1, 0.0113 V on a 16-bit +-10 V ADC)."""
     x = x[np.isfinite(x)]
     if x.size == 0:
         raise InputError(f"{where}: no finite samples")
@@ -150,10 +154,17 @@ def check_volts(x: np.ndarray, where: str, adc_range_v: float | None = None) -> 
         raise InputError(f"{where}: the reference sine is clipped (samples reach {peak:.4g} V of the ADC's "
                          f"+-{adc_range_v:g} V range): lower the exciter level or the conditioner gain and record again")
     span = top - bottom
-    tol = 1e-4 * span
+    levels = np.unique(x)
+    steps = np.diff(levels)
+    q = float(steps.min()) if steps.size else 0.0       # the quantisation step (0 for unquantised data)
+    tol = max(1e-4 * span, 0.5 * q)
+    # a clean quantised sine stays within one step of its extreme for acos(1 - q/A)/pi of a period
+    amp = 0.5 * span
+    quantised = math.acos(max(-1.0, 1.0 - (q + tol) / amp)) / math.pi if amp > 0 else 1.0
+    limit = max(FLAT_TOP_FRACTION, 2.0 * quantised + FLAT_TOP_FRACTION)
     for value, side in ((top, "top"), (bottom, "bottom")):
         share = float(np.mean(np.abs(x - value) <= tol)) if span > 0 else 1.0
-        if share >= FLAT_TOP_FRACTION:
+        if share >= limit:
             raise InputError(f"{where}: the reference sine is clipped ({100 * share:.1f} % of the samples sit at its "
                              f"{side}, {value:.4g} V): lower the exciter level or the conditioner gain and record again")
 

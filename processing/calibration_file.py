@@ -189,7 +189,14 @@ def resolve_ka(channel: str, calibration: dict[str, ChannelCalibration] | None, 
         cal = calibration.get(channel) or next(
             (v for k, v in calibration.items() if k.lower() == channel.lower()), None)
         if cal is not None:
-            return KaChoice(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, cal.source)
+            rec = float(recording_ka)
+            warning = ""
+            if math.isfinite(rec) and rec > 0 and not 1 / 1.2 < cal.ka_m_s2_per_v / rec < 1.2:
+                # a factor 10 is a conditioner gain set differently from the calibration's
+                warning = (f"{cal.source} gives Ka = {cal.ka_m_s2_per_v:.4g} m/s^2/V for channel {shown(channel)}, "
+                           f"{cal.ka_m_s2_per_v / rec:.3g} x the {rec:.4g} m/s^2/V that {shown(where)} states: "
+                           "was the calibration made with the same conditioner gain?")
+            return KaChoice(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, cal.source, warning)
     rec = float(recording_ka)
     if not math.isnan(rec) and not (math.isfinite(rec) and KA_MIN < rec < KA_MAX):
         raise InputError(f"{shown(where)} states Ka = {rec:g} m/s^2/V for channel {shown(channel)}, which is not usable; "

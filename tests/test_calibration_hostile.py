@@ -306,3 +306,30 @@ def test_an_unusable_ka_in_the_recording_does_not_fall_back_to_the_papers(tmp_pa
     assert main(["process", str(rec), "-o", str(tmp_path / "m.nc")]) == 2
     line = one_error_line(capsys)
     assert "aE_t" in line and "--calibration" in line
+
+
+def test_a_clean_coarsely_quantised_reference_is_accepted(tmp_path):
+    # the 480C02 at gain x1: 9.81 m/s^2 is 0.01135 V, 37 steps of a 16-bit +-10 V ADC; the sine
+    # then sits on its extreme step for ~7 % of the samples without being clipped
+    lsb = 20.0 / 65536
+    t = np.arange(int(2 * FS)) / FS
+    v = np.zeros((t.size, 3))
+    rng = np.random.default_rng(2)
+    v[:, 0] = np.round((9.81 / 864.3 * np.sin(2 * np.pi * 79.6 * t) + 5e-5 * rng.standard_normal(t.size)) / lsb) * lsb
+    rec = tmp_path / "ref.h5"
+    write_v1(rec, v, ["aE_t", "aE_n", "tacho"], FS, dtype="float64")
+    cal = tmp_path / "cal.toml"
+    assert main(["calibrate", str(rec), "-o", str(cal)]) == 0
+    assert read_calibration(cal)["aE_t"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_calibration_ten_times_the_recordings_ka_is_said(tmp_path, capsys):
+    # a calibration made at conditioner gain x1 (864.3) applied to a run recorded at x10 (86.43)
+    rec = tmp_path / "run.h5"
+    write_synthetic(rec, SynthSpec(duration_s=1.5), ka=[86.43, 86.43, np.nan])
+    cal = tmp_path / "cal.toml"
+    cal.write_text("[channels.aE_t]\nka_m_s2_per_v = 864.3\n[channels.aE_n]\nka_m_s2_per_v = 86.5\n")
+    assert main(["process", str(rec), "--calibration", str(cal), "-o", str(tmp_path / "m.nc")]) == 0
+    warn = [x for x in capsys.readouterr().err.splitlines() if "same conditioner gain" in x]
+    assert len(warn) == 1 and "aE_t" in warn[0] and "10 x" in warn[0]
