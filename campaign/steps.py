@@ -129,7 +129,8 @@ def process(plan, point, recording: Path, measured: Path, warn=None) -> dict:
     from processing.readers import open_recording
 
     cal = read_calibrations(plan.calibration_files) if plan.calibration_files else None
-    opts = ProcessOptions(calibration=cal, law=point.law, cam_speed_rpm=point.rpm)
+    opts = ProcessOptions(calibration=cal, calibration_source="; ".join(str(p) for p in plan.calibration_files),
+                          law=point.law, cam_speed_rpm=point.rpm)
     rec = open_recording(recording)
     try:
         summary = process_recording(rec, measured, opts, warn=warn)

@@ -1,4 +1,5 @@
-"""The calibration file (TOML): its schema, reader, writer, merging, and which Ka a channel gets.
+"""The calibration file (TOML): its schema, reader, writer and merging (which Ka a channel gets
+from it is processing/ka.py).
 
 Written by ``labtool calibrate`` (through ``write_calibration``, with tomli-w: never by string
 formatting, so any channel name or file name is quoted as TOML requires) and read by
@@ -60,6 +61,7 @@ CHANNEL = Table({
     "ka_m_s2_per_v": Number(gt=KA_MIN, lt=KA_MAX, unit=KA),
     "uncertainty_m_s2_per_v": Number(ge=0, unit=KA, required=False),
     "ka_std_fit_m_s2_per_v": Number(ge=0, unit=KA, required=False),
+    "ka_std_m_s2_per_v": Number(ge=0, unit=KA, required=False),    # an alias of uncertainty_m_s2_per_v
     "fitted_freq_hz": Number(gt=0, unit="Hz", required=False),
     "amplitude_v_peak": Number(gt=0, unit="V", required=False),
     "residual_rms_v": Number(ge=0, unit="V", required=False),
@@ -89,6 +91,11 @@ def check_document(data: dict, where: str) -> dict:
         if not name.isprintable() or name != name.strip() or not name:
             raise SchemaError(f"{where}: channel name {shown(repr(name))} holds control characters or blanks "
                               "at its ends")
+        if "ka_std_m_s2_per_v" in c:   # the alias processing documented; one name only
+            if "uncertainty_m_s2_per_v" in c:
+                raise SchemaError(f"{where}: [channels.{shown(name)}] gives both uncertainty_m_s2_per_v and its alias "
+                                  "ka_std_m_s2_per_v; keep one")
+            c["uncertainty_m_s2_per_v"] = c.pop("ka_std_m_s2_per_v")
         u = c.get("uncertainty_m_s2_per_v")
         if u is not None and not u < c["ka_m_s2_per_v"]:
             raise SchemaError(f"{where}: [channels.{shown(name)}] uncertainty_m_s2_per_v = {u:g}: must be smaller "
@@ -102,7 +109,7 @@ class ChannelCalibration:
     where it comes from (the calibration file)."""
     ka_m_s2_per_v: float
     uncertainty_m_s2_per_v: float = math.nan
-    source: str = "the calibration"
+    source: str = ""                # "calibration file <path>"; "" = processing names it
 
 
 def read_calibration(path) -> dict[str, ChannelCalibration]:
@@ -166,74 +173,6 @@ def write_calibration(path, doc: dict) -> None:
     atomic_write(Path(path), _write)
 
 
-# --------------------------------------------------------------------------- which Ka a channel gets
-
-@dataclasses.dataclass(frozen=True)
-class KaChoice:
-    """The Ka applied to a channel (m/s^2/V), its uncertainty (NaN: unknown), where it comes from,
-    and a warning for the user when it is not a calibration of this chain (else "")."""
-    ka_m_s2_per_v: float
-    uncertainty_m_s2_per_v: float
-    source: str
-    warning: str = ""
-
-
-def resolve_ka(channel: str, calibration: dict[str, ChannelCalibration] | None, recording_ka: float,
-               where: str = "the recording") -> KaChoice:
-    """Ka for ``channel``: the calibration file's, else the recording's ``ka_m_s2_per_v`` attribute,
-    else the paper's 86.43 m/s^2/V, with a warning in both fallback cases.
-
-    A recording attribute that is present but unusable (0, negative, inf) is refused: falling
-    back to the paper's Ka would be a silent wrong answer."""
-    if calibration:
-        cal = calibration.get(channel) or next(
-            (v for k, v in calibration.items() if k.lower() == channel.lower()), None)
-        if cal is not None:
-            rec = float(recording_ka)
-            warning = ""
-            if math.isfinite(rec) and rec > 0 and not 1 / 1.2 < cal.ka_m_s2_per_v / rec < 1.2:
-                # a factor 10 is a conditioner gain set differently from the calibration's
-                warning = (f"{cal.source} gives Ka = {cal.ka_m_s2_per_v:.4g} m/s^2/V for channel {shown(channel)}, "
-                           f"{cal.ka_m_s2_per_v / rec:.3g} x the {rec:.4g} m/s^2/V that {shown(where)} states: "
-                           "was the calibration made with the same conditioner gain?")
-            return KaChoice(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, cal.source, warning)
-    rec = float(recording_ka)
-    if not math.isnan(rec) and not (math.isfinite(rec) and KA_MIN < rec < KA_MAX):
-        raise InputError(f"{shown(where)} states Ka = {rec:g} m/s^2/V for channel {shown(channel)}, which is not usable; "
-                         "give a calibration file (--calibration) for it")
-    if math.isfinite(rec):
-        choice = KaChoice(rec, math.nan, "recording attribute ka_m_s2_per_v")
-    else:
-        choice = KaChoice(PAPER_KA_M_S2_PER_V, math.nan, f"paper default (Ka = {PAPER_KA_M_S2_PER_V} m/s^2/V)")
-    if calibration:
-        # say what is used instead, so the user can tell whether to calibrate that channel too
-        names = sorted({c.source for c in calibration.values()})
-        return dataclasses.replace(choice, warning=(
-            f"{'; '.join(names)} has no entry for channel {shown(channel)}; "
-            f"using the {choice.source} (Ka = {choice.ka_m_s2_per_v:.4g} m/s^2/V)"))
-    if choice.source.startswith("paper default"):
-        return dataclasses.replace(choice, warning=_paper_warning([channel], where))
-    return choice
-
-
-def _paper_warning(channels, where) -> str:
-    return (f"no calibration for channel {', '.join(shown(c) for c in channels)} (no --calibration, no Ka in "
-            f"{shown(where)}): using the paper's Ka = {PAPER_KA_M_S2_PER_V} m/s^2/V, not a calibration of this chain "
-            "(labtool calibrate makes one)")
-
-
-def resolve_channels(channels, calibration: dict[str, ChannelCalibration] | None, recording_ka,
-                     where: str = "the recording") -> tuple[dict[str, KaChoice], list[str]]:
-    """``resolve_ka`` for several channels: their choices, and the warnings with the paper-default
-    ones said once for all the channels they concern."""
-    choices = {c: resolve_ka(c, calibration, k, where) for c, k in zip(channels, recording_ka)}
-    paper = [c for c, ch in choices.items() if ch.warning and not calibration and ch.source.startswith("paper")]
-    warnings = [ch.warning for c, ch in choices.items() if ch.warning and c not in paper]
-    if paper:
-        warnings.append(_paper_warning(paper, where))
-    return choices, warnings
-
-
 __all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "CALIBRATION", "check_document",
            "ChannelCalibration", "read_calibration", "read_calibrations", "calibration_document",
-           "calibration_text", "write_calibration", "KaChoice", "resolve_ka", "resolve_channels"]
+           "calibration_text", "write_calibration"]

@@ -17,7 +17,7 @@ import xarray as xr
 
 from labtool.cli import main
 from processing.calibration_file import read_calibration
-from processing.synthetic import SynthSpec, write_synthetic, write_v1
+from stand_data import stand_recording, write_v1
 
 FS = 10000.0
 SAMPLE_CAL = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data" / "calibration_79p6Hz.h5"
@@ -34,7 +34,7 @@ def sine_recording(path, volts_peak=0.1135, names=("aE_t", "aE_n", "tacho"), on=
         v = np.clip(v, -clip_v, clip_v)
     if np.dtype(dtype).kind == "i":
         v = np.round(v)
-    write_v1(path, v, names, FS, dtype=dtype)
+    write_v1(path, v, names, FS, dtype=dtype, cam_speed_rpm=None)
     if attrs:
         with h5py.File(path, "a") as f:
             f.attrs.update(attrs)
@@ -106,7 +106,7 @@ def _cal_file(path, value: str):
 @pytest.mark.parametrize("value", ["true", "1e300", '"86.43"', "nan", "inf", "0", "-86.43", "[86.43]"])
 def test_a_ka_that_is_not_a_usable_number_is_refused(tmp_path, capsys, value):
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.0))
+    stand_recording(rec, duration_s=1.0, ka=[np.nan, np.nan, np.nan])
     cal = _cal_file(tmp_path / "cal.toml", value)
     out = tmp_path / "m.nc"
     assert main(["process", str(rec), "--calibration", str(cal), "-o", str(out)]) == 2
@@ -120,7 +120,7 @@ def test_unknown_keys_in_a_calibration_file_are_named(tmp_path, capsys):
     cal = tmp_path / "cal.toml"
     cal.write_text("[channels.aE_t]\nka_m_s2_per_v = 86.4\nka_uncertainty = 0.2\n")   # a misspelt key
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.0))
+    stand_recording(rec, duration_s=1.0, ka=[np.nan, np.nan, np.nan])
     assert main(["process", str(rec), "--calibration", str(cal), "-o", str(tmp_path / "m.nc")]) == 2
     line = one_error_line(capsys)
     assert "unknown key [channels.aE_t] ka_uncertainty" in line and "uncertainty_m_s2_per_v" in line
@@ -217,7 +217,7 @@ def test_two_channels_from_one_call_make_one_file_with_both_uncertainties(tmp_pa
     v = np.column_stack([9.81 / ka["aE_t"] * np.sin(2 * np.pi * 79.6 * t), 9.81 / ka["aE_n"] * np.sin(2 * np.pi * 79.6 * t + 1),
                          np.zeros_like(t)]) + 2e-4 * rng.standard_normal((t.size, 3))
     rec = tmp_path / "ref.h5"
-    write_v1(rec, v, ["aE_t", "aE_n", "tacho"], FS)
+    write_v1(rec, v, ["aE_t", "aE_n", "tacho"], FS, cam_speed_rpm=None)
     cal = tmp_path / "cal.toml"
     assert main(["calibrate", str(rec), "--channel", "aE_t", "--channel", "aE_n", "--reference-uncertainty", "0.01",
                  "-o", str(cal)]) == 0
@@ -263,7 +263,7 @@ def test_a_recording_name_that_is_not_a_given_reference_is_refused(tmp_path, cap
 @pytest.mark.hostile("silent_wrong")
 def test_a_second_calibration_is_merged_or_refused_never_silently_replacing(tmp_path, capsys):
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.5, ka=100.0))
+    stand_recording(rec, duration_s=1.5, ka=[np.nan, np.nan, np.nan])
     t = tmp_path / "t.toml"
     t.write_text("[channels.aE_t]\nka_m_s2_per_v = 100.0\nuncertainty_m_s2_per_v = 0.3\n")
     n = tmp_path / "n.toml"
@@ -287,13 +287,14 @@ def test_a_second_calibration_is_merged_or_refused_never_silently_replacing(tmp_
 @pytest.mark.hostile("silent_wrong")
 def test_the_papers_default_ka_is_never_used_silently(tmp_path, capsys):
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.5))   # no Ka in the file, no calibration given
+    stand_recording(rec, duration_s=1.5, ka=[np.nan, np.nan, np.nan])   # no Ka in the file, no calibration given
     assert main(["process", str(rec), "-o", str(tmp_path / "m.nc")]) == 0
     warn = [x for x in capsys.readouterr().err.splitlines() if "paper" in x]
-    assert len(warn) == 1 and warn[0].startswith("labtool: warning:") and "aE_t, aE_n" in warn[0] and "86.43" in warn[0]
+    assert len(warn) == 2 and all(w.startswith("labtool: warning:") and "86.43" in w for w in warn)
+    assert "channel aE_t" in warn[0] and "channel aE_n" in warn[1]
     # with a Ka in the recording, or a calibration for both channels, nothing is said
     rec2 = tmp_path / "run2.h5"
-    write_synthetic(rec2, SynthSpec(duration_s=1.5), ka=[86.43, 86.43, np.nan])
+    stand_recording(rec2, duration_s=1.5, ka=[864.3, 864.3, np.nan])
     assert main(["process", str(rec2), "-o", str(tmp_path / "m2.nc")]) == 0
     assert "paper" not in capsys.readouterr().err
 
@@ -302,7 +303,7 @@ def test_the_papers_default_ka_is_never_used_silently(tmp_path, capsys):
 @pytest.mark.parametrize("bad", [0.0, np.inf, -50.0])
 def test_an_unusable_ka_in_the_recording_does_not_fall_back_to_the_papers(tmp_path, capsys, bad):
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.5), ka=[bad, 86.43, np.nan])
+    stand_recording(rec, duration_s=1.5, ka=[bad, 864.3, np.nan])
     assert main(["process", str(rec), "-o", str(tmp_path / "m.nc")]) == 2
     line = one_error_line(capsys)
     assert "aE_t" in line and "--calibration" in line
@@ -317,7 +318,7 @@ def test_a_clean_coarsely_quantised_reference_is_accepted(tmp_path):
     rng = np.random.default_rng(2)
     v[:, 0] = np.round((9.81 / 864.3 * np.sin(2 * np.pi * 79.6 * t) + 5e-5 * rng.standard_normal(t.size)) / lsb) * lsb
     rec = tmp_path / "ref.h5"
-    write_v1(rec, v, ["aE_t", "aE_n", "tacho"], FS, dtype="float64")
+    write_v1(rec, v, ["aE_t", "aE_n", "tacho"], FS, dtype="float64", cam_speed_rpm=None)
     cal = tmp_path / "cal.toml"
     assert main(["calibrate", str(rec), "-o", str(cal)]) == 0
     assert read_calibration(cal)["aE_t"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)
@@ -327,9 +328,24 @@ def test_a_clean_coarsely_quantised_reference_is_accepted(tmp_path):
 def test_a_calibration_ten_times_the_recordings_ka_is_said(tmp_path, capsys):
     # a calibration made at conditioner gain x1 (864.3) applied to a run recorded at x10 (86.43)
     rec = tmp_path / "run.h5"
-    write_synthetic(rec, SynthSpec(duration_s=1.5), ka=[86.43, 86.43, np.nan])
+    stand_recording(rec, duration_s=1.5, ka=[86.43, 86.43, np.nan])
     cal = tmp_path / "cal.toml"
     cal.write_text("[channels.aE_t]\nka_m_s2_per_v = 864.3\n[channels.aE_n]\nka_m_s2_per_v = 86.5\n")
     assert main(["process", str(rec), "--calibration", str(cal), "-o", str(tmp_path / "m.nc")]) == 0
     warn = [x for x in capsys.readouterr().err.splitlines() if "same conditioner gain" in x]
     assert len(warn) == 1 and "aE_t" in warn[0] and "10 x" in warn[0]
+
+
+@pytest.mark.hostile("hang")
+@pytest.mark.parametrize("keep_bytes", [100, 512, 2048, 4096])
+def test_a_reference_cut_to_its_first_bytes_does_not_hang_calibrate(tmp_path, keep_bytes):
+    # main hung for ever (SWMR open of a truncated file); calibrate now reads through
+    # processing.readers and its superblock check. Run in a child with a bound, as a user would.
+    import subprocess
+    import sys
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(SAMPLE_CAL.read_bytes()[:keep_bytes])
+    res = subprocess.run([sys.executable, "-m", "labtool", "calibrate", str(cut), "-o", str(tmp_path / "c.toml")],
+                         capture_output=True, text=True, timeout=120)
+    err = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(err) == 1 and "truncated" in err[0]
