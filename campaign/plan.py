@@ -51,7 +51,7 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     models = ["rigid", "elastic"]        # rigid, elastic, kinematic
     omega1 = ["const", "var"]
     accuracy = "fast"                    # fast | standard | reference
-    revolutions = 1.0                    # simulated revolutions (the last whole one is compared)
+    revolutions = 6                      # simulated revolutions (default: labtool report's, 6)
     thresholds = "limits.toml"           # optional: reports.thresholds file (exit 1 if one fails)
     restitution = 1.0                    # optional model options (labtool report's)
     contact_damping = 0.0
@@ -131,7 +131,7 @@ PLAN = Table({
         "models": ListOf(String(choices=MODELS), min_len=1, default=["rigid", "elastic"]),
         "omega1": ListOf(String(choices=MODES), min_len=1, default=["const", "var"]),
         "accuracy": String(choices=("fast", "standard", "reference"), default="fast"),
-        "revolutions": Number(ge=1.0, le=20.0, default=1.0),
+        "revolutions": _opt(Number(ge=1.0, le=50.0)),      # default: labtool report's
         "thresholds": _opt(String(max_len=4096)),
         "restitution": _opt(Number(ge=0, le=1)),
         "contact_damping": _opt(Number(ge=0, le=1e4, unit="s/m")),

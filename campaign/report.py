@@ -99,8 +99,9 @@ def collect_inputs(inputs, compare=None, overrides: dict | None = None, page_bas
             if say:
                 say(f"comparing {shown(p)} with {', '.join(compare.models)}")
             records.append(collect.load_measured_file(p, compare, overrides or {}, say=say))
+            revs = f"{compare.revolutions:g}" if compare.revolutions else "the report's default"
             notes.append(f"{shown(p)} was compared here ({', '.join(compare.models)}; accuracy {compare.accuracy}, "
-                         f"{compare.revolutions:g} simulated revolution(s)), with the operating point its file states")
+                         f"{revs} simulated revolutions), with the operating point its file states")
         elif p.is_dir():
             raise InputError(f"{shown(p)} is neither a campaign folder (no points/) nor a point folder (no summary.json)")
         else:

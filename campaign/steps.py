@@ -160,9 +160,11 @@ def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dic
     from reports.pipeline import build_report
     from reports.thresholds import load_thresholds
 
+    from reports.pipeline import DEFAULT_REVOLUTIONS
+
     th = load_thresholds(thresholds_path) if thresholds_path is not None else None
     return build_report(Path(measured), tuple(compare.models), tuple(compare.omega1), th, overrides_,
-                        compare.accuracy, compare.revolutions, progress=say)
+                        compare.accuracy, compare.revolutions or DEFAULT_REVOLUTIONS, progress=say)
 
 
 def write_point_outputs(report, folder: Path, names: dict) -> None:

@@ -108,7 +108,8 @@ def report_cmd(
     models: str = typer.Option("rigid,elastic", help="measured.nc inputs: models to compare, comma-separated"),
     omega1: str = typer.Option("const,var", "--omega1", help="measured.nc inputs: cam speed modes, comma-separated"),
     accuracy: str = typer.Option("fast", help="measured.nc inputs: solver preset (fast, standard, reference)"),
-    revolutions: float = typer.Option(1.0, help="measured.nc inputs: simulated cam revolutions [-]"),
+    revolutions: Optional[float] = typer.Option(None, help="measured.nc inputs: simulated cam revolutions [-] "
+                                                "(default: labtool report's)"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
 ) -> None:
     """One page across the points: ratings against rpm per model, the closest model and where it
@@ -126,7 +127,7 @@ def report_cmd(
     from campaign.plan import check_compare
 
     cmp = check_compare({"models": _split(models), "omega1": _split(omega1), "accuracy": accuracy,
-                         "revolutions": float(revolutions)}, "options")
+                         **({} if revolutions is None else {"revolutions": float(revolutions)})}, "options")
     _report(inputs, output, json_path, csv_path, force, cmp)
 
 
