@@ -45,15 +45,22 @@ def _sim_device(plan, point, duration_s: float):
 
 
 def _nidaqmx_device(plan, point, duration_s: float):
-    from acquisition.nidaqmx_driver import NIDAQmxDevice
+    """The NI device of the plan: its device file (channels by role, ranges, coupling, IEPE,
+    sensitivities, trigger; acquisition.nidaqmx_config) and/or its physical channels."""
+    from acquisition import nidaqmx_config as nc
+    from acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
 
     dev = plan.doc.device
-    if plan.device_file is not None:
-        raise InputError("a nidaqmx device file in a plan needs the acquisition layer's device-file reader, "
-                         "which this installation does not have yet; give device.channels instead")
-    device = NIDAQmxDevice(dev.channels, iepe_excitation=dev.iepe_excitation)
-    ka = [math.nan] * len(device.channel_names)   # Ka comes from the plan's calibration files
-    return device, ka, {"ka_source": "none (the campaign's calibration files are applied by processing)"}
+    doc = nc.load_device_file(plan.device_file) if plan.device_file is not None else None
+    cfg = nc.build(expand_channels(dev.channels) if dev.channels else None, doc,
+                   source=f"device file {shown(plan.device_file)}" if plan.device_file else f"campaign plan {plan.path.name}",
+                   iepe_excitation_a=0.004 if dev.iepe_excitation else None)
+    device = NIDAQmxDevice(cfg)
+    # Ka: the plan's calibration files, applied by processing; the nominal one (sensitivity x gain)
+    # is stored as the recording's own, as 'labtool acquire' does
+    ka = [float(k) if c.kind == "accel" else math.nan for c, k in zip(cfg.channels, device.ka_nominal)]
+    return device, ka, {"ka_source": "nominal from the device configuration; the campaign's calibration files "
+                                     "are applied by processing", **dict(cfg.metadata)}
 
 
 def make_device(plan, point, duration_s: float | None = None):

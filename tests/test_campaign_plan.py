@@ -93,3 +93,13 @@ def test_defaults_and_points_combine():
     assert b.duration_s == pytest.approx(5 * 60 / 300) and b.jt_factor == 1.5
     with pytest.raises(InputError, match="belong to a point"):
         expand_points(check_plan({"defaults": {"seed": 3}, "points": [{"rpm": 180}]}, "plan"))
+
+
+def test_a_nidaqmx_plan_builds_its_device_without_touching_a_board(tmp_path):
+    from campaign import steps
+    p = write(tmp_path, '[device]\nkind = "nidaqmx"\nchannels = "Dev1/ai0:2"\n[[points]]\nrpm = 180\n')
+    plan = load_plan(p)
+    assert plan.doc.device.settle_mode == "tacho"          # real hardware waits for a steady speed
+    dev, ka, attrs = steps.make_device(plan, plan.points[0])
+    assert type(dev).__name__ == "NIDAQmxDevice" and dev.channel_names == ("aE_t", "aE_n", "tacho")
+    assert len(ka) == 3 and "calibration files" in attrs["ka_source"]
