@@ -16,6 +16,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
 from common.errors import LabtoolError
+from common.names import shown
 
 app = typer.Typer(
     name="labtool",
@@ -42,6 +43,7 @@ COMMAND_MODULES = (
     "labtool.commands.process",
     "labtool.commands.export",
     "labtool.commands.bench",
+    "labtool.commands.campaign",
 )
 
 
@@ -59,7 +61,8 @@ def main(argv: list[str] | None = None) -> int:
         rv = app(args=argv, standalone_mode=False, prog_name="labtool")
         return int(rv) if isinstance(rv, int) else 0
     except LabtoolError as exc:
-        typer.echo(f"labtool: error: {exc}", err=True)
+        # one line whatever the message quotes (a file or channel name with a newline in it)
+        typer.echo(f"labtool: error: {shown(str(exc))}", err=True)
         code = 2
     except typer.Exit as exc:
         code = exc.exit_code
