@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from common.errors import InputError
+from common.schema import Number, String, Table, load_toml, parse_toml
 
 _UNIT_SCALE = {"_mm": 1e-3, "_deg": math.pi / 180.0, "_rpm": 2.0 * math.pi / 60.0}
 
@@ -57,6 +57,39 @@ _FIELDS = [
     ("motor", "n_nominal_rpm", "omega_nominal_motor", False, False),
     ("motor", "Jm_kgm2", "Jm", True, False),
 ]
+
+
+# Plausible bounds of a cam mechanism on a test stand, by unit (a value outside is a typo or a
+# unit mix-up, e.g. 1e300 or metres given as mm); the linkage's own geometry is checked by validate()
+_BOUNDS = {"_mm": 1e4, "_deg": 720.0, "_kg": 1e3, "_kgm2": 1e3, "_m_s2": 100.0, "_W": 1e7, "_rpm": 1e5}
+_UNITS = {"_mm": "mm", "_deg": "deg", "_kg": "kg", "_kgm2": "kg m^2", "_m_s2": "m/s^2", "_W": "W", "_rpm": "rpm"}
+
+
+def _number(key: str, zero_ok: bool, negative_ok: bool, **kw) -> Number:
+    suffix = next(s for s in _BOUNDS if key.endswith(s))
+    bound = _BOUNDS[suffix]
+    if negative_ok:
+        return Number(ge=-bound, le=bound, nonzero=not zero_ok, unit=_UNITS[suffix], **kw)
+    return Number(**({"ge": 0.0} if zero_ok else {"gt": 0.0}), le=bound, unit=_UNITS[suffix], **kw)
+
+
+def _schema() -> Table:
+    """The mechanism file's schema: the parameters of _FIELDS (required) and the optional extras."""
+    sections: dict = {}
+    for section, key, _attr, zero_ok, negative_ok in _FIELDS:
+        sections.setdefault(section, {})[key] = _number(key, zero_ok, negative_ok)
+    sections["cam"].update(diameter_mm=_number("diameter_mm", False, False, default=120.0),
+                           rr_min_mm=_number("rr_min_mm", False, False, required=False),
+                           rr_max_mm=_number("rr_max_mm", False, False, required=False))
+    program = Table({"law": String(required=False),
+                     **{k: _number(k, True, False, required=False)
+                        for k in ("rise_deg", "upper_dwell_deg", "return_deg", "lower_dwell_deg")}},
+                    default={})
+    return Table({"name": String(required=False, max_len=200), "program": program,
+                  **{name: Table(fields) for name, fields in sections.items()}})
+
+
+SCHEMA = _schema()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,41 +180,28 @@ class Mechanism:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Mechanism":
-        path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read mechanism file {path}: {exc.strerror}") from None
-        return cls.from_toml_text(text, source=str(path))
+        """A user's mechanism file (common.schema: types, bounds and unknown keys checked)."""
+        doc = load_toml(path, what="mechanism file")
+        return cls.from_dict(doc, source=str(path))
 
     @classmethod
     def from_toml_text(cls, text: str, source: str = "<text>") -> "Mechanism":
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"mechanism file {source} is not valid TOML: {exc}") from None
+        return cls.from_dict(parse_toml(text, f"mechanism file {source}"), source=source)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "<dict>") -> "Mechanism":
+        """From a parsed mechanism document; InputError names the file and the key at fault."""
+        doc = SCHEMA.check(data, where=f"mechanism file {source}")
         values: dict = {}
-        for section, key, attr, zero_ok, negative_ok in _FIELDS:
-            try:
-                raw = data[section][key]
-            except (KeyError, TypeError):
-                raise InputError(
-                    f"mechanism file {source}: missing parameter [{section}] {key}"
-                ) from None
-            if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
-                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw!r} is not a finite number")
-            if raw < 0 and not negative_ok:
-                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw} must not be negative")
-            if raw == 0 and not zero_ok:
-                raise InputError(f"mechanism file {source}: [{section}] {key} must be greater than zero")
+        for section, key, attr, _zero_ok, _negative_ok in _FIELDS:
             scale = next((s for suffix, s in _UNIT_SCALE.items() if key.endswith(suffix)), 1.0)
-            values[attr] = float(raw) * scale
-        cam = data.get("cam", {})
-        values["cam_diameter"] = float(cam.get("diameter_mm", 120.0)) * 1e-3
-        values["rr_min"] = float(cam["rr_min_mm"]) * 1e-3 if "rr_min_mm" in cam else None
-        values["rr_max"] = float(cam["rr_max_mm"]) * 1e-3 if "rr_max_mm" in cam else None
-        values["program"] = dict(data.get("program", {}))
-        mech = cls(name=str(data.get("name", source)), source=source, **values)
+            values[attr] = doc[section][key] * scale
+        cam = doc["cam"]
+        values["cam_diameter"] = cam["diameter_mm"] * 1e-3
+        values["rr_min"] = cam["rr_min_mm"] * 1e-3 if "rr_min_mm" in cam else None
+        values["rr_max"] = cam["rr_max_mm"] * 1e-3 if "rr_max_mm" in cam else None
+        values["program"] = dict(doc["program"])
+        mech = cls(name=doc.get("name", source), source=source, **values)
         mech.validate()
         return mech
 
