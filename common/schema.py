@@ -119,6 +119,8 @@ def _type_name(value) -> str:
 
 
 def _short(value, limit: int = 40) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, float):
         text = f"{value:g}"
     elif isinstance(value, str):
@@ -186,11 +188,14 @@ class Field:
 class Number(Field):
     """A finite real number (TOML integer or float, not a boolean), returned as float.
 
-    ``gt``/``ge``/``lt``/``le``: bounds; ``nonzero``: refuse 0; ``unit``: shown in messages."""
+    ``gt``/``ge``/``lt``/``le``: bounds; ``nonzero``: refuse 0; ``unit``: shown in messages;
+    ``allow_inf``: accept TOML ``inf`` (never ``nan``), e.g. "record until stopped"."""
 
-    def __init__(self, *, gt=None, ge=None, lt=None, le=None, nonzero: bool = False, unit: str = "", **kw):
+    def __init__(self, *, gt=None, ge=None, lt=None, le=None, nonzero: bool = False, unit: str = "",
+                 allow_inf: bool = False, **kw):
         super().__init__(**kw)
         self.gt, self.ge, self.lt, self.le, self.nonzero, self.unit = gt, ge, lt, le, nonzero, unit
+        self.allow_inf = allow_inf
 
     def _u(self) -> str:
         return f" [{self.unit}]" if self.unit else ""
@@ -208,7 +213,7 @@ class Number(Field):
             number = float(value)
         except OverflowError:
             self._fail(where, at, value, f"is too large{self._u()}")
-        if not math.isfinite(number):
+        if not math.isfinite(number) and not (self.allow_inf and not math.isnan(number)):
             self._fail(where, at, value, f"must be a finite number{self._u()}")
         return number
 
@@ -374,12 +379,14 @@ class Table(Field):
 class MapOf(Field):
     """A table with free keys (channel names, signals) whose values all fit ``value``.
 
-    ``keys``: the allowed key names (None = any); ``key_max_len`` bounds a free key's length."""
+    ``keys``: the allowed key names (None = any); ``key_max_len`` bounds a free key's length;
+    ``noun``: what a key is called in messages ("unknown metric [omega2] nrmsee")."""
 
     def __init__(self, value: Field, *, keys: Iterable[str] | None = None, key_max_len: int = 256,
-                 min_len: int = 0, **kw):
+                 min_len: int = 0, noun: str = "key", **kw):
         super().__init__(**kw)
         self.value, self.keys, self.key_max_len, self.min_len = value, (tuple(keys) if keys else None), key_max_len, min_len
+        self.noun = noun
 
     def takes_type(self, value) -> bool:
         return isinstance(value, dict)
@@ -397,7 +404,8 @@ class MapOf(Field):
             sub = at.child(key)
             if self.keys is not None and key not in self.keys:
                 prefix = f"{where}: " if where else ""
-                raise SchemaError(f"{prefix}unknown key {sub}{_suggest(key, self.keys)}; known: {', '.join(self.keys)}")
+                raise SchemaError(f"{prefix}unknown {self.noun} {sub}{_suggest(key, self.keys)}; "
+                                  f"known: {', '.join(self.keys)}")
             if len(key) > self.key_max_len:
                 self._fail(where, at, value, f"a key is longer than {self.key_max_len} characters")
             out[key] = self.value._check(item, where, sub)

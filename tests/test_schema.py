@@ -40,7 +40,7 @@ def test_a_good_document_gets_its_defaults_and_floats():
 @pytest.mark.parametrize("frame, expected", [
     ({"xD_mm": "fast", "n": 3}, '[frame] xD_mm = "fast": expected a number [mm], got a string'),
     ({"xD_mm": [1, 2], "n": 3}, "[frame] xD_mm = [1, 2]: expected a number [mm], got a list"),
-    ({"xD_mm": True, "n": 3}, "[frame] xD_mm = True: expected a number [mm], got a boolean"),
+    ({"xD_mm": True, "n": 3}, "[frame] xD_mm = true: expected a number [mm], got a boolean"),
     ({"xD_mm": 1e300, "n": 3}, "[frame] xD_mm = 1e+300: must be <= 10000 [mm]"),
     ({"xD_mm": math.inf, "n": 3}, "must be a finite number"),
     ({"xD_mm": math.nan, "n": 3}, "must be a finite number"),

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 import sys
-import tomllib
 from pathlib import Path
 from typing import List, Optional
 
@@ -11,6 +10,7 @@ import typer
 
 from common.files import check_output_path
 from common.errors import InputError
+from common.schema import Integer, Number, String, Table, load_toml
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {
@@ -29,21 +29,31 @@ def register(app: typer.Typer) -> None:
     app.command("acquire")(acquire)
 
 
+# the [stand] table of a scene file (common.schema): types, plausible bounds, unknown keys named
+STAND_SCHEMA = Table({
+    "mode": String(choices=("run", "calibration"), required=False),
+    "law": String(required=False),
+    "cam_speed_rpm": Number(gt=0, le=1e5, unit="rpm", required=False),
+    "Fu_N": Number(ge=0, le=1e6, unit="N", required=False),
+    "backlash_mm": Number(ge=0, le=100, unit="mm", required=False),
+    "jt_factor": Number(gt=0, le=1e3, required=False),
+    "ripple": Number(ge=0, lt=1, required=False),
+    "cal_accel_m_s2": Number(gt=0, le=1e6, unit="m/s^2", required=False),
+    "cal_freq_hz": Number(gt=0, le=1e6, unit="Hz", required=False),
+    "cal_channel": String(max_len=64, required=False),
+    "seed": Integer(ge=0, required=False),
+    "duration_s": Number(gt=0, allow_inf=True, unit="s", required=False),
+    "rate_hz": Number(gt=0, le=1e8, unit="Hz", required=False),
+    "ka_m_s2_per_v": Number(gt=0, le=1e7, unit="m/s^2/V", required=False),
+    "truth_model": String(choices=("kinematic", "rigid", "elastic"), required=False),
+})
+assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
+
+
 def load_scene(path: Path) -> dict:
     """Option values from a scene file's [stand] table (keys in SCENE_KEYS); InputError if bad."""
-    try:
-        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"scene file {path} does not exist") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"scene file {path} is not valid TOML: {exc}") from None
-    stand = doc.get("stand")
-    if not isinstance(stand, dict):
-        raise InputError(f"scene file {path} has no [stand] table")
-    unknown = set(stand) - set(SCENE_KEYS)
-    if unknown:
-        raise InputError(f"scene file {path}: unknown keys {', '.join(sorted(unknown))}; known: {', '.join(SCENE_KEYS)}")
-    return {SCENE_KEYS[k]: v for k, v in stand.items()}
+    doc = Table({"stand": STAND_SCHEMA}).check(load_toml(path, "scene file"), where=f"scene file {path}")
+    return {SCENE_KEYS[k]: v for k, v in doc["stand"].items()}
 
 
 def acquire(
