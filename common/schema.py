@@ -35,12 +35,12 @@ from __future__ import annotations
 
 import difflib
 import math
-import os
 import tomllib
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 from common.errors import InputError
+from common.names import shown
 
 MAX_TOML_BYTES = 4 << 20      # no configuration file is this large; refuse rather than parse for ages
 _MISSING = object()
@@ -48,18 +48,6 @@ _MISSING = object()
 
 class SchemaError(InputError):
     """A TOML document that does not fit its schema; the message names the file, the key and why."""
-
-
-def shown(path) -> str:
-    """A file name as text that can be printed and written anywhere (UTF-8, one line).
-
-    Bytes that are not UTF-8 in a POSIX file name (Python keeps them as lone surrogates) appear as
-    ``\\xff``; control characters (a newline in a name) as their escapes."""
-    raw = os.fsencode(os.fspath(path)) if not isinstance(path, bytes) else path
-    text = raw.decode("utf-8", "backslashreplace")
-    if any(c < " " or c == "\x7f" for c in text):
-        text = "".join(c if c >= " " and c != "\x7f" else repr(c)[1:-1] for c in text)
-    return text
 
 
 def load_toml(path, what: str = "TOML file") -> dict:

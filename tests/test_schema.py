@@ -7,8 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.errors import InputError
+from common.names import shown
 from common.schema import (Bool, Integer, ListOf, MapOf, Number, OneOf, SchemaError, String, Table,
-                           load_toml, parse_toml, shown)
+                           load_toml, parse_toml)
 
 SCHEMA = Table({
     "name": String(default="unnamed"),
