@@ -20,3 +20,16 @@ class SolverError(LabtoolError, RuntimeError):
 
 class FileFormatError(LabtoolError, ValueError):
     """A file that is corrupt, truncated, of another format or missing required content."""
+
+
+class OutputError(LabtoolError):
+    """An output that could not be written (full disk, read-only file system, permission); the
+    message says what was kept (DESIGN.md: nothing is left half-written without saying so)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised like Ctrl-C's KeyboardInterrupt so that cleanups run."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"signal {signum}")
+        self.signum = signum
