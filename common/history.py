@@ -25,6 +25,8 @@ def _plain(v):
         return int(v)
     if isinstance(v, (np.bool_,)):
         return bool(v)
+    if isinstance(v, str):   # a non-UTF-8 file name (lone surrogates) is kept, escaped as \xff
+        return v.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
     return v
 
 

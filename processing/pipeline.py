@@ -33,6 +33,7 @@ from common.errors import InputError
 from processing import cam_angle, cycles, events, filters, follower, spectra
 from processing.calibration_file import PAPER_KA_M_S2_PER_V, ChannelCalibration
 from common.history import History
+from common.names import shown
 from processing.readers import Recording
 
 REQUIRED = ("aE_t", "aE_n")
@@ -332,7 +333,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
                            row_time)
     small.attrs.update({
         "title": "labtool measured follower motion",
-        "source_file": rec.source,
+        "source_file": shown(rec.source),
         "source_format": rec.format,
         "start_time_utc": rec.start_time_utc,
         "recording_complete": int(rec.complete),

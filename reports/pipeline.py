@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from reports import align, metrics
 from reports.thresholds import Thresholds, evaluate
@@ -369,7 +370,7 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     say("computing the metrics")
     comparisons = [c for run in sims for c in compare_run(cycles, run)]
     rows = evaluate(thresholds, comparisons) if thresholds else []
-    return Report(str(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(ds, cycles, sims),
+    return Report(shown(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(ds, cycles, sims),
                   rows, thresholds.source if thresholds else None, notes, time.perf_counter() - t0, time_filter)
 
 

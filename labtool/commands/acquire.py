@@ -10,6 +10,7 @@ import typer
 
 from common.files import check_output_path
 from common.errors import InputError
+from common.names import shown
 from common.schema import Integer, Number, String, Table, load_toml
 
 # keys a scene file's [stand] table may hold -> option name
@@ -124,7 +125,7 @@ def acquire(
         attrs = {"ka_source": "none" if opts["ka"] is None else "--ka option"}
         if rpm is not None:
             attrs["cam_speed_rpm"] = float(rpm)
-    attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
+    attrs["command"] = "labtool acquire " + " ".join(map(shown, sys.argv[2:])) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
     _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch)
 
 

@@ -6,8 +6,9 @@ from typing import List
 
 import typer
 
-from common.files import atomic_write, check_output_path
+from common.files import check_output_path, write_text
 from common.errors import InputError
+from common.names import shown
 
 PAPER_KA = 86.43
 
@@ -38,17 +39,10 @@ def calibrate(
         raise InputError(f"--convention must be peak or rms, got '{convention}'")
     check_output_path(output, force)
     cals = calibrate_recording(recording, channel, reference_accel, reference_freq, convention, reference_uncertainty)
-    text = calibration_toml(cals, recording, reference_accel, reference_freq, convention, reference_uncertainty)
+    text = calibration_toml(cals, shown(recording), reference_accel, reference_freq, convention, reference_uncertainty)
+    write_text(output, text)      # atomic, with the user's umask (a calibration is meant to be shared)
 
-    def _write(tmp: Path):
-        try:
-            tmp.write_text(text, encoding="utf-8")
-            tmp.chmod(0o644)  # mkstemp makes it private; a calibration is meant to be shared
-        except OSError as exc:
-            raise InputError(f"cannot write {output}: {exc.strerror}") from None
-    atomic_write(output, _write)
-
-    table = Table(title=f"Calibration from {recording.name}: {reference_accel:g} m/s^2 {convention} at {reference_freq:g} Hz")
+    table = Table(title=f"Calibration from {escape(shown(recording.name))}: {reference_accel:g} m/s^2 {convention} at {reference_freq:g} Hz")
     for col in ("channel", "Ka [m/s^2/V]", "u(Ka) [m/s^2/V]", "vs paper 86.43", "fitted f [Hz]", "amplitude [V peak]", "residual rms [V]"):
         table.add_column(escape(col), justify="right")     # "[m/s^2/V]" is not rich markup
     for c in cals:
