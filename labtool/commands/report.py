@@ -11,7 +11,7 @@ from typing import Optional
 
 import typer
 
-from common.files import atomic_write, check_output_path
+from common.files import OutputSet, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -92,16 +92,19 @@ def report(
         from reports.summary import to_json
         figs = all_figures(rep)
         html = render_html(rep, figs)
-        atomic_write(output, lambda tmp: tmp.write_text(html, encoding="utf-8"))
-        if pdf is not None:
-            from reports.pdf import write_pdf
-            atomic_write(pdf, lambda tmp: write_pdf(rep, tmp, figs))
-        if json_path is not None:
-            text = to_json(rep)
-            if str(json_path) == "-":
-                typer.echo(text)
-            else:
-                atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        # the HTML, PDF and JSON are one set: all written, or none (a full disk, Ctrl-C)
+        with OutputSet() as out:
+            out.write_text(output, html, "-o")
+            if pdf is not None:
+                from reports.pdf import write_pdf
+                status.update("writing the PDF")
+                out.write(pdf, lambda tmp: write_pdf(rep, tmp, figs), "--pdf")
+            if json_path is not None:
+                text = to_json(rep)
+                if str(json_path) != "-":
+                    out.write_text(json_path, text + "\n", "--json")
+        if json_path is not None and str(json_path) == "-":
+            typer.echo(text)
     if not quiet:
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
