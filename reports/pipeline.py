@@ -110,7 +110,7 @@ def _attr_float(ds, *names):
 def max_cam_speed_rpm() -> float:
     """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
     from models.mechanism import Mechanism
-    return Mechanism.default().omega_sync_motor * 30.0 / math.pi
+    return Mechanism.default().max_cam_speed_rpm
 
 
 def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dict:

@@ -165,6 +165,21 @@ class Mechanism:
         """Nominal motor torque Pn / omega_n in N*m."""
         return self.Pn / self.omega_nominal_motor
 
+    @property
+    def max_cam_speed_rpm(self) -> float:
+        """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
+        return self.omega_sync_motor * 30.0 / math.pi
+
+    def check_cam_speed(self, rpm: float) -> float:
+        """``rpm`` if 0 < rpm <= max_cam_speed_rpm, else InputError stating the range. One range for
+        every command (simulate, kinematics, doe, report, the simulated stand): the motor cannot
+        drive the cam past its synchronous speed, and past it MR13D grows as n1^2 to nonsense."""
+        top = self.max_cam_speed_rpm
+        if not (math.isfinite(rpm) and 0 < rpm <= top * (1 + 1e-12)):    # 1000 rpm -> rad/s -> rpm
+            raise InputError(f"cam speed {rpm:.10g} rpm is outside the range the models take: 0 < n1 <= {top:.10g} rpm "
+                             "(the drive motor's synchronous speed, [motor] n_sync_rpm of the mechanism)")
+        return rpm
+
     def replace(self, **changes) -> "Mechanism":
         """A copy with some parameters changed (SI values), validated again."""
         new = dataclasses.replace(self, **changes)
