@@ -72,6 +72,19 @@ def check_output_path(path: Path, force: bool = False, option: str | None = None
         raise InputError(f"cannot write {name}: folder {shown(parent)} is not writable")
 
 
+def check_outputs(named: dict, force: bool = False) -> None:
+    """check_output_path for each ``{option: path}`` given (None = not asked for), and refuse two
+    options naming one file (``-o X --groove-csv X`` wrote one over the other)."""
+    given = [(opt, Path(p)) for opt, p in named.items() if p is not None and str(p) != "-"]
+    for i, (opt, path) in enumerate(given):
+        for other_opt, other in given[:i]:
+            if _same_file_key(path) == _same_file_key(other):
+                raise InputError(f"{other_opt} and {opt} name the same file {shown(path)}; "
+                                 "give each output its own name")
+    for opt, path in given:
+        check_output_path(path, force, opt)
+
+
 def check_output_dir(path: Path) -> None:
     """A folder to write into: existing or creatable, not a file, writable, not read-only."""
     path = Path(path)
