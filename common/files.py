@@ -8,7 +8,9 @@ Every output of labtool goes through here:
   kinematics' NetCDF + groove CSV): each is written to a hidden temporary name beside its final
   name, all are renamed at the end, and on any failure, Ctrl-C or SIGTERM every temporary is
   removed and no final name is changed (files replaced with ``--force`` are restored);
-- :func:`atomic_write` / :func:`write_netcdf` for one file (an OutputSet of one).
+- :func:`atomic_write` / :func:`write_netcdf` for one file (an OutputSet of one);
+- :func:`staged_folder` for a command that fills a folder (``labtool demo -o out/``): built in a
+  hidden folder beside it, its files moved in at the end, all or none.
 
 Temporary names are ``.NAME.<host>-<pid>-<token>.part.<ext>`` (the extension kept for writers that
 choose the format by it). A process killed with SIGKILL cannot clean up; the next write to the
@@ -27,6 +29,7 @@ import errno
 import hashlib
 import os
 import secrets
+import shutil
 import signal
 import socket
 import threading
@@ -67,7 +70,7 @@ def check_output_path(path: Path, force: bool = False, option: str | None = None
         raise InputError(f"cannot write {name}: folder {shown(parent)} does not exist")
     if read_only(parent):
         raise OutputError(f"cannot write {name}: {shown(parent)} is on a read-only file system; "
-                          "choose a folder you can write to")
+                          "choose a folder you can write to", errno.EROFS)
     if not os.access(parent, os.W_OK):
         raise InputError(f"cannot write {name}: folder {shown(parent)} is not writable")
 
@@ -100,7 +103,7 @@ def check_output_dir(path: Path) -> None:
         raise InputError(f"cannot create folder {name}: {shown(probe)} is a file")
     if read_only(probe):
         raise OutputError(f"cannot write into {name}: {shown(probe)} is on a read-only file system; "
-                          "choose a folder you can write to")
+                          "choose a folder you can write to", errno.EROFS)
     if not os.access(probe, os.W_OK | os.X_OK):
         raise InputError(f"cannot write into {name}: folder {shown(probe)} is not writable")
 
@@ -129,7 +132,7 @@ def ensure_free_space(path: Path, need_bytes: float, kept: str = "nothing was wr
     if free < need_bytes:
         raise OutputError(f"cannot write {shown(path)}: it needs about {_size(need_bytes)} and "
                           f"{shown(folder)} has {_size(free)} free; {kept}; free some space or "
-                          "write elsewhere")
+                          "write elsewhere", errno.ENOSPC)
 
 
 def disk_error(exc: BaseException) -> int | None:
@@ -199,7 +202,6 @@ def remove_stale_temporaries(final: Path) -> list[Path]:
             continue
         with contextlib.suppress(OSError):
             if entry.is_dir(follow_symlinks=False):
-                import shutil
                 shutil.rmtree(entry.path)
             else:
                 os.unlink(entry.path)
@@ -387,20 +389,19 @@ class OutputSet:
 
     # -- errors --
     def _kept_text(self, final: Path | None) -> str:
-        names = [shown(f.name) for f in self.finals] or ([shown(Path(final).name)] if final else [])
-        if len(names) > 1:
-            text = f"nothing was written ({', '.join(names)} unchanged)"
-        elif names:
-            text = f"nothing was written ({names[0]} unchanged)" if final and Path(final).exists() \
-                else "nothing was written"
-        else:
-            text = "nothing was written"
+        """What stays as it was, e.g. "none of r.html, r.pdf was written (r.html unchanged)"."""
+        paths = self.finals + ([Path(final)] if final is not None and Path(final) not in self.finals else [])
+        names = [shown(p.name) for p in paths]
+        existing = [shown(p.name) for p in paths if p.exists()]
+        text = f"none of {', '.join(names)} was written" if len(names) > 1 else "nothing was written"
+        if existing:
+            text += f" ({', '.join(existing)} unchanged)"
         return f"{text}; {self._kept}" if self._kept else text
 
     def _fail_disk(self, code: int, final: Path):
-        message = describe_disk_error(code, final, self._kept_text(final))
-        self.rollback()
-        raise OutputError(message)
+        kept = self._kept_text(final)
+        self.rollback()                     # first, so that the free space said is the real one
+        raise OutputError(describe_disk_error(code, final, kept), code)
 
     def _raise_for(self, exc: BaseException, final: Path | None):
         """Roll back, then re-raise ``exc`` as one OutputError line if the disk is the cause."""
@@ -496,3 +497,48 @@ def write_netcdf(ds, path: Path) -> None:
     free-space check), so a full disk is one line instead of an HDF5 crash."""
     with OutputSet() as out:
         out.write_netcdf(path, ds)
+
+
+# --- a folder of outputs ---------------------------------------------------------------------
+@contextlib.contextmanager
+def staged_folder(final: Path):
+    """Yield a hidden staging folder beside ``final``; at the end of the block move every file in
+    it into ``final`` (created if needed; files there with the same names replaced), all or none.
+
+    On any exception, Ctrl-C or SIGTERM the staging folder is removed and ``final`` is unchanged;
+    a full or read-only disk is one OutputError line. Files of ``final`` not produced again stay."""
+    check_output_dir(Path(final))
+    final = Path(final).absolute()
+    remove_stale_temporaries(final)
+    stage = final.with_name(f".{final.name[:200]}.{_HOST}-{os.getpid()}-{secrets.token_hex(4)}.part")
+    kept = f"nothing was written into {shown(final)}"
+    try:
+        stage.mkdir()
+    except OSError as exc:
+        code = disk_error(exc)
+        if code is not None:
+            raise OutputError(describe_disk_error(code, final, kept), code) from None
+        raise
+    try:
+        with signals_interrupt():
+            yield stage
+            _move_folder(stage, final)
+    except BaseException as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        code = exc.errno if isinstance(exc, OutputError) else disk_error(exc) if isinstance(exc, Exception) else None
+        if code is not None:
+            raise OutputError(describe_disk_error(code, final / "", kept), code) from None
+        raise
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def _move_folder(stage: Path, final: Path) -> None:
+    """Move the files under ``stage`` to the same places under ``final`` as one OutputSet commit."""
+    files = [p for p in sorted(stage.rglob("*")) if p.is_file() or p.is_symlink()]
+    final.mkdir(parents=True, exist_ok=True)
+    out = OutputSet()
+    for path in files:
+        target = final / path.relative_to(stage)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        out._items.append((target, path, None))     # already written: only the commit is left
+    out.commit()

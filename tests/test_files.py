@@ -118,7 +118,7 @@ def test_full_disk_is_one_line_and_leaves_nothing(small_disk):
     disk = small_disk(256)
     (disk / "kept.txt").write_text("previous")
     big = xr.Dataset({"v": ("t", np.random.default_rng(0).normal(size=200_000))})
-    with pytest.raises(OutputError, match="no space left on device .* nothing was written") as info:
+    with pytest.raises(OutputError, match=r"no space left on device .* none of kept.txt, big.nc was written \(kept.txt unchanged\)") as info:
         with OutputSet() as out:
             out.write_text(disk / "kept.txt", "new")
             out.write_netcdf(disk / "big.nc", big)
