@@ -25,6 +25,7 @@ from rich.markup import escape  # paths are the user's, not markup
 from rich.table import Table
 
 from labtool.output import console as new_console
+from common.errors import OutputError
 from common.files import write_netcdf
 
 # the paper's experiment (sec. 2.4 and 3.3)
@@ -35,7 +36,9 @@ RECORD_SECONDS = 3.0           # 9 cam revolutions at 180 rpm
 SAMPLE_DATA = Path(__file__).resolve().parent.parent / "sample_data"
 
 
-def run_demo(out: Path) -> None:
+def run_demo(out: Path, shown_as: Path | None = None):
+    """Run every step writing into ``out``; returns the function that prints where the results
+    are (called once they are in place; ``shown_as`` is the folder they are then in)."""
     console = new_console()
     t0 = time.perf_counter()
     kin_path = step_kinematics(out, console)
@@ -45,14 +48,21 @@ def run_demo(out: Path) -> None:
     if measured is None:
         measured = step_synthetic_measurement(out, console)
     report = step_report(out, console, measured)
-    console.print(f"\n[bold]demo done[/bold] in {time.perf_counter() - t0:.0f} s: kinematics {escape(str(kin_path))}, "
-                  f"Table 1 comparison {escape(str(table_path))}")
-    if report is not None:
-        html, rows = report
-        console.print(f"[bold]report: {escape(str(html.resolve()))}[/bold]  (open it in a browser; summary.json and report.pdf "
-                      "beside it)", soft_wrap=True)
-        for line in rows:
-            console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
+    elapsed = time.perf_counter() - t0
+
+    def final(path: Path) -> Path:
+        return (shown_as / path.relative_to(out)) if shown_as is not None else path
+
+    def announce() -> None:
+        console.print(f"\n[bold]demo done[/bold] in {elapsed:.0f} s: kinematics {escape(str(final(kin_path)))}, "
+                      f"Table 1 comparison {escape(str(final(table_path)))}")
+        if report is not None:
+            html, rows = report
+            console.print(f"[bold]report: {escape(str(final(html).resolve()))}[/bold]  (open it in a browser; "
+                          "summary.json and report.pdf beside it)", soft_wrap=True)
+            for line in rows:
+                console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
+    return announce
 
 
 def _skip(console: Console, step: str, why: str) -> None:
@@ -194,6 +204,8 @@ def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list
         text = to_json(rep)
         atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
         atomic_write(pdf_path, lambda tmp: write_pdf(rep, tmp, figs))
+    except OutputError:
+        raise                 # a full or read-only disk: the demo cannot go on
     except Exception as exc:
         _skip(console, "report", f"{type(exc).__name__}: {exc}")
         console.print(traceback.format_exc(limit=3), highlight=False, markup=False)
