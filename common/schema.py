@@ -72,6 +72,9 @@ def load_toml(path, what: str = "TOML file") -> dict:
 def parse_toml(raw: bytes | str, where: str) -> dict:
     """Parse TOML bytes (UTF-8) or text; InputError ``<where> is not ...`` otherwise."""
     if isinstance(raw, bytes):
+        if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            raise InputError(f"{where} is UTF-16 text (Notepad's 'Unicode'); save it as UTF-8")
+        raw = raw.removeprefix(b"\xef\xbb\xbf")   # Notepad and Excel put a BOM before UTF-8 text
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -79,7 +82,7 @@ def parse_toml(raw: bytes | str, where: str) -> dict:
             raise InputError(f"{where} is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); "
                              "save it as UTF-8") from None
     else:
-        text = raw
+        text = raw.removeprefix("\ufeff")
     if "\x00" in text:
         raise InputError(f"{where} is not a text file (it holds NUL bytes)")
     try:

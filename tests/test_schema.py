@@ -132,4 +132,4 @@ def test_any_bytes_parse_or_are_refused_in_one_line(raw):
     except InputError as exc:
         assert str(exc).startswith("scene file s.toml ") and "\n" not in str(exc).strip()
         return
-    assert doc == tomllib.loads(raw.decode("utf-8"))
+    assert doc == tomllib.loads(raw.decode("utf-8-sig"))
