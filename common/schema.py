@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import stat
 import tomllib
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -57,7 +58,10 @@ def load_toml(path, what: str = "TOML file") -> dict:
     try:
         if path.is_dir():
             raise InputError(f"{what} {name} is a folder; give the TOML file inside it")
-        size = path.stat().st_size
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):    # a FIFO or /dev/zero would block or never end
+            raise InputError(f"{what} {name} is not a regular file (a pipe or a device); give a TOML file")
+        size = st.st_size
         if size > MAX_TOML_BYTES:
             raise InputError(f"{what} {name} is {size / 2**20:.0f} MB; a {what} is at most "
                              f"{MAX_TOML_BYTES >> 20} MB of TOML text")
