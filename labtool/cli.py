@@ -69,10 +69,19 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
+def _invoke(argv):
+    """Run the command without typer's own top-level handler (typer 0.29 turns Ctrl-C into a
+    silent exit 130, so no cleanup message and no way to tell SIGTERM from SIGINT)."""
+    command = typer.main.get_command(app)
+    args = sys.argv[1:] if argv is None else list(argv)
+    with command.make_context("labtool", args) as ctx:
+        return command.invoke(ctx)
+
+
 def _run(argv) -> int:
     try:
-        rv = app(args=argv, standalone_mode=False, prog_name="labtool")
-        return int(rv) if isinstance(rv, int) else 0
+        rv = _invoke(argv)
+        return int(rv) if isinstance(rv, int) and not isinstance(rv, bool) else 0
     except LabtoolError as exc:
         return _error(str(exc))
     except typer.Exit as exc:
@@ -85,8 +94,8 @@ def _run(argv) -> int:
                    err=True)
         return 128 + int(signum)
     except click_exc.UsageError as exc:
-        hint = f" (see 'labtool {exc.ctx.command_path.split(' ', 1)[-1]} --help')" if exc.ctx else ""
-        return _error(f"{exc.format_message()}{hint}")
+        hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx else ""
+        return _error(f"{exc.format_message() or 'no command given'}{hint}")
     except click_exc.ClickException as exc:
         return _error(exc.format_message())
     except OSError as exc:
