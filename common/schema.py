@@ -122,9 +122,15 @@ def _short(value, limit: int = 40) -> str:
         text = '"' + shown(value.encode("utf-8", "surrogateescape"))[:limit].replace('"', '\\"') + '"'
     elif isinstance(value, dict):
         return "{...}"
+    elif hasattr(value, "isoformat"):      # TOML dates and times
+        text = value.isoformat()
     else:
         text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _bound_text(bound) -> str:
+    return str(bound) if isinstance(bound, int) else f"{bound:g}"
 
 
 class KeyPath:
@@ -214,17 +220,18 @@ class Number(Field):
 
     def _bounds(self, number, value, where, at):
         u = self._u()
+        f = _bound_text
         if self.gt is not None and not number > self.gt:
             if self.gt == 0:
                 self._fail(where, at, value, "must not be negative; it must be greater than zero" if number < 0
                            else "must be greater than zero")
-            self._fail(where, at, value, f"must be > {self.gt:g}{u}")
+            self._fail(where, at, value, f"must be > {f(self.gt)}{u}")
         if self.ge is not None and not number >= self.ge:
-            self._fail(where, at, value, "must not be negative" if self.ge == 0 else f"must be >= {self.ge:g}{u}")
+            self._fail(where, at, value, "must not be negative" if self.ge == 0 else f"must be >= {f(self.ge)}{u}")
         if self.lt is not None and not number < self.lt:
-            self._fail(where, at, value, f"must be < {self.lt:g}{u}")
+            self._fail(where, at, value, f"must be < {f(self.lt)}{u}")
         if self.le is not None and not number <= self.le:
-            self._fail(where, at, value, f"must be <= {self.le:g}{u}")
+            self._fail(where, at, value, f"must be <= {f(self.le)}{u}")
         if self.nonzero and number == 0:
             self._fail(where, at, value, f"must not be zero{u}")
 
@@ -321,8 +328,15 @@ class ListOf(Field):
 
 
 def _suggest(name: str, known: Iterable[str]) -> str:
-    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]}?)" if close else ""
+    """' (did you mean X?)' for a misspelt key: case, a missing unit suffix (fu -> Fu_N), typos."""
+    known = list(known)
+    lower = {k.lower(): k for k in known}
+    key = name.lower()
+    same = lower.get(key) or next((k for k in known if k.lower().split("_")[0] == key), None)
+    if same is None:
+        close = difflib.get_close_matches(key, list(lower), n=1, cutoff=0.6)
+        same = lower[close[0]] if close else None
+    return f" (did you mean {same}?)" if same and same != name else ""
 
 
 class Table(Field):
