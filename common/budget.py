@@ -40,7 +40,25 @@ class Estimate:
 
 
 def available_memory() -> float:
-    """Bytes of memory available to a new allocation now (Linux MemAvailable; else physical)."""
+    """Bytes of memory available to a new allocation now: Linux MemAvailable (else the free
+    physical memory), and no more than the process's address-space limit (ulimit -v) allows."""
+    return min(_system_available(), _rlimit_available())
+
+
+def _rlimit_available() -> float:
+    try:
+        import resource
+        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+        if soft == resource.RLIM_INFINITY:
+            return math.inf
+        with open("/proc/self/statm") as f:
+            used = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+        return max(float(soft - used), 0.0)
+    except (ImportError, OSError, ValueError):
+        return math.inf
+
+
+def _system_available() -> float:
     try:
         with open("/proc/meminfo") as f:
             for line in f:

@@ -8,6 +8,7 @@ one line ``labtool: error: ...`` on stderr.
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -40,14 +41,23 @@ def command(args: list) -> list:
     return [sys.executable, "-m", "labtool", *[os.fsdecode(a) for a in args]]
 
 
+CHILD_MEMORY = 8 << 30     # address-space limit of every child: a runaway request fails, the machine stays
+
+
+def _limit():
+    resource.setrlimit(resource.RLIMIT_AS, (CHILD_MEMORY, CHILD_MEMORY))
+
+
 def run(args: list, cwd=None, timeout: float = 240) -> tuple[int, str]:
     """labtool in a child process: (exit code, stderr); a timeout is a test failure (a hang)."""
-    proc = subprocess.run(command(args), cwd=cwd, env=env(), capture_output=True, timeout=timeout)
+    proc = subprocess.run(command(args), cwd=cwd, env=env(), capture_output=True, timeout=timeout,
+                          preexec_fn=_limit)
     return proc.returncode, proc.stderr.decode("utf-8", "replace")
 
 
 def start(args: list, cwd=None) -> subprocess.Popen:
-    return subprocess.Popen(command(args), cwd=cwd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    return subprocess.Popen(command(args), cwd=cwd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            preexec_fn=_limit)
 
 
 def one_error_line(code: int, err: str) -> str:

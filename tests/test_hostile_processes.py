@@ -156,3 +156,25 @@ def test_a_reader_never_sees_a_partial_output(tmp_path):
     n, bad = map(int, stdout.split())
     assert bad == 0 and n > 0, stderr.decode()[-2000:]
     assert hidden(tmp_path) == []
+
+
+@pytest.mark.hostile("concurrency")
+def test_two_reports_on_one_set_at_once(tmp_path, measured_nc):
+    """The second starts while the first is writing: neither removes the other's temporaries,
+    both finish, and the set on disk is whole (HTML, a PDF, JSON that parses)."""
+    import json
+
+    first = start(_report(measured_nc, tmp_path, force=True))
+    try:
+        assert wait_for(lambda: any(".part" in n for n in hidden(tmp_path)) or first.poll() is not None, timeout=180)
+        second = start(_report(measured_nc, tmp_path, force=True))
+        outs = [p.communicate(timeout=300) for p in (first, second)]
+    finally:
+        for p in (first,):
+            if p.poll() is None:
+                p.kill()
+    assert [first.returncode, second.returncode] in ([0, 0], [1, 1]), [o[1][-1500:] for o in outs]
+    assert (tmp_path / "r.pdf").read_bytes().startswith(b"%PDF")
+    assert json.loads((tmp_path / "r.json").read_text())["headline"]
+    assert (tmp_path / "r.html").read_text().rstrip().endswith("</html>")
+    assert hidden(tmp_path) == []
