@@ -2,21 +2,20 @@
 
 1. kinematics of the paper's mechanism at 180 rpm (table, NetCDF, plot);
 2. the 16 runs of Table 1: kinematic MR13D against the paper's Table 3;
-3. the simulated stand records the paper's experiment (sine law, Fu = 0 N, j = 0.128 mm, 180 rpm):
-   ``labtool acquire --device sim --fast``; else a recording from sample_data/;
+3. the simulated stand records the paper's experiment (sine law, Fu = 0 N, j = 0.128 mm, 180 rpm)
+   with its default truth: ``labtool acquire --device sim --fast``;
 4. ``labtool process`` turns it into measured.nc (omega2, epsilon2, cam angle, spectra);
-5. ``labtool report``: the rigid and elastic models, omega1 constant and variable, against it.
+5. ``labtool report``: the rigid and elastic models, omega1 constant and variable, against it,
+   with the groove's energy loss where the stand's recording states it (its ``truth_*``
+   restitution and contact damping: what a lab measures on its groove), the robustness check and
+   the measured impacts.
 
-A step whose piece is not installed (or fails) is skipped with a message saying so, and the demo
-goes on with what it has: without a recording or its processing, the report runs on a synthetic
-measurement built from the kinematics, and the report says so on its first lines.
+A step that fails ends the demo with its error.
 """
 from __future__ import annotations
 
-import importlib
 import math
 import time
-import traceback
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +24,6 @@ from rich.markup import escape  # paths are the user's, not markup
 from rich.table import Table
 
 from labtool.output import console as new_console
-from common.errors import OutputError
 from common.files import write_netcdf
 
 # the paper's experiment (sec. 2.4 and 3.3)
@@ -33,7 +31,6 @@ EXPERIMENT_RPM = 180.0
 EXPERIMENT_BACKLASH_MM = 0.128
 EXPERIMENT_FU_N = 0.0
 RECORD_SECONDS = 3.0           # 9 cam revolutions at 180 rpm
-SAMPLE_DATA = Path(__file__).resolve().parent.parent / "sample_data"
 
 
 def run_demo(out: Path, shown_as: Path | None = None):
@@ -45,9 +42,7 @@ def run_demo(out: Path, shown_as: Path | None = None):
     table_path = step_table1_kinematic(out, console)
     recording = step_acquire(out, console)
     measured = step_process(out, console, recording)
-    if measured is None:
-        measured = step_synthetic_measurement(out, console)
-    report = step_report(out, console, measured)
+    html, rows = step_report(out, console, measured, recording)
     elapsed = time.perf_counter() - t0
 
     def final(path: Path) -> Path:
@@ -56,30 +51,20 @@ def run_demo(out: Path, shown_as: Path | None = None):
     def announce() -> None:
         console.print(f"\n[bold]demo done[/bold] in {elapsed:.0f} s: kinematics {escape(str(final(kin_path)))}, "
                       f"Table 1 comparison {escape(str(final(table_path)))}")
-        if report is not None:
-            html, rows = report
-            console.print(f"[bold]report: {escape(str(final(html).resolve()))}[/bold]  (open it in a browser; "
-                          "summary.json and report.pdf beside it)", soft_wrap=True)
-            for line in rows:
-                console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
+        console.print(f"[bold]report: {escape(str(final(html).resolve()))}[/bold]  (open it in a browser; "
+                      "summary.json and report.pdf beside it)", soft_wrap=True)
+        for line in rows:
+            console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
     return announce
 
 
-def _skip(console: Console, step: str, why: str) -> None:
-    console.print(f"[yellow]step skipped[/yellow]: {step}: {why}", highlight=False)
-
-
-def _have(module: str) -> bool:
-    try:
-        importlib.import_module(module)
-    except ImportError:
-        return False
-    return True
-
-
-def _cli(args: list[str]) -> int:
+def _cli(args: list[str], step: str) -> None:
+    """Run a labtool command; a non-zero exit ends the demo with the step's name."""
+    from common.errors import LabtoolError
     from labtool.cli import main
-    return main(args)
+    rc = main(args)
+    if rc != 0:
+        raise LabtoolError(f"demo step '{step}' failed (labtool {args[0]} exit {rc}); its message is above")
 
 
 def step_kinematics(out: Path, console: Console) -> Path:
@@ -123,101 +108,74 @@ def step_table1_kinematic(out: Path, console: Console) -> Path:
     return path
 
 
-def step_acquire(out: Path, console: Console) -> Path | None:
-    """The simulated stand records the paper's experiment; else a sample_data/ recording."""
+def step_acquire(out: Path, console: Console) -> Path:
+    """The simulated stand (its default truth) records the paper's experiment."""
     path = out / "recording_180rpm.h5"
-    step = "acquisition on the simulated stand"
-    if _have("labtool.commands.acquire") and _have("acquisition.sim_stand"):
-        path.unlink(missing_ok=True)
-        console.print(f"[bold]{step}[/bold]: sine law, Fu = {EXPERIMENT_FU_N:g} N, j = {EXPERIMENT_BACKLASH_MM} mm, "
-                      f"{EXPERIMENT_RPM:g} rpm, {RECORD_SECONDS:g} s at 10 kHz (--fast)")
-        try:
-            rc = _cli(["acquire", "--device", "sim", "--rpm", f"{EXPERIMENT_RPM:g}", "--duration", f"{RECORD_SECONDS:g}",
-                       "--fast", "--seed", "1", "--law", "sine", "--fu", f"{EXPERIMENT_FU_N:g}",
-                       "--backlash-mm", f"{EXPERIMENT_BACKLASH_MM:g}", "-o", str(path)])
-        except Exception as exc:   # the demo goes on; the message says what broke
-            rc = f"{type(exc).__name__}: {exc}"
-        if rc == 0 and path.exists():
-            return path
-        _skip(console, step, f"labtool acquire ended with {rc}")
-    else:
-        _skip(console, step, "the acquisition package (labtool acquire --device sim) is not installed yet")
-    samples = sorted(SAMPLE_DATA.glob("*180*rpm*.h5")) or sorted(SAMPLE_DATA.glob("*.h5"))
-    if samples:
-        console.print(f"using the recording {escape(str(samples[0]))} from sample_data/")
-        return samples[0]
-    _skip(console, "sample recording", "sample_data/ holds no recording (*.h5)")
-    return None
-
-
-def step_process(out: Path, console: Console, recording: Path | None) -> Path | None:
-    step = "processing (labtool process)"
-    if recording is None:
-        _skip(console, step, "there is no recording to process")
-        return None
-    if not _have("labtool.commands.process"):
-        _skip(console, step, "the processing package (labtool process) is not installed yet")
-        return None
-    path = out / "measured_180rpm.nc"
     path.unlink(missing_ok=True)
-    console.print(f"[bold]{step}[/bold]: {escape(recording.name)} -> {escape(path.name)}")
-    try:
-        rc = _cli(["process", str(recording), "-o", str(path)])
-    except Exception as exc:
-        rc = f"{type(exc).__name__}: {exc}"
-    if rc == 0 and path.exists():
-        return path
-    _skip(console, step, f"labtool process ended with {rc}")
-    return None
-
-
-def step_synthetic_measurement(out: Path, console: Console) -> Path:
-    from reports.synthetic import synthetic_measured
-
-    path = out / "measured_synthetic_180rpm.nc"
-    write_netcdf(synthetic_measured(rpm=EXPERIMENT_RPM, noise=0.03, gain=1.0, seed=1), path)
-    console.print(f"[yellow]using a SYNTHETIC measurement[/yellow] (kinematics + 3 % noise, not a recording): {escape(str(path))}")
+    console.print(f"[bold]acquisition on the simulated stand[/bold] (default truth): sine law, Fu = {EXPERIMENT_FU_N:g} N, "
+                  f"j = {EXPERIMENT_BACKLASH_MM} mm, {EXPERIMENT_RPM:g} rpm, {RECORD_SECONDS:g} s at 10 kHz (--fast)")
+    _cli(["acquire", "--device", "sim", "--rpm", f"{EXPERIMENT_RPM:g}", "--duration", f"{RECORD_SECONDS:g}",
+          "--fast", "--seed", "1", "--law", "sine", "--fu", f"{EXPERIMENT_FU_N:g}",
+          "--backlash-mm", f"{EXPERIMENT_BACKLASH_MM:g}", "-o", str(path)], "acquire")
     return path
 
 
-def step_report(out: Path, console: Console, measured: Path) -> tuple[Path, list[str]] | None:
-    """The report: both models, both omega1 modes, 'fast' solver preset, one simulated revolution."""
+def step_process(out: Path, console: Console, recording: Path) -> Path:
+    path = out / "measured_180rpm.nc"
+    path.unlink(missing_ok=True)
+    console.print(f"[bold]processing (labtool process)[/bold]: {escape(recording.name)} -> {escape(path.name)}")
+    _cli(["process", str(recording), "-o", str(path)], "process")
+    return path
+
+
+def groove_energy_loss(recording: Path) -> dict:
+    """The groove's restitution and contact damping as the stand's recording states them
+    (``truth_restitution``, ``truth_contact_damping_s_per_m``), for the models; {} when it states
+    none (the models keep the paper's k = 1, undamped)."""
+    import h5py
+    with h5py.File(recording, "r") as f:
+        a = dict(f.attrs)
+    out = {}
+    for key, names in (("restitution", ("truth_restitution", "truth_k")),
+                       ("contact_damping", ("truth_contact_damping_s_per_m", "truth_contact_damping"))):
+        for n in names:
+            if n in a:
+                try:
+                    out[key] = float(np.asarray(a[n]).ravel()[0])
+                except (TypeError, ValueError):
+                    continue
+                break
+    return out
+
+
+def step_report(out: Path, console: Console, measured: Path, recording: Path) -> tuple[Path, list[str]]:
+    """The report: both models, both omega1 modes, 'fast' preset, with the robustness check."""
     from common.files import atomic_write
-    from reports.pipeline import build_report, closest, headline
+    from reports.figures import all_figures
+    from reports.html import render_html
+    from reports.pdf import write_pdf
+    from reports.pipeline import build_report, headline, verdict_lines
+    from reports.summary import to_json
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
-    missing = [m for m in ("rigid", "elastic") if not _have(f"models.dynamics.{m}")]
-    if missing:
-        _skip(console, f"the {' and '.join(missing)} model(s)", "not installed yet: the kinematic level stands in, "
-              "and the report says so")
-    console.print(f"[bold]report[/bold]: {escape(measured.name)} against the rigid and elastic models, omega1 constant and variable")
-    try:
-        from reports.figures import all_figures
-        from reports.html import render_html
-        from reports.pdf import write_pdf
-        from reports.summary import to_json
-        rep = build_report(measured, ("rigid", "elastic"), ("const", "var"), accuracy="fast", revolutions=1.0,
-                           progress=lambda msg: console.print(f"  {msg}", highlight=False), stand_in_on_failure=True)
-        figs = all_figures(rep)
-        html = render_html(rep, figs)
-        atomic_write(html_path, lambda tmp: tmp.write_text(html, encoding="utf-8"))
-        text = to_json(rep)
-        atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
-        atomic_write(pdf_path, lambda tmp: write_pdf(rep, tmp, figs))
-    except OutputError:
-        raise                 # a full or read-only disk: the demo cannot go on
-    except Exception as exc:
-        _skip(console, "report", f"{type(exc).__name__}: {exc}")
-        console.print(traceback.format_exc(limit=3), highlight=False, markup=False)
-        return None
+    loss = groove_energy_loss(recording)
+    said = ", ".join(f"{k.replace('_', ' ')} {v:g}" for k, v in loss.items()) or "none stated: the paper's k = 1, undamped"
+    console.print(f"[bold]report[/bold]: {escape(measured.name)} against the rigid and elastic models, omega1 constant and "
+                  f"variable; the groove's energy loss: {escape(said)}")
+    rep = build_report(measured, ("rigid", "elastic"), ("const", "var"), overrides=loss, accuracy="fast",
+                       progress=lambda msg: console.print(f"  {msg}", highlight=False), stand_in_on_failure=True)
+    figs = all_figures(rep)
+    html = render_html(rep, figs)
+    atomic_write(html_path, lambda tmp: tmp.write_text(html, encoding="utf-8"))
+    text = to_json(rep)
+    atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+    atomic_write(pdf_path, lambda tmp: write_pdf(rep, tmp, figs))
     rows = [f"measured: {len(rep.cycles.revolutions)} whole revolutions at {rep.cycles.cam_speed_rpm:.1f} rpm "
             f"({rep.measured.attrs.get('source', 'recording')})"]
     for h in headline(rep):
         rows.append(f"{h['label']:36s} omega2: ISO {h['omega2_iso_rating']:.2f} ({h['omega2_iso_grade']}), "
                     f"S&G C {h['omega2_sg_comprehensive']:.2f}; epsilon2: ISO {h['epsilon2_iso_rating']:.2f} "
-                    f"({h['epsilon2_iso_grade']}), S&G C {h['epsilon2_sg_comprehensive']:.2f}")
-    best = closest(rep)
-    if best is not None:
-        rows.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
+                    f"({h['epsilon2_iso_grade']}), S&G C {h['epsilon2_sg_comprehensive']:.2f}; {h['motion']}")
+    rows += verdict_lines(rep)
     rows += [f"note: {n}" for n in rep.notes]
     return html_path, rows

@@ -10,8 +10,12 @@ Both sides go through the same three steps (``condition``):
 
 A measured revolution is *whole* when its samples cover [2 pi k, 2 pi (k+1)] without a time gap;
 partial revolutions at the ends of a recording, or around a gap, are left out and counted.
-Simulations are compared on their last whole revolution (the steady state); a simulation that covers
-only part of a revolution (for instance the rise only) is compared over that part only.
+Simulations (``simulated_cycles``) are resampled uniformly in their own time, low-passed like the
+measurement, and cut into whole revolutions the same way; their steady state is either periodic (the
+last two revolutions agree within ``PERIODIC_TOL``: the last one is the model's cycle) or not (the
+model's cycle statistics over its revolutions after the first are compared, as the measurement's).
+A simulation that covers only part of a revolution (for instance the rise only) is compared over
+that part only (``simulated_cycle``).
 """
 from __future__ import annotations
 
@@ -22,11 +26,17 @@ import numpy as np
 import xarray as xr
 
 from common.errors import InputError
+from common.history import History, Lowpass
+from processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
 FINE_FACTOR = 4
 DEFAULT_GRID = 720          # 0.5 deg of cam angle
 DEFAULT_HARMONICS = 60      # 180 Hz at 180 rpm; about 10 harmonics of the 58 deg rise
+# a model's motion is periodic when its last two revolutions differ by less than this fraction of
+# the signal's rms, for omega2 and epsilon2 (after the common conditioning); docs/reports.md
+PERIODIC_TOL = 0.05
+SIM_RATE_HZ = 10_000.0      # uniform resampling of a simulation when the measurement records no rate
 
 
 @dataclasses.dataclass
@@ -73,7 +83,6 @@ class TimeFilter:
 
     def apply_periodic(self, y: np.ndarray) -> np.ndarray:
         """Filter one period sampled uniformly in time, as a periodic signal (3 copies, middle kept)."""
-        from processing.filters import lowpass_sos, zero_phase
         sos = lowpass_sos(self.fs, self.cutoff_hz, self.order)
         n = y.size
         return zero_phase(sos, np.concatenate([y, y, y]))[n:2 * n]
@@ -82,24 +91,14 @@ class TimeFilter:
 def processing_filter(ds: xr.Dataset) -> TimeFilter | None:
     """The low-pass recorded in the measured file's processing history (``lowpass`` step), else its
     ``lowpass_hz`` attribute (order 4); None when the file records none or processing is absent."""
-    import json
-    try:
-        import processing.filters  # noqa: F401  (the filter design lives there)
-    except ImportError:
-        return None
     fs = ds.attrs.get("sample_rate_hz")
     cutoff, order = ds.attrs.get("lowpass_hz"), 4
-    try:
-        steps = json.loads(ds.attrs.get("processing_history", "[]"))
-        for st in steps if isinstance(steps, list) else []:
-            if isinstance(st, dict) and st.get("step") == "lowpass":
-                par = st.get("parameters", {})
-                cutoff = par.get("cutoff_hz", cutoff)
-                order = int(par.get("order", order))
-                if par.get("zero_phase") is False or par.get("kind", "butterworth") != "butterworth":
-                    return None   # not a filter this re-implementation reproduces
-    except (TypeError, ValueError):
-        pass
+    lp = History.parse(ds.attrs.get("processing_history", "[]")).find(Lowpass)
+    if lp is not None:
+        if lp.zero_phase is False or (lp.kind or "butterworth") != "butterworth":
+            return None   # not a filter this re-implementation reproduces
+        cutoff = lp.cutoff_hz if lp.cutoff_hz is not None else cutoff
+        order = int(lp.order) if lp.order is not None else order
     try:
         fs, cutoff = float(fs), float(cutoff)
     except (TypeError, ValueError):
@@ -131,12 +130,69 @@ class MeasuredCycles:
     time: np.ndarray                       # (n_rev, n_grid) time of each grid point (s)
     partial: int                           # revolutions left out (partial or with a gap)
     cam_speed_rpm: float                   # mean measured cam speed over the whole revolutions
+    in_file: int | None = None             # revolution marks in the file when only a sample is read
+    blocks: list = dataclasses.field(default_factory=list)   # the measured data read (xr.Dataset each)
 
     def mean(self, name: str) -> np.ndarray:
         return self.signals[name].mean(axis=0)
 
     def std(self, name: str) -> np.ndarray:
         return self.signals[name].std(axis=0)
+
+
+MAX_REVOLUTIONS = 240      # the report reads at most this many whole revolutions of a recording
+BLOCK_REVOLUTIONS = 20     # ... in blocks of this many consecutive ones, evenly spread
+
+
+def revolution_blocks(ds: xr.Dataset, max_revolutions: int = MAX_REVOLUTIONS,
+                      per_block: int = BLOCK_REVOLUTIONS) -> tuple[list[tuple[slice, int]], int] | None:
+    """Sample slices (of the ``time`` dimension, with the index of their first mark) of at most ``max_revolutions`` whole revolutions in
+    blocks of ``per_block`` consecutive ones, evenly spread over the recording, and the number of
+    revolution marks in the file; None when the file holds fewer (read it whole) or records no
+    revolution marks (``revolution_start_time``, written by labtool process). So the report's cost
+    does not grow with the recording's length; the page says how many revolutions were used."""
+    if "revolution_start_time" not in ds.variables or "time" not in ds.coords:
+        return None
+    marks = np.asarray(ds["revolution_start_time"].values, dtype=float)
+    marks = marks[np.isfinite(marks)]
+    if marks.size <= max_revolutions + 2:
+        return None
+    t = ds["time"].values                         # the index coordinate is in memory already
+    n_blocks = max(1, max_revolutions // per_block)
+    starts = np.linspace(0, marks.size - per_block - 1, n_blocks).round().astype(int)
+    out = []
+    for i in starts:
+        a = int(np.searchsorted(t, marks[i], side="left"))
+        b = int(np.searchsorted(t, marks[i + per_block], side="right"))
+        # a few samples either side so the end marks' revolutions are whole in the slice
+        out.append((slice(max(a - 4, 0), min(b + 4, t.size)), int(i)))
+    return out, int(marks.size)
+
+
+def read_measured(ds: xr.Dataset, names, cond: Conditioning, extra=(),
+                  max_revolutions: int = MAX_REVOLUTIONS) -> MeasuredCycles:
+    """``measured_cycles`` of a (lazily opened) measured file, reading only a bounded sample of
+    whole revolutions (``revolution_blocks``) when it is long. ``extra`` names further variables
+    over time to read with them (kept in ``blocks`` for the event detection)."""
+    want = [n for n in dict.fromkeys(["phi1", *names, *extra]) if n in ds]
+    sel = revolution_blocks(ds, max_revolutions)
+    if sel is None:
+        block = ds[want].load()
+        cyc = measured_cycles(block, names, cond)
+        cyc.blocks = [block]
+        return cyc
+    slices, in_file = sel
+    parts, revs = [], []
+    for sl, first_mark in slices:
+        block = ds[want].isel(time=sl).load()
+        c = measured_cycles(block, names, cond)
+        parts.append((block, c))
+        revs.append(c.revolutions - c.revolutions.min() + first_mark)   # numbered as the file's marks
+    first = parts[0][1]
+    signals = {n: np.concatenate([c.signals[n] for _, c in parts]) for n in names}
+    times = np.concatenate([c.time for _, c in parts])
+    rpm = float(np.mean([c.cam_speed_rpm for _, c in parts]))
+    return MeasuredCycles(first.grid, np.concatenate(revs), signals, times, 0, rpm, in_file, [b for b, _ in parts])
 
 
 def _unwrapped_angle(phi1: np.ndarray) -> np.ndarray:
@@ -215,6 +271,13 @@ class SimulatedCycle:
     signals: dict
     covered: np.ndarray
     note: str
+    periodic: bool = True      # one revolution (the kinematics, a partial run): nothing to average
+    change: float = 0.0
+    n_used: int = 1
+
+    @property
+    def std(self) -> dict:
+        return {n: np.zeros_like(v) for n, v in self.signals.items()}
 
 
 def _sim_time(sim: xr.Dataset, ok: np.ndarray, order: np.ndarray) -> np.ndarray | None:
@@ -332,3 +395,122 @@ def simulated_cycle(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_om
         note += "; epsilon2 = d(omega2)/dt of the filtered omega2 (impact impulses included)"
     signals = {n: condition(v, cond) for n, v in fine_vals.items()}
     return SimulatedCycle(cond.grid, signals, covered, note)
+
+
+@dataclasses.dataclass
+class SimulatedCycles:
+    """Every whole revolution of a simulation on the report grid, and the model's cycle.
+
+    ``revolutions[name]``: (K, n_grid), revolution 0 first. ``periodic``: the last two revolutions
+    agree within ``PERIODIC_TOL`` (``change`` is the larger relative rms difference of the two
+    signals). ``signals``: the model's cycle, the last revolution when periodic, else the mean over
+    the revolutions after the first (``n_used`` of them); ``std``: their scatter (0 when periodic)."""
+
+    grid: np.ndarray
+    revolutions: dict
+    periodic: bool
+    change: float
+    signals: dict
+    std: dict
+    n_used: int
+    covered: np.ndarray
+    note: str
+
+    def upto(self, k: int, tol: float = PERIODIC_TOL) -> "SimulatedCycles":
+        """The same simulation stopped after its first ``k`` revolutions (a causal simulation of k
+        revolutions is the first k revolutions of a longer one)."""
+        return steady_cycles({n: v[:k] for n, v in self.revolutions.items()}, self.grid, tol)
+
+
+def _uniform_in_time(sim: xr.Dataset, names, fs: float):
+    """(theta (rad, unwrapped), time, {name: values}) resampled uniformly at ``fs`` over the
+    simulation, or None when it has no usable time axis. At repeated time stamps (the states
+    before and after a rigid impact) the later state is kept, so omega2 steps across them."""
+    if "time" not in sim.variables or "phi1" not in sim.variables or sim["time"].shape != sim["phi1"].shape:
+        return None
+    t = np.asarray(sim["time"].values, dtype=float)
+    cols = {n: np.asarray(sim[n].values, dtype=float) for n in names if n in sim and sim[n].shape == t.shape}
+    phi = np.asarray(sim["phi1"].values, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(phi)
+    for y in cols.values():
+        ok &= np.isfinite(y)
+    t, phi = t[ok], phi[ok]
+    if t.size < 4 or np.any(np.diff(t) < 0):
+        return None
+    keep = np.append(np.diff(t) > 0, True)
+    t, phi = t[keep], phi[keep]
+    tu = t[0] + np.arange(int(math.floor((t[-1] - t[0]) * fs)) + 1) / fs
+    return np.interp(tu, t, phi), tu, {n: np.interp(tu, t, y[ok][keep]) for n, y in cols.items()}
+
+
+def _periodic_tail_filter(y: np.ndarray, period_n: int, tf: "TimeFilter") -> np.ndarray:
+    """Zero-phase low-pass of a record whose end continues periodically (the steady state): one
+    more period is appended before filtering so the last revolution has no edge transient."""
+    n = y.size
+    ext = np.concatenate([y, y[n - period_n:]]) if 0 < period_n < n else y
+    return zero_phase(lowpass_sos(tf.fs, tf.cutoff_hz, tf.order), ext)[:n]
+
+
+def simulated_cycles(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_omega2: bool = False,
+                     time_filter: "TimeFilter | None" = None, tol: float = PERIODIC_TOL) -> SimulatedCycles | None:
+    """Whole revolutions of a dynamic simulation conditioned like the measurement, and its steady
+    cycle; None when the simulation has no time axis or no whole revolution (use simulated_cycle).
+
+    The simulation is resampled uniformly in its own time (at the recording's rate when the
+    measurement's low-pass is known), low-passed with ``time_filter`` (zero-phase, as the
+    processing), then every revolution [2 pi k, 2 pi (k+1)] goes through ``condition`` on the
+    fine grid. ``epsilon2_from_omega2`` (rigid model: its epsilon2 leaves out the impulses of its
+    velocity jumps): epsilon2 = d(omega2)/dt of the filtered omega2, which is what an accelerometer
+    behind the same filter sees (filtering and differentiation commute)."""
+    names = list(names)
+    fs = time_filter.fs if time_filter is not None else SIM_RATE_HZ
+    u = _uniform_in_time(sim, names, fs)
+    if u is None:
+        return None
+    theta, tu, data = u
+    if any(n not in data for n in names if not (n == "epsilon2" and epsilon2_from_omega2)):
+        return None
+    K = int(math.floor(theta[-1] / TWO_PI + 1e-9))
+    if K < 1 or theta[0] > 1e-6:
+        return None
+    period_n = int(round(TWO_PI / max(float(np.median(np.diff(theta))), 1e-12)))   # samples per revolution
+    if time_filter is not None:
+        data = {n: _periodic_tail_filter(y, period_n, time_filter) for n, y in data.items()}
+    if epsilon2_from_omega2:
+        data["epsilon2"] = np.gradient(data["omega2"], 1.0 / fs)
+    fine = cond.fine_grid
+    revs = {n: condition(np.array([np.interp(TWO_PI * k + fine, theta, data[n]) for k in range(K)]), cond)
+            for n in names}
+    out = steady_cycles(revs, cond.grid, tol)
+    if time_filter is not None:
+        out.note += "; processing low-pass applied"
+    if epsilon2_from_omega2:
+        out.note += "; epsilon2 = d(omega2)/dt of the filtered omega2 (impact impulses included)"
+    return out
+
+
+def steady_cycles(revs: dict, grid: np.ndarray, tol: float = PERIODIC_TOL) -> SimulatedCycles:
+    """The model's cycle from its conditioned revolutions ``revs[name]`` (K, n_grid)."""
+    K = next(iter(revs.values())).shape[0]
+    change = 0.0
+    if K >= 2:
+        for v in revs.values():
+            rms = float(np.sqrt(np.mean(v[-1] ** 2)))
+            if rms > 0:
+                change = max(change, float(np.sqrt(np.mean((v[-1] - v[-2]) ** 2))) / rms)
+    periodic = K >= 2 and change < tol
+    if periodic or K < 3:
+        cyc = {n: v[-1].copy() for n, v in revs.items()}
+        std = {n: np.zeros(v.shape[1]) for n, v in revs.items()}
+        n_used = 1
+        note = (f"periodic: revolution {K} of {K} (steady state; it differs from revolution {K - 1} by "
+                f"{100 * change:.2g} % rms)" if periodic else
+                f"revolution {K} of {K}" + ("" if K < 2 else f"; NOT periodic ({100 * change:.2g} % rms change "
+                                              "from the revolution before), too few revolutions for statistics"))
+    else:
+        cyc = {n: v[1:].mean(axis=0) for n, v in revs.items()}
+        std = {n: v[1:].std(axis=0) for n, v in revs.items()}
+        n_used = K - 1
+        note = (f"NOT periodic ({100 * change:.2g} % rms change between its last two revolutions): the model's "
+                f"cycle average over revolutions 2..{K} is compared, with its scatter")
+    return SimulatedCycles(grid, revs, periodic, change, cyc, std, n_used, np.ones(grid.size, bool), note)

@@ -1,36 +1,58 @@
 """The report's figures (matplotlib, object API, no global state), of the paper's kinds:
 
-- MR13D and the jump indicators of each simulation (paper Figs 7-9);
+- MR13D of each model in its own panel and the impacts' percussions (paper Figs 7-9);
 - amplitude spectra and time histories of the measured accelerations (Fig 11);
 - measured against simulated omega2 and epsilon2, omega1 constant and variable (Figs 12-14);
 - residuals (simulated minus the measured cycle average) against the measured scatter.
 
 Each function returns ``(title, Figure)`` or None when the data it needs is absent. Degrees and
-millimetres appear only on the axes; the data stay SI.
+millimetres appear only on the axes; the data stay SI. The y-range of a comparison is set by the
+measurement; model curves beyond it are clipped and marked (``plot_clipped``).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+
+from common.cf import elapsed_seconds
 
 COLORS = {"const": "tab:blue", "var": "tab:red"}
 SIGNAL_LABEL = {"omega2": ("ω2", "rad/s"), "epsilon2": ("ε2", "rad/s²")}
-# jump indicators a simulation may carry: name -> (scale to the plotted unit, unit, label)
-JUMP_VARS = {
-    "dphi2": (180.0 / math.pi, "deg", "φ2rcj − φ2rfj"),
-    "domega2": (1.0, "rad/s", "ω2rcj − ω2rfj"),
-    "domega1": (1.0, "rad/s", "ω1rcj − ω1rfj"),
-    "percussion": (1.0, "N·s", "Percussion_int"),
-    "x_el": (1e3, "mm", "x_el"),
-}
 
 
 def plain(text) -> str:
     """A string from a file, shown literally by matplotlib ('$' would start mathtext and an
     unbalanced one would fail the drawing)."""
     return str(text).replace("$", r"\$")
+
+
+def measured_limits(values: np.ndarray, margin: float = 0.15) -> tuple[float, float]:
+    """y-range set by the measurement: its extremes (all revolutions and the band) plus ``margin``."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return -1.0, 1.0
+    lo, hi = float(v.min()), float(v.max())
+    pad = margin * max(hi - lo, 1e-12)
+    return lo - pad, hi + pad
+
+
+def plot_clipped(ax, x, y, lim, **style) -> int:
+    """Plot y clipped to the axis range ``lim``; the clipped stretches are marked with small
+    triangles on the axis' edge. Returns the number of clipped points."""
+    y = np.asarray(y, dtype=float)
+    lo, hi = lim
+    ax.plot(x, np.clip(y, lo, hi), **style)
+    above, below = y > hi, y < lo
+    color = style.get("color")
+    if above.any():
+        ax.plot(np.asarray(x)[above], np.full(above.sum(), hi), "^", ms=3, color=color, clip_on=False)
+    if below.any():
+        ax.plot(np.asarray(x)[below], np.full(below.sum(), lo), "v", ms=3, color=color, clip_on=False)
+    return int(above.sum() + below.sum())
 
 
 def _last_revolution(ds):
@@ -45,44 +67,53 @@ def _last_revolution(ds):
 
 
 def fig_mr13d(sims) -> tuple[str, Figure] | None:
-    """MR13D of each simulation over its last revolution, and the jump indicators it computes."""
-    if not sims:
+    """MR13D of each model (its own panel, so the elastic contact spikes do not hide the rigid
+    curve; each panel's y-range is its 1-99 % quantiles, spikes beyond it clipped and marked) over
+    the last simulated revolution, and the percussions of the events (Figs 7-9)."""
+    models = list(dict.fromkeys(r.requested for r in sims if "MR13D" in r.dataset))
+    if not models:
         return None
-    extra = [v for v in JUMP_VARS if any(v in r.dataset and r.dataset[v].dims == r.dataset["phi1"].dims for r in sims)]
     has_perc = any("event_percussion" in r.dataset and "event_phi1" in r.dataset for r in sims)
+    rows = len(models) + int(has_perc)
+    fig = Figure(figsize=(9, 2.4 * rows + 0.6), layout="constrained")
+    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    for ax, model in zip(axes, models):
+        runs = [r for r in sims if r.requested == model and "MR13D" in r.dataset]
+        vals = []
+        for r in runs:
+            mask, deg = _last_revolution(r.dataset)
+            vals.append((r, deg, np.asarray(r.dataset["MR13D"].values, dtype=float)[mask]))
+        pool = np.concatenate([v for _, _, v in vals])
+        q1, q99 = np.nanpercentile(pool, [1, 99])
+        pad = 0.15 * max(q99 - q1, 1e-9)
+        lim = (q1 - pad, q99 + pad)
+        for r, deg, v in vals:
+            plot_clipped(ax, deg, v, lim, color=COLORS[r.omega1], lw=0.9, label=r.label)
+        ax.set_ylim(*lim)
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(f"MR13D [N·m]\n{model}")
+        ax.legend(fontsize=7, ncol=2)
     if has_perc:
-        extra.append("percussion_events")
-    fig = Figure(figsize=(9, 2.6 * (1 + len(extra))), layout="constrained")
-    axes = fig.subplots(1 + len(extra), 1, sharex=True, squeeze=False)[:, 0]
-    for r in sims:
-        ds = r.dataset
-        mask, deg = _last_revolution(ds)
-        style = dict(color=COLORS[r.omega1], lw=1.0, ls="-" if r.requested == "elastic" else "--", label=r.label)
-        if "MR13D" in ds:
-            axes[0].plot(deg, np.asarray(ds["MR13D"].values)[mask], **style)
-        for ax, v in zip(axes[1:], extra):
-            if v == "percussion_events" and "event_percussion" in ds and "event_phi1" in ds:
-                ph = np.asarray(ds["event_phi1"].values, dtype=float)
-                pc = np.asarray(ds["event_percussion"].values, dtype=float)
-                k = max(int(math.floor(np.nanmax(np.asarray(ds["phi1"].values)) / (2 * math.pi) + 1e-9)) - 1, 0)
-                sel = (ph >= 2 * math.pi * k) & (ph < 2 * math.pi * (k + 1)) & np.isfinite(pc)
-                if sel.any():
-                    ax.vlines(np.degrees(ph[sel] - 2 * math.pi * k), 0, pc[sel], color=style["color"], lw=1.0)
-                    ax.plot(np.degrees(ph[sel] - 2 * math.pi * k), pc[sel], "o", ms=3, color=style["color"])
-                ax.set_ylabel("Percussion_int [N·s]")
-            elif v in ds and ds[v].dims == ds["phi1"].dims:
-                scale, unit, lab = JUMP_VARS[v]
-                ax.plot(deg, np.asarray(ds[v].values)[mask] * scale, **style)
-                ax.set_ylabel(f"{lab} [{unit}]")
-    axes[0].axhline(0.0, color="k", lw=0.6)
-    axes[0].set_ylabel("MR13D [N·m]")
-    axes[0].legend(fontsize=8, ncol=2)
+        ax = axes[-1]
+        for r in sims:
+            ds = r.dataset
+            if "event_percussion" not in ds or "event_phi1" not in ds:
+                continue
+            ph = np.asarray(ds["event_phi1"].values, dtype=float)
+            pc = np.asarray(ds["event_percussion"].values, dtype=float)
+            k = max(int(math.floor(np.nanmax(np.asarray(ds["phi1"].values)) / (2 * math.pi) + 1e-9)) - 1, 0)
+            sel = (ph >= 2 * math.pi * k) & (ph < 2 * math.pi * (k + 1)) & np.isfinite(pc)
+            if sel.any():
+                ax.vlines(np.degrees(ph[sel] - 2 * math.pi * k), 0, pc[sel], color=COLORS[r.omega1], lw=1.0)
+                ax.plot(np.degrees(ph[sel] - 2 * math.pi * k), pc[sel], "o", ms=3, color=COLORS[r.omega1], label=r.label)
+        ax.set_ylabel("Percussion_int [N·s]")
+        ax.legend(fontsize=7)
     for ax in axes:
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
-    fig.suptitle("MR13D and jump indicators of the simulations, last simulated revolution (cf. paper Figs 7-9)",
-                 fontsize=10)
-    return "MR13D and jump indicators (Figs 7-9)", fig
+    fig.suptitle("MR13D per model and the impacts' percussions, last simulated revolution (cf. paper Figs 7-9); "
+                 "▲▼ beyond the axis", fontsize=9)
+    return "MR13D per model and percussions (Figs 7-9)", fig
 
 
 def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
@@ -98,18 +129,20 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
     for i, n in enumerate(spectra):
         ax = axes[i, 0]
         y = np.abs(np.asarray(ds[n].values, dtype=float))
-        ax.semilogy(f, np.where(y > 0, y, np.nan), lw=0.7)
-        ax.set_xlim(0, min(float(f.max()), 1000.0))
+        top = min(float(f.max()), 1000.0)
+        keep = f <= top
+        ax.semilogy(f[keep], np.where(y[keep] > 0, y[keep], np.nan), lw=0.7)
+        ax.set_xlim(0, top)
         ax.set_ylabel(plain(f"[{ds[n].attrs.get('units', '')}]"))
         ax.set_title(plain(ds[n].attrs.get("long_name", n)), fontsize=9)
         ax.grid(True, alpha=0.3)
     if spectra:
         axes[len(spectra) - 1, 0].set_xlabel("frequency [Hz]")
-    t = np.asarray(ds["time"].values, dtype=float) if series else None
+    t = elapsed_seconds(ds["time"].values) if series else None  # CF time may decode to datetime64
+    sel = slice(0, int(np.searchsorted(t, t[0] + max_time_s, side="right"))) if series else None
     for i, n in enumerate(series):
         ax = axes[i, 1]
-        sel = t <= t[0] + max_time_s
-        ax.plot(t[sel], np.asarray(ds[n].values, dtype=float)[sel], lw=0.6)
+        ax.plot(t[sel], np.asarray(ds[n][sel].values, dtype=float), lw=0.6)   # reads only that second
         ax.set_ylabel(plain(f"{n} [{ds[n].attrs.get('units', 'm/s²')}]"))
         ax.set_title(f"{n}, filtered and translated (first {max_time_s:g} s)", fontsize=9)
         ax.grid(True, alpha=0.3)
@@ -124,7 +157,9 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
 
 
 def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
-    """Measured revolutions, their average, and ``model`` at omega1 constant and variable (Figs 12-14)."""
+    """Measured revolutions, their average and +-2 sigma band, and ``model`` at omega1 constant and
+    variable (Figs 12-14). The y-range is the measurement's; a model beyond it is clipped and
+    marked (triangles on the edge), with its own +-2 sigma band when it is not periodic."""
     runs = [r for r in report.sims if r.requested == model]
     if not runs:
         return None
@@ -133,12 +168,23 @@ def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
     sym, unit = SIGNAL_LABEL[signal]
     fig = Figure(figsize=(10, 4.2), layout="constrained")
     ax = fig.subplots()
-    for k in range(cyc.signals[signal].shape[0]):
-        ax.plot(deg, cyc.signals[signal][k], color="0.75", lw=0.6, label="measured, each revolution" if k == 0 else None)
-    ax.plot(deg, cyc.mean(signal), color="k", lw=1.4, label="measured values (cycle average)")
+    revs = cyc.signals[signal]
+    mean, sd = cyc.mean(signal), cyc.std(signal)
+    lim = measured_limits(np.concatenate([revs.ravel(), mean + 2 * sd, mean - 2 * sd]))
+    show = revs[:: max(1, revs.shape[0] // 60)]          # at most ~60 grey lines, whatever the length
+    ax.add_collection(LineCollection([np.column_stack([deg, r]) for r in show], colors="0.78", linewidths=0.5,
+                                     label=f"measured, each revolution ({revs.shape[0]})"))
+    ax.fill_between(deg, mean - 2 * sd, mean + 2 * sd, color="0.55", alpha=0.35, lw=0, label="measured ±2σ")
+    ax.plot(deg, mean, color="k", lw=1.4, label="measured values (cycle average)")
+    clipped = 0
     for r in runs:
         y = np.where(r.cycle.covered, r.cycle.signals[signal], np.nan)
-        ax.plot(deg, y, color=COLORS[r.omega1], lw=1.1, label=r.label)
+        if not r.cycle.periodic:
+            s2 = 2 * r.cycle.std[signal]
+            ax.fill_between(deg, np.clip(y - s2, *lim), np.clip(y + s2, *lim), color=COLORS[r.omega1], alpha=0.15, lw=0)
+        label = r.label + ("" if r.cycle.periodic else f" (mean of {r.cycle.n_used} rev, ±2σ)")
+        clipped += plot_clipped(ax, deg, y, lim, color=COLORS[r.omega1], lw=1.1, label=label)
+    ax.set_ylim(*lim)
     ax.set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
     ax.set_ylabel(f"{sym} [{unit}]")
     ax.set_xlim(0, 360)
@@ -147,15 +193,19 @@ def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
     top = ax.secondary_xaxis("top", functions=(lambda d: d / deg_per_s, lambda t: t * deg_per_s))
     top.set_xlabel(f"time from the start of the rise [s] at {cyc.cam_speed_rpm:.1f} rpm", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, loc="best")
     used = runs[0].model
     name = model if used == model else f"{model} (the {used} level stood in)"
-    ax.set_title(f"{sym} of the follower: {name} model vs experiment, {report.scene['cam_speed_rpm']:g} rpm (cf. paper Figs 12-14)")
+    note = f"; ▲▼ model beyond the measured range ({clipped} points)" if clipped else ""
+    ax.set_title(f"{sym}: {name} model vs experiment, {report.scene['cam_speed_rpm']:g} rpm (cf. paper Figs 12-14){note}",
+                 fontsize=9)
     return f"{sym}: {model} model vs measurement", fig
 
 
 def fig_residuals(report, signal: str) -> tuple[str, Figure] | None:
-    """Simulated minus the measured cycle average, with +-2 standard deviations of the measured scatter."""
+    """Simulated minus the measured cycle average, against +-2 standard deviations of the measured
+    scatter (shaded and outlined). The y-range is set by the band (at least 3 x its half width) and
+    by the measured signal's range; residuals beyond it are clipped and marked."""
     if not report.sims:
         return None
     cyc = report.cycles
@@ -164,17 +214,24 @@ def fig_residuals(report, signal: str) -> tuple[str, Figure] | None:
     fig = Figure(figsize=(10, 3.6), layout="constrained")
     ax = fig.subplots()
     sd = cyc.std(signal)
-    ax.fill_between(deg, -2 * sd, 2 * sd, color="0.85", label="±2σ of the measured revolutions")
+    mean = cyc.mean(signal)
+    half = max(3.0 * float(np.max(2 * sd)), 0.25 * float(np.ptp(mean)))
+    lim = (-half, half)
+    ax.fill_between(deg, -2 * sd, 2 * sd, color="tab:green", alpha=0.25, lw=0, label="±2σ of the measured revolutions")
+    ax.plot(deg, 2 * sd, color="tab:green", lw=0.7)
+    ax.plot(deg, -2 * sd, color="tab:green", lw=0.7)
     for r in report.sims:
-        y = np.where(r.cycle.covered, r.cycle.signals[signal] - cyc.mean(signal), np.nan)
-        ax.plot(deg, y, color=COLORS[r.omega1], lw=1.0, ls="-" if r.requested == "elastic" else "--", label=r.label)
+        y = np.where(r.cycle.covered, r.cycle.signals[signal] - mean, np.nan)
+        plot_clipped(ax, deg, y, lim, color=COLORS[r.omega1], lw=1.0, ls="-" if r.requested == "elastic" else "--",
+                     label=r.label)
     ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_ylim(*lim)
     ax.set_xlim(0, 360)
     ax.set_xlabel("cam angle φ1 [deg]")
     ax.set_ylabel(f"Δ{sym} [{unit}]")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    ax.set_title(f"Residuals of {sym}: simulated − measured cycle average")
+    ax.legend(fontsize=7, ncol=3)
+    ax.set_title(f"Residuals of {sym}: simulated − measured cycle average (▲▼ beyond the axis)", fontsize=9)
     return f"Residuals of {sym}", fig
 
 

@@ -15,13 +15,16 @@ import jinja2
 import numpy as np
 
 from reports.figures import all_figures, png_bytes
-from reports.pipeline import Report, closest, headline
+from reports.align import PERIODIC_TOL
+from reports.pipeline import Report, closest, headline, robust_verdict
 from reports.summary import build_summary
 
 TEMPLATES = Path(__file__).with_name("templates")
 METRIC_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_magnitude", "sg_phase",
                   "sg_comprehensive", "nrmse", "peak_max_error", "peak_min_error", "peak_max_shift_deg",
-                  "peak_min_shift_deg", "lag_deg")
+                  "peak_min_shift_deg", "lag_deg", "band_overlap", "scatter_ratio")
+PER_REV_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_comprehensive", "nrmse",
+                   "lag_deg")
 
 
 def _fmt(value, spec: str = ".3g") -> str:
@@ -72,8 +75,12 @@ def render_html(report: Report, figures=None, dpi: int = 90) -> str:
     context = {
         "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "measured": summary["measured"], "op": report.scene, "notes": report.notes,
-        "headline": headline(report), "closest": closest(report), "comparisons": report.comparisons, "metric_columns": METRIC_COLUMNS,
-        "events": report.events, "simulations": summary["simulations"], "conditioning": summary["conditioning"],
+        "headline": headline(report), "closest": closest(report), "comparisons": report.comparisons,
+        "metric_columns": METRIC_COLUMNS, "per_rev_columns": PER_REV_COLUMNS, "periodic_tol": PERIODIC_TOL,
+        "metrics_by_signal": [(s, [c for c in report.comparisons if c["signal"] == s]) for s in ("omega2", "epsilon2")],
+        "robustness": {"rows": report.robustness, "robust": (robust_verdict(report.robustness) or {}).get("robust"),
+                       "labels": [m["label"] for m in report.robustness[0]["models"]] if report.robustness else []},
+        "events": report.events, "mev": summary["measured"]["events"], "simulations": summary["simulations"], "conditioning": summary["conditioning"],
         "thresholds": {"file": report.thresholds_source, "rows": rows}, "passed": report.passed,
         "failed": [r for r in rows if not r["passed"]], "figures": figs,
         "variables": variables, "attributes": attributes,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from common.errors import InputError
 
@@ -50,6 +51,15 @@ def _pair(measured, simulated, min_len: int = 2):
     if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
         raise InputError("signals contain NaN or Inf samples")
     return m, c
+
+
+def _rows(measured, simulated):
+    """(R, N) measured rows and the simulation broadcast to them; InputError on a shape mismatch."""
+    m = np.asarray(measured, dtype=float)
+    c = np.asarray(simulated, dtype=float)
+    if m.ndim != 2 or c.ndim not in (1, 2) or c.shape[-1] != m.shape[1] or (c.ndim == 2 and c.shape[0] != m.shape[0]):
+        raise InputError(f"signals differ in shape ({m.shape} measured, {c.shape} simulated); align them on one grid first")
+    return m, np.broadcast_to(c, m.shape)
 
 
 # --------------------------------------------------------------------------- Sprague & Geers
@@ -141,19 +151,57 @@ def _pearson(a, b) -> float:
     return float(a @ b) / den if den > 0 else 0.0
 
 
+def _shift_correlations(m: np.ndarray, c: np.ndarray, n_max: int) -> np.ndarray:
+    """Pearson correlation of the overlapping parts for every lag k in [-n_max, n_max], rows at once.
+
+    ``m``, ``c``: (R, N). Returns (R, 2 n_max + 1); column n_max + k holds lag k (k > 0: pairs
+    m[:N-k] with c[k:], the simulation is late). Cross sums from one zero-padded FFT, the sums of
+    the overlaps from prefix sums: O(N log N) per row instead of O(N n_max)."""
+    R, N = m.shape
+    m = m - m.mean(axis=1, keepdims=True)      # Pearson ignores constants; this keeps the sums small
+    c = c - c.mean(axis=1, keepdims=True)
+    nfft = 1 << int(math.ceil(math.log2(2 * N)))
+    xc = np.fft.irfft(np.conj(np.fft.rfft(m, nfft)) * np.fft.rfft(c, nfft), nfft)
+    k = np.arange(-n_max, n_max + 1)
+    smc = xc[:, k % nfft]                      # sum_i m[i] c[i + k] over the overlap
+    z = np.zeros((R, 1))
+    pm, pc = np.hstack([z, np.cumsum(m, 1)]), np.hstack([z, np.cumsum(c, 1)])
+    pmm, pcc = np.hstack([z, np.cumsum(m * m, 1)]), np.hstack([z, np.cumsum(c * c, 1)])
+    kp = np.maximum(k, 0)
+    kn = np.maximum(-k, 0)
+    L = N - np.abs(k)
+    # overlap: m[kn : N - kp], c[kp : N - kn]
+    sm, smm = pm[:, N - kp] - pm[:, kn], pmm[:, N - kp] - pmm[:, kn]
+    sc, scc = pc[:, N - kn] - pc[:, kp], pcc[:, N - kn] - pcc[:, kp]
+    num = L * smc - sm * sc
+    den = np.sqrt(np.maximum(L * smm - sm * sm, 0.0) * np.maximum(L * scc - sc * sc, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return rho
+
+
+def _pick_shift(rho: np.ndarray, n_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """ISO's choice among the lags: the largest correlation, the smallest |n| on a tie, the
+    positive lag before the negative one (as ISO/TS 18571 and objective-rating-metrics scan)."""
+    best_n = np.zeros(rho.shape[0], dtype=np.int64)
+    best = rho[:, n_max].copy()
+    for n in range(1, n_max + 1):
+        for k in (n, -n):
+            r = rho[:, n_max + k]
+            better = r > best + 1e-12
+            best = np.where(better, r, best)
+            best_n = np.where(better, k, best_n)
+    return best_n, best
+
+
 def best_shift(measured, simulated, max_shift: float = 0.2) -> tuple[int, float]:
     """The shift n (samples) of the simulation that maximises the Pearson correlation of the
     overlapping parts, |n| <= floor(max_shift*N); n > 0 means the simulation lags (it is late).
     Returns (n, rho). Ties go to the smallest |n|."""
     m, c = _pair(measured, simulated)
-    n_max = int(math.floor(max_shift * m.size))
-    best = (0, _pearson(m, c))
-    for n in range(1, n_max + 1):
-        for k in (n, -n):
-            r = _pearson(m[:-k], c[k:]) if k > 0 else _pearson(m[-k:], c[:k])
-            if r > best[1] + 1e-12:
-                best = (k, r)
-    return best
+    n_max = min(int(math.floor(max_shift * m.size)), m.size - 2)
+    n, r = _pick_shift(_shift_correlations(m[None], c[None], n_max), n_max)
+    return int(n[0]), float(r[0])
 
 
 def _shifted(m, c, n):
@@ -165,44 +213,114 @@ def _shifted(m, c, n):
     return m, c
 
 
+@njit(cache=True)
+def _dtw_fill(x, y, window):
+    """Cumulative cost D (n+1, m+1) of DTW, squared-difference cost, steps (1,0), (0,1), (1,1) of
+    weight 1, band |i - j| <= window (1-based i, j). Self-contained (no module globals), so
+    numba's file-keyed cache cannot keep a stale copy of anything it calls."""
+    n, m = x.size, y.size
+    D = np.full((n + 1, m + 1), np.inf)
+    D[0, 0] = 0.0
+    for i in range(1, n + 1):
+        lo = max(1, i - window)
+        hi = min(m, i + window)
+        for j in range(lo, hi + 1):
+            prev = D[i - 1, j - 1]
+            if D[i - 1, j] < prev:
+                prev = D[i - 1, j]
+            if D[i, j - 1] < prev:
+                prev = D[i, j - 1]
+            d = x[i - 1] - y[j - 1]
+            D[i, j] = d * d + prev
+    return D
+
+
+@njit(cache=True)
+def _dtw_backtrack(D):
+    """Warping path (0-based index arrays) from the end; on a tie the diagonal step first."""
+    i, j = D.shape[0] - 1, D.shape[1] - 1
+    pi = np.empty(i + j, dtype=np.int64)
+    pj = np.empty(i + j, dtype=np.int64)
+    k = 0
+    pi[0], pj[0] = i - 1, j - 1
+    while i > 1 or j > 1:
+        a, b, c = D[i - 1, j - 1], D[i - 1, j], D[i, j - 1]
+        if a <= b and a <= c:
+            i, j = i - 1, j - 1
+        elif b <= c:
+            i = i - 1
+        else:
+            j = j - 1
+        k += 1
+        pi[k], pj[k] = i - 1, j - 1
+    return pi[:k + 1][::-1].copy(), pj[:k + 1][::-1].copy()
+
+
 def dtw_path(x, y, window: int) -> tuple[np.ndarray, np.ndarray]:
     """Dynamic time warping of x against y (squared-difference cost, steps (1,0), (0,1), (1,1)
     with weight 1, Sakoe-Chiba band |i - j| <= window). Returns the index arrays of the warping
-    path. The cost matrix is filled one anti-diagonal at a time (vectorised)."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n, m = x.size, y.size
-    window = max(int(window), abs(n - m))
-    D = np.full((n + 1, m + 1), np.inf)
-    D[0, 0] = 0.0
-    for k in range(2, n + m + 1):   # i + j = k with 1-based i, j
-        i = np.arange(max(1, k - m), min(n, k - 1) + 1)
-        j = k - i
-        ok = np.abs(i - j) <= window
-        i, j = i[ok], j[ok]
-        if i.size == 0:
-            continue
-        prev = np.minimum(np.minimum(D[i - 1, j], D[i, j - 1]), D[i - 1, j - 1])
-        D[i, j] = (x[i - 1] - y[j - 1]) ** 2 + prev
-    # backtrack
-    i, j = n, m
-    pi, pj = [i - 1], [j - 1]
-    while i > 1 or j > 1:
-        steps = ((D[i - 1, j - 1], i - 1, j - 1), (D[i - 1, j], i - 1, j), (D[i, j - 1], i, j - 1))
-        _, i, j = min(steps, key=lambda s: s[0])
-        pi.append(i - 1)
-        pj.append(j - 1)
-    return np.array(pi[::-1]), np.array(pj[::-1])
+    path. Compiled (numba): O(n window)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    y = np.ascontiguousarray(y, dtype=float)
+    window = max(int(window), abs(x.size - y.size))
+    return _dtw_backtrack(_dtw_fill(x, y, window))
+
+
+def dtw_window(n: int, fraction: float) -> int:
+    """ISO's DTW band for n samples: ceil(fraction n) - 1 samples either side, as
+    objective-rating-metrics passes it to dtwalign's Sakoe-Chiba window (|i - j| <= size)."""
+    return max(int(math.ceil(fraction * n)) - 1, 0)
 
 
 def _moving_average_9(d):
-    """ISO's smoothing of the derivative: centred 9-point mean, shrinking windows (1, 3, 5, 7) at the ends."""
-    out = np.empty_like(d)
+    """ISO's smoothing of the derivative: centred 9-point mean, shrinking windows (1, 3, 5, 7) at
+    the ends (as objective-rating-metrics); one convolution."""
+    d = np.asarray(d, dtype=float)
     n = d.size
-    for k in range(n):
-        h = min(4, k, n - 1 - k)
-        out[k] = d[k - h:k + h + 1].mean()
+    if n < 9:
+        return np.array([d[max(0, k - min(4, k, n - 1 - k)):k + min(4, k, n - 1 - k) + 1].mean() for k in range(n)])
+    out = np.empty_like(d)
+    out[4:-4] = np.convolve(d, np.ones(9) / 9.0, mode="valid")
+    c = np.cumsum(d)
+    for h in range(4):               # windows of 2h + 1 points centred on h and on n - 1 - h
+        out[h] = c[2 * h] / (2 * h + 1)
+        out[n - 1 - h] = (c[-1] - (c[n - 2 - 2 * h] if n - 2 - 2 * h >= 0 else 0.0)) / (2 * h + 1)
     return out
+
+
+def _iso_from_shift(m, c, n_eps, rho, p) -> dict:
+    """The ISO scores of one pair once its lag ``n_eps`` (samples) is known."""
+    N = m.size
+    Z = iso_corridor(m, c, p["a0"], p["b0"], p["kz"])
+    limit = p["max_shift"] * N
+    E_P = 1.0 if n_eps == 0 else max(0.0, (limit - abs(n_eps)) / limit) ** p["kp"]
+    ms, cs = _shifted(m, c, n_eps)
+    pi, pj = dtw_path(cs, ms, dtw_window(ms.size, p["dtw_window"]))
+    cw, mw = cs[pi], ms[pj]
+    den = float(np.sum(np.abs(mw)))
+    e_mag = float(np.sum(np.abs(cw - mw)) / den) if den > 0 else math.inf
+    E_M = max(0.0, (p["eps_mag"] - e_mag) / p["eps_mag"]) ** p["km"]
+    # slope: central differences (the grid step cancels in the ratio), smoothed, on the shifted signals
+    dm = _moving_average_9(np.gradient(ms))
+    dc = _moving_average_9(np.gradient(cs))
+    den = float(np.sum(np.abs(dm)))
+    e_slope = float(np.sum(np.abs(dc - dm)) / den) if den > 0 else math.inf
+    E_S = max(0.0, (p["eps_slope"] - e_slope) / p["eps_slope"]) ** p["ks"]
+    wz, wp, wm, ws = p["weights"]
+    R = wz * Z + wp * E_P + wm * E_M + ws * E_S
+    return {
+        "iso_corridor": Z, "iso_phase": E_P, "iso_magnitude": E_M, "iso_slope": E_S,
+        "iso_rating": R, "iso_grade": iso_grade(R),
+        "iso_shift_samples": int(n_eps), "iso_rho": float(rho),
+        "iso_magnitude_error": e_mag, "iso_slope_error": e_slope,
+    }
+
+
+def _iso_params(params: dict) -> dict:
+    unknown = set(params) - set(ISO_DEFAULTS)
+    if unknown:
+        raise InputError(f"unknown ISO/TS 18571 parameter(s): {', '.join(sorted(unknown))}")
+    return {**ISO_DEFAULTS, **params}
 
 
 def iso18571(measured, simulated, **params) -> dict:
@@ -212,40 +330,19 @@ def iso18571(measured, simulated, **params) -> dict:
     0.4/0.2/0.2/0.2), its grade, and the intermediate errors (shift in samples, magnitude and slope
     errors). Parameters: see ``ISO_DEFAULTS``.
     """
-    p = {**ISO_DEFAULTS, **params}
-    unknown = set(params) - set(ISO_DEFAULTS)
-    if unknown:
-        raise InputError(f"unknown ISO/TS 18571 parameter(s): {', '.join(sorted(unknown))}")
-    m, c = _pair(measured, simulated, min_len=10)
-    N = m.size
-    Z = iso_corridor(m, c, p["a0"], p["b0"], p["kz"])
+    return iso18571_rows(np.asarray(measured, dtype=float)[None], simulated, **params)[0]
 
-    n_eps, rho = best_shift(m, c, p["max_shift"])
-    limit = p["max_shift"] * N
-    E_P = 1.0 if n_eps == 0 else max(0.0, (limit - abs(n_eps)) / limit) ** p["kp"]
 
-    ms, cs = _shifted(m, c, n_eps)
-    pi, pj = dtw_path(ms, cs, int(math.ceil(p["dtw_window"] * ms.size)))
-    mw, cw = ms[pi], cs[pj]
-    den = float(np.sum(np.abs(mw)))
-    e_mag = float(np.sum(np.abs(cw - mw)) / den) if den > 0 else math.inf
-    E_M = max(0.0, (p["eps_mag"] - e_mag) / p["eps_mag"]) ** p["km"]
-
-    # slope: forward differences (the grid step cancels in the ratio), smoothed, on the shifted signals
-    dm = _moving_average_9(np.diff(ms))
-    dc = _moving_average_9(np.diff(cs))
-    den = float(np.sum(np.abs(dm)))
-    e_slope = float(np.sum(np.abs(dc - dm)) / den) if den > 0 else math.inf
-    E_S = max(0.0, (p["eps_slope"] - e_slope) / p["eps_slope"]) ** p["ks"]
-
-    wz, wp, wm, ws = p["weights"]
-    R = wz * Z + wp * E_P + wm * E_M + ws * E_S
-    return {
-        "iso_corridor": Z, "iso_phase": E_P, "iso_magnitude": E_M, "iso_slope": E_S,
-        "iso_rating": R, "iso_grade": iso_grade(R),
-        "iso_shift_samples": int(n_eps), "iso_rho": rho,
-        "iso_magnitude_error": e_mag, "iso_slope_error": e_slope,
-    }
+def iso18571_rows(measured, simulated, **params) -> list[dict]:
+    """``iso18571`` of every row of ``measured`` (R, N) against ``simulated`` ((N,) or (R, N)):
+    the lag search of all rows in one FFT pass, DTW compiled."""
+    p = _iso_params(params)
+    m, c = _rows(measured, simulated)
+    rows = [_pair(a, b, min_len=10) for a, b in zip(m, c)]
+    N = m.shape[1]
+    n_max = min(int(math.floor(p["max_shift"] * N)), N - 2)
+    n_eps, rho = _pick_shift(_shift_correlations(m, np.array(c), n_max), n_max)
+    return [_iso_from_shift(a, b, int(n), r, p) for (a, b), n, r in zip(rows, n_eps, rho)]
 
 
 def iso_grade(rating: float) -> str:
@@ -274,21 +371,30 @@ METRICS = {
     "peak_max_shift_deg": ("low", True),
     "peak_min_shift_deg": ("low", True),
     "lag_deg": ("low", True),
+    "band_overlap": ("high", False),    # reports.pipeline.band_statistics
 }
 
 
 def compare(measured, simulated, grid_rad, iso_params: dict | None = None) -> dict:
     """Every metric of this module for one pair of signals on the cam-angle grid ``grid_rad`` (rad).
     Peak shifts are reported in degrees of cam angle (``*_shift_deg``)."""
-    out = {}
-    out.update(sprague_geers(measured, simulated))
-    out.update(iso18571(measured, simulated, **(iso_params or {})))
-    out["nrmse"] = nrmse(measured, simulated)
-    pk = peak_errors(measured, simulated, grid_rad)
-    out.update({k: v for k, v in pk.items() if not k.endswith("_shift")})
-    out["peak_max_shift_deg"] = math.degrees(pk["peak_max_shift"])
-    out["peak_min_shift_deg"] = math.degrees(pk["peak_min_shift"])
-    # the lag of best correlation (ISO phase step) as a cam angle: the timing error of the whole curve
+    return compare_rows(np.asarray(measured, dtype=float)[None], simulated, grid_rad, iso_params)[0]
+
+
+def compare_rows(measured, simulated, grid_rad, iso_params: dict | None = None) -> list[dict]:
+    """``compare`` for every row of ``measured`` (R, N) against ``simulated`` ((N,) or (R, N)),
+    e.g. every measured revolution against one simulated cycle."""
+    m, c = _rows(measured, simulated)
+    iso = iso18571_rows(m, c, **(iso_params or {}))
     step = float(np.mean(np.diff(np.asarray(grid_rad, dtype=float))))
-    out["lag_deg"] = math.degrees(out["iso_shift_samples"] * step)
+    out = []
+    for a, b, s in zip(m, c, iso):
+        row = {**sprague_geers(a, b), **s, "nrmse": nrmse(a, b)}
+        pk = peak_errors(a, b, grid_rad)
+        row.update({k: v for k, v in pk.items() if not k.endswith("_shift")})
+        row["peak_max_shift_deg"] = math.degrees(pk["peak_max_shift"])
+        row["peak_min_shift_deg"] = math.degrees(pk["peak_min_shift"])
+        # the lag of best correlation (ISO phase step) as a cam angle: the timing error of the whole curve
+        row["lag_deg"] = math.degrees(row["iso_shift_samples"] * step)
+        out.append(row)
     return out

@@ -6,7 +6,6 @@ summary.py render it. Nothing here draws or writes files.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import time
 from pathlib import Path
@@ -16,7 +15,8 @@ import xarray as xr
 
 from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
-from reports import align, metrics
+from processing import impacts
+from reports import align, events, metrics
 from reports.thresholds import Thresholds, evaluate
 
 SIGNALS = ("omega2", "epsilon2")
@@ -27,6 +27,9 @@ EXPERIMENT = {"law": "sine", "Fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0}
 # model options (not properties of the recording): the paper's idealisations unless the user sets
 # them (k = 1, no contact damping, lw = 6 mm, the follower crosses the backlash)
 MODEL_OPTIONS = {"restitution": 1.0, "contact_damping": 0.0, "contact_length_mm": 6.0, "elastic_gap": "physical"}
+# the robustness check: the verdict again at the other preset and at half the simulated length
+OTHER_PRESET = {"fast": "standard", "standard": "fast", "reference": "standard"}
+DEFAULT_REVOLUTIONS = 6      # simulated cam revolutions: transient, then steady state or statistics
 
 
 @dataclasses.dataclass
@@ -36,17 +39,26 @@ class SimRun:
     omega1: str               # const | var
     dataset: xr.Dataset
     indicators: dict
-    cycle: align.SimulatedCycle
+    cycle: align.SimulatedCycles | align.SimulatedCycle
     wall_s: float
     note: str = ""
-    revolutions: float = 1.0  # cam revolutions simulated (event counts are divided by it)
+    revolutions: float = 1.0  # cam revolutions simulated
     warning: str = ""         # what the reader must know (a stand-in level, a partial revolution)
+    accuracy: str = "standard"
+    events: dict | None = None   # predicted event statistics (reports.events.predicted)
+
+    @property
+    def steady(self) -> range:
+        """Indices of the simulated revolutions the model's cycle is made of (and its event statistics)."""
+        if not isinstance(self.cycle, align.SimulatedCycles):
+            return range(0, 1)
+        k = self.cycle.revolutions[SIGNALS[0]].shape[0]
+        return range(k - self.cycle.n_used, k)
 
     @property
     def label(self) -> str:
         name = self.requested if self.model == self.requested else f"{self.requested} (ran {self.model})"
         return f"{name}, w1 = {'ct.' if self.omega1 == 'const' else 'var.'}"
-
 
 @dataclasses.dataclass
 class Report:
@@ -63,6 +75,8 @@ class Report:
     notes: list                       # what was skipped or replaced, and why
     wall_s: float = 0.0
     time_filter: align.TimeFilter | None = None   # the processing low-pass, re-applied to the simulations
+    measured_events: dict | None = None            # reports.events.measured
+    robustness: list = dataclasses.field(default_factory=list)   # rows: preset, revolutions, closest, grades
 
     @property
     def passed(self) -> bool:
@@ -77,7 +91,9 @@ def load_measured(path: Path) -> xr.Dataset:
     if not path.is_file():
         raise InputError(f"measured file {path} not found")
     try:
-        ds = xr.open_dataset(path, engine="h5netcdf").load()
+        # lazily: the report reads only the revolutions it uses (align.read_measured); the CF time
+        # ('seconds since <start>') kept in seconds, as revolution_start_time and spike_time are
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
     except Exception as exc:   # h5py/xarray raise many types for a file that is not NetCDF4
         raise FileFormatError(f"{path} is not a NetCDF4 file written by 'labtool process' "
                               f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
@@ -151,166 +167,107 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
 
 # --------------------------------------------------------------------------- simulations
 
-def model_available(name: str) -> bool:
-    """Whether the model level's module can be imported (rigid and elastic land separately)."""
-    from models.dynamics.simulate import LEVELS
-    if name not in LEVELS:
-        return False
-    try:
-        importlib.import_module(LEVELS[name].split(":")[0])
-    except ModuleNotFoundError:
-        return False
-    return True
+def model_scene(op: dict, mode: str, accuracy: str, revolutions: float):
+    """The models' Scene for the operating point ``op`` (edge units) over whole revolutions."""
+    from models.dynamics.scene import Scene
+    return Scene(law=op["law"], cam_speed_rpm=op["cam_speed_rpm"], Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
+                 jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
+                 rise_only=False, restitution=op.get("restitution", 1.0),
+                 contact_damping=op.get("contact_damping", 0.0),
+                 contact_length=op.get("contact_length_mm", 6.0) * 1e-3,
+                 elastic_gap=op.get("elastic_gap", "physical"))
 
 
 def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutions: float,
                    cond: align.Conditioning, time_filter: align.TimeFilter | None = None) -> SimRun:
-    """One model at one omega1 mode over whole revolutions; a model that is not there yet is
-    replaced by the kinematic level, and the note says so."""
-    from models.dynamics.scene import Scene
+    """One model at one omega1 mode over ``revolutions`` whole revolutions, conditioned like the
+    measurement (align.simulated_cycles): its steady cycle, periodic or as statistics."""
     from models.dynamics.simulate import simulate
 
-    scene = Scene(law=op["law"], cam_speed_rpm=op["cam_speed_rpm"], Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
-                  jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
-                  rise_only=False, restitution=op.get("restitution", 1.0),
-                  contact_damping=op.get("contact_damping", 0.0),
-                  contact_length=op.get("contact_length_mm", 6.0) * 1e-3,
-                  elastic_gap=op.get("elastic_gap", "physical"))
-    level, note = requested, ""
-    if not model_available(requested):
-        level = "kinematic"
-        note = f"the {requested} model is not available in this installation; the kinematic level stands in for it"
     t0 = time.perf_counter()
-    res = simulate(scene, level)
+    res = simulate(model_scene(op, mode, accuracy, revolutions), requested)
     # the rigid model's impacts are velocity jumps: its epsilon2 omits their impulses
-    cycle = align.simulated_cycle(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid",
-                                  time_filter=time_filter)
-    warning = "; ".join(x for x in (note, cycle.note if not cycle.covered.all() else "") if x)
+    cycle = align.simulated_cycles(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid",
+                                   time_filter=time_filter)
+    if cycle is None:    # the kinematic level (one revolution on phi1) or a partial revolution
+        cycle = align.simulated_cycle(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid",
+                                      time_filter=time_filter)
+    warning = cycle.note if not cycle.covered.all() or not cycle.periodic else ""
     return SimRun(requested, res.model, mode, res.dataset, res.indicators, cycle, time.perf_counter() - t0,
-                  "; ".join(x for x in (note, cycle.note) if x), revolutions, warning)
+                  cycle.note, revolutions, warning, accuracy)
 
 
 # --------------------------------------------------------------------------- comparison
 
-def _compare(meas: np.ndarray, sim: np.ndarray, covered: np.ndarray, grid: np.ndarray) -> dict:
-    if covered.all():
-        return metrics.compare(meas, sim, grid)
-    return metrics.compare(meas[covered], sim[covered], grid[covered])
+def band_statistics(meas_mean, meas_std, sim_mean, sim_std) -> dict:
+    """How a model's cycle statistics sit against the measured ones (for motion that is not
+    periodic, where a pointwise comparison of one revolution is meaningless): ``band_overlap`` =
+    fraction of the grid where the two cycle averages differ by less than two combined standard
+    deviations; ``scatter_ratio`` = rms of the model's revolution-to-revolution scatter over the
+    measured one's (0 for a periodic model, ~1 when the model varies as much as the stand)."""
+    tol = 2.0 * np.sqrt(np.asarray(meas_std) ** 2 + np.asarray(sim_std) ** 2)
+    inside = np.abs(np.asarray(sim_mean) - np.asarray(meas_mean)) <= tol
+    ms = float(np.sqrt(np.mean(np.asarray(meas_std) ** 2)))
+    return {"band_overlap": float(inside.mean()),
+            "scatter_ratio": float(np.sqrt(np.mean(np.asarray(sim_std) ** 2)) / ms) if ms > 0 else math.nan}
+
+
+def _covered(x, cov):
+    return x if cov.all() else x[..., cov]
+
+
+def compare_signal(cycles: align.MeasuredCycles, cycle, sig: str, per_revolution: bool = True) -> tuple[dict, list]:
+    """Overall metrics (the model's cycle against the measured cycle average, with the band
+    statistics) and, if asked, against every measured revolution (batched)."""
+    cov = cycle.covered
+    sim = _covered(cycle.signals[sig], cov)
+    grid = _covered(cycles.grid, cov)
+    overall = metrics.compare(_covered(cycles.mean(sig), cov), sim, grid)
+    overall.update(band_statistics(_covered(cycles.mean(sig), cov), _covered(cycles.std(sig), cov), sim,
+                                   _covered(cycle.std[sig], cov)))
+    per_rev = []
+    if per_revolution:
+        per_rev = metrics.compare_rows(_covered(cycles.signals[sig], cov), sim, grid)
+        for m, rev in zip(per_rev, cycles.revolutions):
+            m["revolution"] = int(rev)
+    return overall, per_rev
 
 
 def compare_run(cycles: align.MeasuredCycles, run: SimRun) -> list[dict]:
     """Metrics of one simulation against the cycle average (``overall``) and every whole revolution."""
     out = []
     for sig in SIGNALS:
-        sim = run.cycle.signals[sig]
-        cov = run.cycle.covered
-        per_rev = []
-        for k, rev in enumerate(cycles.revolutions):
-            m = _compare(cycles.signals[sig][k], sim, cov, cycles.grid)
-            m["revolution"] = int(rev)
-            per_rev.append(m)
+        overall, per_rev = compare_signal(cycles, run.cycle, sig)
         out.append({
             "requested_model": run.requested, "model": run.model, "omega1": run.omega1, "signal": sig,
-            "label": run.label, "overall": _compare(cycles.mean(sig), sim, cov, cycles.grid),
-            "per_revolution": per_rev, "covered_fraction": float(cov.mean()),
+            "label": run.label, "overall": overall, "per_revolution": per_rev,
+            "covered_fraction": float(run.cycle.covered.mean()), "periodic": bool(run.cycle.periodic),
+            "model_revolutions_averaged": int(run.cycle.n_used),
         })
     return out
 
 
-def _measured_events(ds: xr.Dataset, cycles: align.MeasuredCycles) -> dict:
-    """Impacts and jumps the processing found, per whole revolution (None when it reports none).
-
-    Impacts: event times in seconds on an event dimension, ``impact_time`` or the acceleration
-    spikes of ``labtool process`` (``spike_time``: an impact shows as a spike above the processing
-    band). Jumps: ``jump_time``. Else scalar attributes ``impacts``/``jumps`` (per revolution)."""
-    out = {}
-    t0, t1 = cycles.time[:, 0], cycles.time[:, -1]
-    candidates = {"impacts": ("impact_time", "spike_time"), "jumps": ("jump_time",)}
-    for kind, names in candidates.items():
-        val = None
-        for n in names:
-            if n in ds.variables and ds[n].ndim == 1 and "time" not in ds[n].dims:
-                arr = np.asarray(ds[n].values, dtype=float)
-                counts = [int(np.sum((arr >= a) & (arr <= b))) for a, b in zip(t0, t1)]
-                val = float(np.mean(counts))
-                break
-        if val is None:
-            val = _attr_float(ds, kind, f"{kind}_per_revolution")
-        out[kind] = val
-    return out
-
-
-def predicted_events(sim: xr.Dataset) -> dict | None:
-    """Cam angles (rad, in [0, 2 pi)) of the impacts and of the jumps (contact losses) in the
-    simulation's last whole revolution: ``{"impacts": array, "jumps": array}``.
-
-    Rigid model: ``event_phi1`` by ``event_kind`` (flag meanings ``impact_*`` = impact; a jump, i.e. a
-    free flight, starts at a ``liftoff`` and after every ``impact_rebound``); elastic model: ``event_kinds``/``event_times_s`` (``leave_*`` = jump, ``land_*`` =
-    impact), mapped to phi1 through the simulation's own phi1(time). None when the simulation records
-    no events (kinematic level)."""
-    out = None
-    if "event_phi1" in sim and "event_kind" in sim:
-        meanings = str(sim["event_kind"].attrs.get("flag_meanings", "")).split()
-        values = list(np.atleast_1d(sim["event_kind"].attrs.get("flag_values", range(1, len(meanings) + 1))))
-        kinds = np.asarray(sim["event_kind"].values)
-        phi = np.asarray(sim["event_phi1"].values, dtype=float)
-        flags = lambda word: [v for v, m in zip(values, meanings) if word in m]   # noqa: E731
-        # a flight (jump) starts at a lift-off and again after every rebounding impact
-        out = {"impacts": phi[np.isin(kinds, flags("impact"))],
-               "jumps": phi[np.isin(kinds, flags("liftoff") + flags("rebound"))]}
-    elif "event_times_s" in sim.attrs and "event_kinds" in sim.attrs and "time" in sim.variables:
-        times = np.atleast_1d(np.asarray(sim.attrs["event_times_s"], dtype=float))
-        kinds = [k for k in str(sim.attrs["event_kinds"]).split(",") if k]
-        if len(kinds) != times.size:
-            return None
-        phi = np.interp(times, np.asarray(sim["time"].values, float), np.asarray(sim["phi1"].values, float))
-        out = {"impacts": phi[np.array([k.startswith("land") for k in kinds], dtype=bool)],
-               "jumps": phi[np.array([k.startswith("leave") for k in kinds], dtype=bool)]}
-    if out is None:
+def detector_for(time_filter: align.TimeFilter | None, ds: xr.Dataset) -> impacts.Detector | None:
+    """The impact detector of this recording (its rate and processing low-pass), None without them."""
+    if time_filter is None:
         return None
-    top = float(np.nanmax(np.asarray(sim["phi1"].values, float)))
-    k = max(int(math.floor(top / (2 * math.pi) + 1e-6)) - 1, 0)
-    a = 2 * math.pi * k
-    return {name: np.sort(v[np.isfinite(v) & (v >= a) & (v < a + 2 * math.pi)] - a) for name, v in out.items()}
+    return impacts.Detector(time_filter.fs, time_filter.cutoff_hz, time_filter.order)
 
 
-def _measured_first_impact_deg(ds: xr.Dataset, cycles: align.MeasuredCycles) -> float | None:
-    """Median over the whole revolutions of the cam angle (deg) of the first spike after phi1 = 0."""
-    if "spike_time" not in ds.variables and "impact_time" not in ds.variables:
-        return None
-    name = "impact_time" if "impact_time" in ds.variables else "spike_time"
-    times = np.asarray(ds[name].values, dtype=float)
-    firsts = []
-    for k in range(cycles.time.shape[0]):
-        row = cycles.time[k]
-        inside = times[(times >= row[0]) & (times <= row[-1])]
-        if inside.size:
-            firsts.append(math.degrees(float(np.interp(inside.min(), row, cycles.grid))))
-    return float(np.median(firsts)) if firsts else None
-
-
-def event_table(ds: xr.Dataset, cycles: align.MeasuredCycles, sims: list) -> list[dict]:
-    """Jumps and impacts per revolution, predicted (each simulation) and measured, and the cam angle
-    of the first impact of a revolution (deg)."""
-    meas = _measured_events(ds, cycles)
-    first_meas = _measured_first_impact_deg(ds, cycles)
+def event_table(measured: dict | None, sims: list) -> list[dict]:
+    """One row per simulation: its predicted events (same definitions as the measured ones) beside
+    the measured, and the model's own indicators as counted in the paper's tables."""
     rows = []
     for run in sims:
         ind = run.indicators
-        row = {"label": run.label, "requested_model": run.requested, "model": run.model, "omega1": run.omega1}
-        ev = predicted_events(run.dataset)
-        for kind in ("jumps", "impacts"):
-            # per revolution: the events of the last (steady) simulated revolution, like the measurement
-            row[f"{kind}_predicted_per_rev"] = None if ev is None else float(ev[kind].size)
-            row[f"{kind}_measured_per_rev"] = meas[kind]
-            # the model's own indicator, counted as in the paper's tables (may cover the rise only)
-            row[f"{kind}_indicator"] = ind.get(kind)
-        angles = None if ev is None else ev["impacts"]
-        row["first_impact_deg_predicted"] = None if angles is None or not angles.size else math.degrees(angles[0])
-        row["first_impact_deg_measured"] = first_meas
-        row["sign_change"] = ind.get("sign_change")
-        row["MR13D_max_Nm"] = ind.get("MR13D_max_Nm")
-        row["MR13D_min_Nm"] = ind.get("MR13D_min_Nm")
+        row = {"label": run.label, "requested_model": run.requested, "model": run.model, "omega1": run.omega1,
+               "predicted": run.events, "measured": measured,
+               "jumps_indicator": ind.get("jumps"), "impacts_indicator": ind.get("impacts"),
+               "sign_change": ind.get("sign_change"), "MR13D_max_Nm": ind.get("MR13D_max_Nm"),
+               "MR13D_min_Nm": ind.get("MR13D_min_Nm")}
+        p = run.events or {}
+        for key in events.KEYS + ("detectable_impacts_per_rev", "flights_per_rev"):
+            row[key] = p.get(key)
         rows.append(row)
     return rows
 
@@ -318,25 +275,62 @@ def event_table(ds: xr.Dataset, cycles: align.MeasuredCycles, sims: list) -> lis
 # --------------------------------------------------------------------------- the whole report
 
 def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Thresholds | None = None,
-                 overrides: dict | None = None, accuracy: str = "standard", revolutions: float = 2.0,
-                 cond: align.Conditioning | None = None, progress=None, stand_in_on_failure: bool = False) -> Report:
+                 overrides: dict | None = None, accuracy: str = "standard", revolutions: float = DEFAULT_REVOLUTIONS,
+                 cond: align.Conditioning | None = None, progress=None, stand_in_on_failure: bool = False,
+                 robustness: bool = True) -> Report:
     """Everything the report shows. ``progress(msg)`` is called before each long step.
 
     ``stand_in_on_failure`` (the demo): a model that fails is replaced by the kinematic level with a
-    note, instead of ending the report (the CLI: exit 2 for a model's InputError/SolverError)."""
+    note, instead of ending the report (the CLI: exit 2 for a model's InputError/SolverError).
+    ``robustness``: also the verdict at the other preset and at half the simulated length."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     cond = cond or align.Conditioning()
     models, modes = _check_choice(models, ("rigid", "elastic", "kinematic"), "model"), _check_choice(modes, MODES, "omega1 mode")
+    if not (math.isfinite(revolutions) and revolutions >= 1 and float(revolutions).is_integer()):
+        raise InputError(f"--revolutions must be a whole number >= 1 of cam revolutions, got {revolutions:g}")
     ds = load_measured(measured_path)
-    say("aligning the measured revolutions")
-    cycles = align.measured_cycles(ds, SIGNALS, cond)
+    say("reading and aligning the measured revolutions")
+    cycles = align.read_measured(ds, SIGNALS, cond, extra=("aE_n",))
     op = operating_point(ds, cycles.cam_speed_rpm, overrides or {})
-    notes = []
     time_filter = align.processing_filter(ds)
+    notes = _measured_notes(ds, cycles, op, time_filter)
+    sims = []
+    for model in models:
+        for mode in modes:
+            say(f"simulating {model}, omega1 {mode} ({accuracy}, {revolutions:g} revolutions)")
+            run = _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_filter, stand_in_on_failure)
+            if run.warning:
+                notes.append(f"{run.label}: {run.warning}")
+            sims.append(run)
+    say("finding the measured impacts and jumps")
+    det = detector_for(time_filter, ds)
+    meas_ev = _measured_events(cycles, det, op)
+    for run in sims:
+        if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
+            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"])
+    say("computing the metrics")
+    comparisons = [c for run in sims for c in compare_run(cycles, run)]
+    rows = evaluate(thresholds, comparisons) if thresholds else []
+    rep = Report(shown(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(meas_ev, sims),
+                 rows, thresholds.source if thresholds else None, notes, 0.0, time_filter, meas_ev)
+    if robustness and any(r.model != "kinematic" for r in sims):
+        say("checking the verdict at the other preset and half the length")
+        rep.robustness = robustness_rows(rep, accuracy, revolutions, say)
+        verdict = robust_verdict(rep.robustness)
+        if verdict is not None and not verdict["robust"]:
+            notes.append("the verdict is NOT robust: the closest model changes with the solver preset or the simulated "
+                         "length (" + "; ".join(f"{r['accuracy']}, {r['revolutions']:g} rev: {r['closest']}"
+                                                 for r in rep.robustness) + ")")
+    rep.wall_s = time.perf_counter() - t0
+    return rep
+
+
+def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
+    notes = []
     if time_filter is None:
         notes.append("the measured file records no processing low-pass that the report can reproduce: "
-                     "the simulations see only the common harmonic low-pass")
+                     "the simulations see only the common harmonic low-pass, and no impacts are detected")
     if ds.attrs.get("source") == "synthetic":
         notes.append("the measured file is SYNTHETIC (kinematics + noise, reports.synthetic), not a recording")
     dev = cycles.cam_speed_rpm / op["cam_speed_rpm"] - 1.0
@@ -345,33 +339,120 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
                      f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
     if cycles.partial:
         notes.append(f"{cycles.partial} partial revolution(s) of the recording left out (ends or gaps)")
-    sims = []
-    for model in models:
-        for mode in modes:
-            say(f"simulating {model}, omega1 {mode}")
+    if cycles.in_file is not None:
+        notes.append(f"a long recording: {len(cycles.revolutions)} of its ~{cycles.in_file} revolutions are used, in "
+                     f"{len(cycles.blocks)} blocks of consecutive revolutions spread evenly over it (the report's cost "
+                     "does not grow with the length)")
+    return notes
+
+
+def _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_filter, stand_in) -> SimRun:
+    try:
+        return run_simulation(op, model, mode, accuracy, revolutions, cond, time_filter)
+    except Exception as exc:
+        if not stand_in or model == "kinematic":
+            if isinstance(exc, LabtoolError):
+                raise
+            if isinstance(exc, (ValueError, ArithmeticError)):
+                raise InputError(f"the {model} model cannot simulate {op['cam_speed_rpm']:g} rpm "
+                                 f"(omega1 {mode}): {exc}") from None
+            raise
+        # the demo keeps going: the kinematic level stands in, and the page says why
+        run = run_simulation(op, "kinematic", mode, accuracy, revolutions, cond, time_filter)
+        run.requested = model
+        run.warning = run.note = (f"the {model} model failed ({type(exc).__name__}: "
+                                  f"{str(exc).splitlines()[0] if str(exc) else ''}); the kinematic level stands in")
+        return run
+
+
+def _measured_events(cycles, det, op) -> dict | None:
+    if det is None:
+        return None
+    from models.mechanism import Mechanism
+    from models.mechanism.motion_laws import CamProgram
+    mech = Mechanism.default()
+    return events.measured(cycles, det, mech, CamProgram.for_mechanism(mech, law=op["law"]))
+
+
+def _ratings(cycles, cycle) -> dict:
+    out = {}
+    for sig in SIGNALS:
+        o, _ = compare_signal(cycles, cycle, sig, per_revolution=False)
+        out[f"{sig}_iso_rating"], out[f"{sig}_iso_grade"] = o["iso_rating"], o["iso_grade"]
+    return out
+
+
+def _variant_row(accuracy, revolutions, entries) -> dict:
+    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings."""
+    best = max(entries, key=lambda e: 0.5 * (e[1]["omega2_iso_rating"] + e[1]["epsilon2_iso_rating"]))
+    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0],
+            "models": [{"label": lab, **r} for lab, r in entries]}
+
+
+def robustness_rows(rep: Report, accuracy: str, revolutions: float, say) -> list[dict]:
+    """The closest model and every model's grades at (preset, length) for the report's preset and
+    the other one (OTHER_PRESET), each at the full and at half the simulated length (the first
+    half of a causal simulation: no extra run). A preset that fails is a row with its error."""
+    half = max(int(revolutions) // 2, 1)
+    lengths = [int(revolutions)] + ([half] if half < int(revolutions) else [])
+    other = OTHER_PRESET[accuracy]
+    rows = []
+    for acc in (accuracy, other):
+        runs, error = [], None
+        for run in rep.sims:
+            if acc == accuracy or run.model == "kinematic":
+                runs.append((run.label, run.cycle))
+                continue
             try:
-                run = run_simulation(op, model, mode, accuracy, revolutions, cond, time_filter)
-            except Exception as exc:
-                if not stand_in_on_failure or model == "kinematic":
-                    if isinstance(exc, LabtoolError):
-                        raise
-                    if isinstance(exc, (ValueError, ArithmeticError)):
-                        raise InputError(f"the {model} model cannot simulate {op['cam_speed_rpm']:g} rpm "
-                                         f"(omega1 {mode}): {exc}") from None
-                    raise
-                # the demo keeps going: the kinematic level stands in, and the page says why
-                run = run_simulation(op, "kinematic", mode, accuracy, revolutions, cond, time_filter)
-                run.requested = model
-                run.warning = run.note = (f"the {model} model failed ({type(exc).__name__}: "
-                                          f"{str(exc).splitlines()[0] if str(exc) else ''}); the kinematic level stands in")
-            if run.warning:
-                notes.append(f"{run.label}: {run.warning}")
-            sims.append(run)
-    say("computing the metrics")
-    comparisons = [c for run in sims for c in compare_run(cycles, run)]
-    rows = evaluate(thresholds, comparisons) if thresholds else []
-    return Report(shown(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(ds, cycles, sims),
-                  rows, thresholds.source if thresholds else None, notes, time.perf_counter() - t0, time_filter)
+                r2 = run_simulation(rep.scene, run.model, run.omega1, acc, revolutions, rep.conditioning, rep.time_filter)
+                runs.append((run.label, r2.cycle))
+            except LabtoolError as exc:
+                error = f"{run.label}: {exc}"
+                break
+        if error is not None:
+            rows.append({"accuracy": acc, "revolutions": float(revolutions), "closest": None, "error": error, "models": []})
+            continue
+        for k in lengths:
+            entries = [(lab, _ratings(rep.cycles, cyc.upto(k) if isinstance(cyc, align.SimulatedCycles) else cyc))
+                       for lab, cyc in runs]
+            rows.append(_variant_row(acc, k, entries))
+    return rows
+
+
+def verdict_lines(report: "Report") -> list[str]:
+    """The verdict in plain lines (console, demo, PDF): the closest model, whether that is robust,
+    and the measured events with their detectability."""
+    lines = []
+    best = closest(report)
+    if best is not None:
+        lines.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
+    sentence = robustness_sentence(report.robustness)
+    if sentence is not None:
+        lines.append(sentence)
+    m = report.measured_events
+    if m is not None and m.get("impacts_per_rev") is not None:
+        first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
+        lines.append(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
+                     f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+    return lines
+
+
+def robustness_sentence(rows: list[dict]) -> str | None:
+    """One line for the console, the demo and the PDF: robust, or which model wins where."""
+    verdict = robust_verdict(rows)
+    if verdict is None:
+        return None
+    if verdict["robust"]:
+        return "verdict robust: the same closest model at both presets and both simulated lengths"
+    return "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}" for r in rows)
+
+
+def robust_verdict(rows: list[dict]) -> dict | None:
+    """Whether the closest model is the same in every robustness row (None without rows)."""
+    names = [r["closest"] for r in rows if r.get("closest") is not None]
+    if not names:
+        return None
+    return {"robust": len(set(names)) == 1 and len(names) == len(rows), "closest": sorted(set(names))}
 
 
 def _check_choice(values, allowed, what) -> tuple:
@@ -388,13 +469,16 @@ def headline(report: Report) -> list[dict]:
     """One row per simulation: overall ISO rating and S&G comprehensive error for omega2 and epsilon2."""
     rows = []
     for run in report.sims:
-        row = {"label": run.label, "requested_model": run.requested, "model": run.model, "omega1": run.omega1}
+        row = {"label": run.label, "requested_model": run.requested, "model": run.model, "omega1": run.omega1,
+               "periodic": bool(run.cycle.periodic),
+               "motion": "periodic" if run.cycle.periodic else f"not periodic ({run.cycle.n_used} rev averaged)"}
         for c in report.comparisons:
             if c["requested_model"] == run.requested and c["omega1"] == run.omega1:
                 o = c["overall"]
                 s = c["signal"]
                 row.update({f"{s}_iso_rating": o["iso_rating"], f"{s}_iso_grade": o["iso_grade"],
-                            f"{s}_sg_comprehensive": o["sg_comprehensive"], f"{s}_nrmse": o["nrmse"]})
+                            f"{s}_sg_comprehensive": o["sg_comprehensive"], f"{s}_nrmse": o["nrmse"],
+                            f"{s}_band_overlap": o["band_overlap"]})
         rows.append(row)
     return rows
 

@@ -1,11 +1,18 @@
 """The report as one JSON object, for a lab's automation (``labtool report --json``).
 
-Keys (stable): ``format`` ("labtool.report.summary"), ``format_version`` (1), ``measured`` (file,
-cam speeds, Ka, whole revolutions), ``operating_point`` (what the models simulated, edge units),
-``conditioning``, ``simulations`` (per model and omega1 mode: level used, note, wall time,
-indicators), ``comparisons`` (per model, mode and signal: ``overall`` metrics on the cycle average
-and ``per_revolution``), ``headline``, ``closest`` (the simulation with the best mean ISO rating of
-omega2 and epsilon2), ``events``, ``thresholds`` (rows with ``passed``),
+Keys (stable): ``format`` ("labtool.report.summary"), ``format_version`` (2), ``measured`` (file,
+cam speeds, Ka, whole revolutions used and in the file, and ``events``: the measured impacts and
+jumps with ``impacts_per_rev``, ``jumps_per_rev``, ``first_impact_deg``, ``impact_angles_deg``, the
+detectability ``threshold_rad_s`` and the detector), ``operating_point`` (what the models
+simulated, edge units), ``conditioning``, ``simulations`` (per model and omega1 mode: level used,
+periodic or not, revolutions, note, wall time, indicators), ``comparisons`` (per model, mode and
+signal: ``overall`` metrics on the cycle average, with ``band_overlap`` and ``scatter_ratio``, and
+``per_revolution``), ``headline``, ``closest`` (the simulation with the best mean ISO rating of
+omega2 and epsilon2), ``robustness`` (``rows``: preset, revolutions, closest, every model's grades;
+``robust``), ``events`` (per simulation: the predicted ``impacts_per_rev`` (all contacts of the
+model's record), ``detectable_impacts_per_rev`` (those the chain shows, same threshold and
+resolution as the measurement), ``jumps_per_rev``, ``first_impact_deg``, ``impact_angles_deg``
+(of the visible ones), and the model's own indicators), ``thresholds`` (rows with ``passed``),
 ``passed`` (true when every threshold holds, also when there are none), ``notes``.
 Non-finite numbers become null so that the output is strict JSON.
 """
@@ -16,9 +23,10 @@ import math
 
 import numpy as np
 
-from reports.pipeline import Report, closest, headline
+from reports.events import KEYS as EVENT_KEYS
+from reports.pipeline import Report, closest, headline, robust_verdict
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 
 def _clean(obj):
@@ -72,21 +80,41 @@ def measured_info(report: Report) -> dict:
         "ka_m_s2_per_v": ka,
         "ka_source": ka_source,
         "whole_revolutions": len(report.cycles.revolutions),
+        "revolutions_in_file": report.cycles.in_file if report.cycles.in_file is not None else len(report.cycles.revolutions),
         "partial_revolutions_left_out": report.cycles.partial,
         "processing_history": history,
+        "events": measured_events(report),
     }
+
+
+def measured_events(report: Report) -> dict | None:
+    m = report.measured_events
+    if m is None:
+        return None
+    keys = EVENT_KEYS + ("threshold_rad_s", "threshold_m_s", "revolutions", "normal_check_median", "normal_check_n",
+                         "detector", "impacts_each_rev", "jumps_each_rev")
+    return {k: m.get(k) for k in keys}
+
+
+def event_rows(report: Report) -> list[dict]:
+    keys = ("label", "requested_model", "model", "omega1") + EVENT_KEYS + (
+        "detectable_impacts_per_rev", "flights_per_rev", "jumps_indicator", "impacts_indicator", "sign_change",
+        "MR13D_max_Nm", "MR13D_min_Nm")
+    return [{k: e.get(k) for k in keys} for e in report.events]
 
 
 def build_summary(report: Report) -> dict:
     sims = [{
         "requested_model": r.requested, "model": r.model, "omega1": r.omega1, "label": r.label,
-        "note": r.note, "wall_s": r.wall_s, "revolutions": r.revolutions,
+        "note": r.note, "wall_s": r.wall_s, "revolutions": r.revolutions, "accuracy": r.accuracy,
+        "periodic": bool(r.cycle.periodic), "revolution_change": r.cycle.change,
+        "revolutions_averaged": int(r.cycle.n_used),
         "indicators": {k: v for k, v in r.indicators.items() if not isinstance(v, (np.ndarray, list))},
     } for r in report.sims]
     comps = []
     for c in report.comparisons:
         comps.append({k: c[k] for k in ("requested_model", "model", "omega1", "signal", "label", "covered_fraction",
-                                         "overall", "per_revolution")})
+                                         "periodic", "model_revolutions_averaged", "overall", "per_revolution")})
     out = {
         "format": "labtool.report.summary",
         "format_version": FORMAT_VERSION,
@@ -103,7 +131,8 @@ def build_summary(report: Report) -> dict:
         "comparisons": comps,
         "headline": headline(report),
         "closest": None if closest(report) is None else closest(report)["label"],
-        "events": report.events,
+        "robustness": {"rows": report.robustness, **(robust_verdict(report.robustness) or {"robust": None})},
+        "events": event_rows(report),
         "thresholds": {"file": report.thresholds_source, "rows": report.threshold_rows},
         "passed": report.passed,
         "notes": report.notes,

@@ -132,7 +132,9 @@ def evaluate(thresholds: Thresholds, comparisons) -> list[dict]:
                 value = comp["overall"][lim.metric]
             else:
                 # the worst revolution: the one that fails, else the one closest to failing
-                vals = [r[lim.metric] for r in comp["per_revolution"]]
+                # metrics of the cycle statistics (band_overlap) exist only overall
+                vals = [r.get(lim.metric, comp["overall"][lim.metric]) for r in comp["per_revolution"]] \
+                    or [comp["overall"][lim.metric]]
                 key = (lambda v: abs(v)) if METRICS[lim.metric][1] else (lambda v: v)
                 worst_high = METRICS[lim.metric][0] == "high"
                 value = min(vals, key=key) if worst_high else max(vals, key=key)

@@ -180,14 +180,6 @@ def test_other_bad_inputs(files, capsys, tmp_path):
     assert existing.read_text() == "keep me"
 
 
-def test_a_model_that_is_not_there_is_replaced_by_the_kinematic_level_and_said(files, monkeypatch):
-    monkeypatch.setattr(pipeline, "model_available", lambda name: False)
-    rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
-    assert rep.sims[0].model == "kinematic" and rep.sims[0].requested == "elastic"
-    assert any("elastic model is not available" in n for n in rep.notes)
-    assert rep.comparisons[0]["overall"]["iso_rating"] == pytest.approx(1.0, abs=2e-3)
-
-
 def test_a_gap_makes_its_revolution_partial():
     ds = synthetic_measured(noise=0.0, revolutions=4.3)
     t = ds["time"].values
@@ -323,7 +315,6 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
         return real(scene, model)
 
     monkeypatch.setattr(ms, "simulate", broken)
-    monkeypatch.setattr(pipeline, "model_available", lambda name: True)
     with pytest.raises(InputError, match="elastic model cannot simulate 180 rpm"):
         pipeline.build_report(files["exact"], models=("elastic",), modes=("const",))
     rep = pipeline.build_report(files["exact"], models=("elastic",), modes=("const",), stand_in_on_failure=True)
@@ -331,25 +322,35 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
     assert any("elastic model failed (ValueError: step size too small)" in n for n in rep.notes)
 
 
-def test_predicted_events_of_the_last_revolution():
-    """Rigid-style events (flags) and elastic-style events (kinds + times) in the last revolution."""
+def test_model_events_read_both_formats_as_one_record():
+    """Rigid-style events (flags, omega2 before/after) and elastic-style events (kinds + times,
+    the step of omega2 from the dataset) become the one record of EVENTS.md."""
     import xarray as xr
+    from reports import events
     two = 2 * math.pi
     rigid = xr.Dataset(
         {"phi1": ("time", np.linspace(0, 2 * two, 50)),
+         "event_time": ("event", np.array([0.1, 0.2, 0.6, 0.7, 0.8])),
          "event_phi1": ("event", np.array([0.5, 1.0, two + 0.3, two + 0.4, two + 0.9])),
+         "event_omega2_before": ("event", np.array([1.0, 1.0, 2.0, 2.0, 0.5])),
+         "event_omega2_after": ("event", np.array([1.0, 0.2, 2.0, 1.5, 0.0])),
          "event_kind": ("event", np.array([1, 2, 1, 2, 3], dtype="int8"),
                         {"flag_values": np.array([1, 2, 3], dtype="int8"),
                          "flag_meanings": "liftoff impact_rebound impact_settle"})},
         coords={"time": np.linspace(0, 1, 50)})
-    ev = pipeline.predicted_events(rigid)
-    assert np.allclose(ev["impacts"], [0.4, 0.9]) and np.allclose(ev["jumps"], [0.3, 0.4])
-    t = np.linspace(0, 2, 101)
-    elastic = xr.Dataset({"phi1": ("time", two * t)}, coords={"time": t},
-                         attrs={"event_times_s": np.array([0.1, 1.05, 1.25]), "event_kinds": "leave_interior,leave_exterior,land_exterior"})
-    ev = pipeline.predicted_events(elastic)
-    assert np.allclose(ev["jumps"], [two * 0.05]) and np.allclose(ev["impacts"], [two * 0.25])
-    assert pipeline.predicted_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
+    rec = events.model_events(rigid)
+    assert list(rec.kind) == ["separation", "contact", "separation", "contact", "contact"]
+    assert np.allclose(rec.d_omega2[rec.contacts], [-0.8, -0.5, -0.5]) and np.isnan(rec.d_omega2[~rec.contacts]).all()
+    t = np.linspace(0, 2, 2001)
+    w2 = np.where(t < 1.2505, 1.0, 0.25)            # a landing at 1.25 s takes omega2 from 1 to 0.25
+    elastic = xr.Dataset({"phi1": ("time", two * t), "omega2": ("time", w2), "omega2_kin": ("time", 0 * t)},
+                         coords={"time": t},
+                         attrs={"event_times_s": np.array([0.1, 1.05, 1.25]),
+                                "event_kinds": "leave_interior,leave_exterior,land_exterior"})
+    rec = events.model_events(elastic)
+    assert list(rec.kind) == ["separation", "separation", "contact"]
+    assert np.allclose(rec.phi1, two * np.array([0.1, 1.05, 1.25])) and rec.d_omega2[2] == pytest.approx(-0.75)
+    assert events.model_events(xr.Dataset({"phi1": ("phi1", [0.0, 1.0])})) is None
 
 
 def test_model_options_reach_the_simulations_and_the_page(files, capsys, tmp_path):

@@ -6,6 +6,8 @@ threshold failed; exit 2: bad input (one line on stderr), nothing written.
 from __future__ import annotations
 
 import math
+import sys
+import time
 from pathlib import Path
 from typing import Optional
 
@@ -18,8 +20,16 @@ def register(app: typer.Typer) -> None:
     app.command("report")(report)
 
 
-class _Quiet:
-    """Stands in for rich's status spinner when stderr is not a terminal."""
+class _Lines:
+    """Progress when stderr is not a terminal (a pipe, a CI log): the current step with the time
+    since the start, at most every ``period`` s and not before ``quiet`` s, so a long report is
+    never silent and a quick one (or one that ends in a bad-input line) prints nothing extra."""
+
+    def __init__(self, stream, quiet: float = 2.0, period: float = 5.0):
+        self.stream = stream
+        self.t0 = self.last = time.perf_counter()
+        self.quiet, self.period = quiet, period
+        self.printed = False
 
     def __enter__(self):
         return self
@@ -27,8 +37,11 @@ class _Quiet:
     def __exit__(self, *exc):
         return False
 
-    def update(self, *args, **kwargs):
-        pass
+    def update(self, msg: str) -> None:
+        now = time.perf_counter()
+        if now - self.t0 >= self.quiet and (not self.printed or now - self.last >= self.period):
+            print(f"report: {msg} ({now - self.t0:.0f} s)", file=self.stream, flush=True)
+            self.last, self.printed = now, True
 
 
 def _split(value: str) -> list[str]:
@@ -53,7 +66,9 @@ def report(
     contact_length_mm: Optional[float] = typer.Option(None, help="elastic model: contact length lw [mm] (default 6)"),
     elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
     accuracy: str = typer.Option("standard", help="solver preset of the models: fast, standard, reference"),
-    revolutions: float = typer.Option(2.0, help="cam revolutions to simulate; the last one is compared [-]"),
+    revolutions: int = typer.Option(6, help="cam revolutions to simulate [-]: the last one is compared when the model's "
+                                    "motion is periodic, else the cycle statistics of revolutions 2..N"),
+    robustness: bool = typer.Option(True, help="also check the verdict at the other solver preset and half the length"),
     harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
     grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
@@ -64,7 +79,7 @@ def report(
 
     from common.errors import InputError
     from reports.align import Conditioning
-    from reports.pipeline import build_report, headline
+    from reports.pipeline import build_report, headline, verdict_lines
     from reports.thresholds import load_thresholds
 
     outputs = [p for p in (output, pdf, json_path) if p is not None and str(p) != "-"]
@@ -83,9 +98,9 @@ def report(
             raise InputError(f"{name} must be a finite number, got {value}")
     err = console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
-    with (err.status("report") if err.is_terminal else _Quiet()) as status:
+    with (err.status("report") if err.is_terminal else _Lines(sys.stderr)) as status:
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
-                           progress=lambda msg: status.update(msg))
+                           progress=lambda msg: status.update(msg), robustness=robustness)
         status.update("drawing the figures")
         from reports.figures import all_figures
         from reports.html import render_html
@@ -109,6 +124,8 @@ def report(
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
                        f"epsilon2 ISO {row['epsilon2_iso_rating']:.3f} ({row['epsilon2_iso_grade']})")
+        for line in verdict_lines(rep):
+            typer.echo(line)
         for n in rep.notes:
             typer.echo(f"note: {n}")
         typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else ""))
