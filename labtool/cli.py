@@ -18,7 +18,7 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from common.errors import Interrupted, LabtoolError
+from common.errors import Interrupted, LabtoolError, OutputError
 from common.files import describe_disk_error, disk_error, signals_interrupt
 from common.names import shown
 
@@ -63,10 +63,25 @@ def main(argv: list[str] | None = None) -> int:
     ``labtool: internal error: ...`` with exit 70 for a bug (LABTOOL_DEBUG=1 shows the traceback).
     """
     _tolerant_stdio()
+    _STATE["exit_at_disk_error"] = argv is None
     with signals_interrupt():
         code = _run(argv)
     if argv is None:
         sys.exit(code)
+    return code
+
+
+_STATE = {"exit_at_disk_error": False}
+
+
+def _disk_error_seen(code: int) -> int:
+    """After a full disk, HDF5 can crash the process (exit 139) when the objects of the failed
+    write are freed with the exception or at the interpreter's exit: the console command ends here,
+    the one line printed and the outputs already cleaned up (in-process callers get the code)."""
+    if _STATE["exit_at_disk_error"]:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     return code
 
 
@@ -84,6 +99,8 @@ def _run(argv) -> int:
         rv = _invoke(argv)
         return int(rv) if isinstance(rv, int) and not isinstance(rv, bool) else 0
     except LabtoolError as exc:
+        if (isinstance(exc, OutputError) and exc.errno is not None) or disk_error(exc) is not None:
+            return _disk_error_seen(_error(str(exc)))
         return _error(str(exc))
     except typer.Exit as exc:
         return exc.exit_code
@@ -100,13 +117,21 @@ def _run(argv) -> int:
     except click_exc.ClickException as exc:
         return _error(exc.format_message())
     except OSError as exc:
-        return _error(_os_error(exc))
+        code = _error(_os_error(exc))
+        return _disk_error_seen(code) if disk_error(exc) is not None else code
     except UnicodeError as exc:
         if _surrogates(exc):
             return _error("a file name given is not valid UTF-8 and cannot be written into the outputs; "
                           "rename the file (e.g. with convmv) and run again")
         return _internal(exc)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        code = disk_error(exc)
+        if code is not None:      # HDF5 and zlib say "errno = 28" in a RuntimeError or ValueError
+            name = getattr(exc, "filename", None)
+            text = (describe_disk_error(code, Path(os.fsdecode(name)), "the output may be incomplete") if name else
+                    f"a write failed: {os.strerror(code).lower()}; the output may be incomplete; "
+                    "free some space or write elsewhere")
+            return _disk_error_seen(_error(text))
         return _internal(exc)
 
 
