@@ -61,12 +61,14 @@ def start(args: list, cwd=None) -> subprocess.Popen:
 
 
 def one_error_line(code: int, err: str) -> str:
-    """The single ``labtool: error:`` line of a user error (exit 2); fails otherwise."""
+    """The ``labtool: error:`` line that ends a user error (exit 2); fails otherwise. Progress
+    lines before it are allowed (``report: drawing the figures (3 s)``), a traceback is not."""
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == 2, f"exit {code}, stderr: {err[-2000:]}"
-    assert len(lines) == 1, f"{len(lines)} lines on stderr: {err[-2000:]}"
-    assert lines[0].startswith("labtool: error: "), lines[0]
-    return lines[0]
+    assert lines and lines[-1].startswith("labtool: error: "), f"stderr: {err[-2000:]}"
+    assert sum(line.startswith("labtool: error: ") for line in lines) == 1, f"stderr: {err[-2000:]}"
+    assert not any(line.startswith(("Traceback", "HDF5-DIAG", "  File ")) for line in lines), err[-2000:]
+    return lines[-1]
 
 
 def wait_for(predicate, timeout: float = 120.0, every: float = 0.005) -> bool:

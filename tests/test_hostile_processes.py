@@ -30,6 +30,14 @@ def test_huge_requests_are_estimated_and_refused_at_once(args, fragment):
 
 
 @pytest.mark.hostile("hang")
+def test_a_report_over_a_million_revolutions_is_refused_at_once(tmp_path, measured_nc):
+    code, err = run(["report", measured_nc, "-o", tmp_path / "r.html", "--revolutions", "1000000"], timeout=120)
+    msg = one_error_line(code, err)
+    assert "--revolutions 1000000 would take about" in msg and "per revolution" in msg
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.hostile("hang")
 def test_a_request_over_the_time_limit_says_how_to_run_it():
     code, err = run(["kinematics", "--points", "2000000", "--max-seconds", "0.5"], timeout=90)
     msg = one_error_line(code, err)
@@ -178,3 +186,22 @@ def test_two_reports_on_one_set_at_once(tmp_path, measured_nc):
     assert json.loads((tmp_path / "r.json").read_text())["headline"]
     assert (tmp_path / "r.html").read_text().rstrip().endswith("</html>")
     assert hidden(tmp_path) == []
+
+
+@pytest.mark.hostile("concurrency")
+@pytest.mark.slow
+def test_two_demos_into_one_folder_at_once(tmp_path):
+    """Each demo builds in its own staging folder: the second never reads the first one's
+    half-written recording, both finish, and the folder holds one whole set."""
+    import json
+
+    out = tmp_path / "demo"
+    procs = [start(["demo", "-o", out]) for _ in range(2)]
+    results = [p.communicate(timeout=900) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [r[1][-1500:] for r in results]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["measured"]["source"] == "recording" and summary["headline"]
+    ds = xr.open_dataset(out / "measured_180rpm.nc", engine="h5netcdf")
+    assert ds.sizes["time"] > 0
+    ds.close()
+    assert hidden(tmp_path) == [] and hidden(out) == []
