@@ -165,19 +165,30 @@ class Mechanism:
         """Nominal motor torque Pn / omega_n in N*m."""
         return self.Pn / self.omega_nominal_motor
 
+    MAX_TRANSMISSION_RATIO = 1000.0      # motor-to-cam speed ratio of any real drive train
+
     @property
     def max_cam_speed_rpm(self) -> float:
         """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
         return self.omega_sync_motor * 30.0 / math.pi
 
+    @property
+    def min_cam_speed_rpm(self) -> float:
+        """The slowest cam speed the models take (rpm): the motor's nominal speed over a drive
+        ratio of MAX_TRANSMISSION_RATIO (eq. 3 scales the motor by the ratio squared: at 1e-266
+        rpm it overflowed)."""
+        return self.omega_nominal_motor * 30.0 / math.pi / self.MAX_TRANSMISSION_RATIO
+
     def check_cam_speed(self, rpm: float) -> float:
-        """``rpm`` if 0 < rpm <= max_cam_speed_rpm, else InputError stating the range. One range for
-        every command (simulate, kinematics, doe, report, the simulated stand): the motor cannot
-        drive the cam past its synchronous speed, and past it MR13D grows as n1^2 to nonsense."""
-        top = self.max_cam_speed_rpm
-        if not (math.isfinite(rpm) and 0 < rpm <= top * (1 + 1e-12)):    # 1000 rpm -> rad/s -> rpm
-            raise InputError(f"cam speed {rpm:.10g} rpm is outside the range the models take: 0 < n1 <= {top:.10g} rpm "
-                             "(the drive motor's synchronous speed, [motor] n_sync_rpm of the mechanism)")
+        """``rpm`` if min_cam_speed_rpm <= rpm <= max_cam_speed_rpm, else InputError stating the
+        range. One range for every command (simulate, kinematics, doe, report, the simulated stand):
+        the motor cannot drive the cam past its synchronous speed (past it MR13D grows as n1^2 to
+        nonsense), nor through a drive ratio above 1000."""
+        lo, top = self.min_cam_speed_rpm, self.max_cam_speed_rpm
+        if not (math.isfinite(rpm) and lo * (1 - 1e-12) <= rpm <= top * (1 + 1e-12)):    # rpm -> rad/s -> rpm
+            raise InputError(f"cam speed {rpm:.10g} rpm is outside the range the models take: {lo:.4g} <= n1 <= "
+                             f"{top:.10g} rpm (the drive motor's synchronous speed, [motor] n_sync_rpm, and its "
+                             "nominal speed over a drive ratio of 1000)")
         return rpm
 
     def replace(self, **changes) -> "Mechanism":
