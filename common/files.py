@@ -255,6 +255,19 @@ def signals_interrupt(signals: Iterable[int] = (signal.SIGTERM, signal.SIGHUP)):
                 signal.signal(s, h)
 
 
+@contextlib.contextmanager
+def _signals_held(signals=(signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
+    """Block ``signals`` inside the block; one that arrived meanwhile is delivered at its end."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 # --- sets of outputs -------------------------------------------------------------------------
 class OutputSet:
     """Files written together: all of them, or none (see the module docstring).
@@ -288,11 +301,12 @@ class OutputSet:
                 raise InputError(f"{a} name the same file {shown(final)}; give each output its own name")
         remove_stale_temporaries(final)
         tmp = _temp_name(final)
+        self._items.append((final, tmp, option))   # first: a signal right after the create still removes it
         try:
             _create_empty(tmp)
         except OSError as exc:
+            self._items.pop()
             self._raise_for(exc, final)
-        self._items.append((final, tmp, option))
         return tmp
 
     @property
@@ -336,7 +350,12 @@ class OutputSet:
 
     # -- ending --
     def commit(self) -> None:
-        """Rename every temporary onto its final name; on failure restore what was there."""
+        """Rename every temporary onto its final name; on failure restore what was there. Signals
+        wait until the renames are done (a few ms), so a set is never left half renamed."""
+        with _signals_held():
+            self._commit()
+
+    def _commit(self) -> None:
         done: list[tuple[Path, Path | None]] = []
         try:
             for final, tmp, _option in self._items:
