@@ -19,6 +19,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from common.names import utf8_text
+
 ATTRIBUTE = "processing_history"
 
 
@@ -40,7 +42,7 @@ def _plain(v):
         f = float(v)
         return f if math.isfinite(f) else None
     if isinstance(v, str):   # a non-UTF-8 file name (lone surrogates) is kept, escaped as \xff
-        return v.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        return utf8_text(v)
     return v
 
 

@@ -28,6 +28,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # plain click help: rich markup would read units such as "[mm]" or "[s/m]" as style tags and
+    # drop them, and its option table cuts long option names at 80 columns
+    rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
@@ -39,10 +42,12 @@ COMMAND_MODULES = (
     "labtool.commands.report",
     "labtool.commands.doe",
     "labtool.commands.acquire",
+    "labtool.commands.devices",
     "labtool.commands.calibrate",
     "labtool.commands.process",
     "labtool.commands.export",
     "labtool.commands.bench",
+    "labtool.commands.campaign",
 )
 
 
@@ -141,8 +146,9 @@ def _error(message: str) -> int:
 
 
 def _one_line(text) -> str:
-    """The message on one line: a newline (in a file name, a library's text) is shown as \\n."""
-    return str(text).strip().replace("\r", "\\r").replace("\n", "\\n")
+    """The message on one line, whatever it quotes: a newline or another control character (in a
+    file or channel name, a library's text) is shown escaped (common.names.shown)."""
+    return shown(str(text).strip())
 
 
 def _os_error(exc: OSError) -> str:
