@@ -110,7 +110,6 @@ class StandScene:
             (not model_truth or self.ripple == 0.0,
              f"the {self.truth_model} truth turns the cam at constant speed: set the speed ripple to 0"),
             (self.mode in ("run", "calibration"), f"stand mode must be 'run' or 'calibration', got '{self.mode}'"),
-            (math.isfinite(self.cam_speed_rpm) and 0 < self.cam_speed_rpm <= 2000, f"cam speed must lie in (0, 2000] rpm, got {self.cam_speed_rpm}"),
             (math.isfinite(self.Fu) and self.Fu >= 0, f"load Fu must be >= 0 N, got {self.Fu}"),
             (math.isfinite(self.backlash) and self.backlash >= 0, f"backlash must be >= 0 mm, got {self.backlash * 1e3:g}"),
             (math.isfinite(self.jt_factor) and self.jt_factor > 0, f"inertia factor Jt must be > 0, got {self.jt_factor}"),
@@ -127,6 +126,7 @@ class StandScene:
         for ok, msg in checks:
             if not ok:
                 raise InputError(msg)
+        self.mechanism.check_cam_speed(self.cam_speed_rpm)     # the one cam speed range of every command
         if self.twin.ripple != self.ripple:   # one ripple: the scene's
             object.__setattr__(self, "twin", self.twin.replace(ripple=self.ripple))
         self.program  # unknown law -> InputError now, not mid-run

@@ -20,3 +20,21 @@ class SolverError(LabtoolError, RuntimeError):
 
 class FileFormatError(LabtoolError, ValueError):
     """A file that is corrupt, truncated, of another format or missing required content."""
+
+
+class OutputError(LabtoolError):
+    """An output that could not be written (full disk, read-only file system, permission); the
+    message says what was kept (DESIGN.md: nothing is left half-written without saying so).
+    ``errno``: ENOSPC, EDQUOT, EFBIG or EROFS when the disk was the cause, else None."""
+
+    def __init__(self, message: str, errno: int | None = None):
+        super().__init__(message)
+        self.errno = errno
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised like Ctrl-C's KeyboardInterrupt so that cleanups run."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"signal {signum}")
+        self.signum = signum

@@ -19,6 +19,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from common.names import utf8_text
+
 ATTRIBUTE = "processing_history"
 
 
@@ -39,6 +41,8 @@ def _plain(v):
     if isinstance(v, (np.floating, float)):
         f = float(v)
         return f if math.isfinite(f) else None
+    if isinstance(v, str):   # a non-UTF-8 file name (lone surrogates) is kept, escaped as \xff
+        return utf8_text(v)
     return v
 
 

@@ -122,9 +122,15 @@ def _short(value, limit: int = 40) -> str:
         text = '"' + shown(value.encode("utf-8", "surrogateescape"))[:limit].replace('"', '\\"') + '"'
     elif isinstance(value, dict):
         return "{...}"
+    elif hasattr(value, "isoformat"):      # TOML dates and times
+        text = value.isoformat()
     else:
         text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _bound_text(bound) -> str:
+    return str(bound) if isinstance(bound, int) else f"{bound:g}"
 
 
 class KeyPath:
@@ -165,9 +171,17 @@ class Field:
         """What the field takes, for messages ("a number [mm]")."""
         return "a value"
 
+    types: tuple = (object,)      # the Python types of the TOML values it takes (bool only if listed)
+
     def takes_type(self, value) -> bool:
         """Whether ``value`` is of the kind this field takes (its range aside); used by OneOf."""
-        return True
+        if isinstance(value, bool) and bool not in self.types:
+            return False
+        return isinstance(value, self.types)
+
+    def _require_type(self, value, where, at) -> None:
+        if not self.takes_type(value):
+            self._expected(where, at, value)
 
     def _fail(self, where: str, at: KeyPath, value, why: str):
         prefix = f"{where}: " if where else ""
@@ -186,6 +200,8 @@ class Number(Field):
     ``gt``/``ge``/``lt``/``le``: bounds; ``nonzero``: refuse 0; ``unit``: shown in messages;
     ``allow_inf``: accept TOML ``inf`` (never ``nan``), e.g. "record until stopped"."""
 
+    types = (int, float)
+
     def __init__(self, *, gt=None, ge=None, lt=None, le=None, nonzero: bool = False, unit: str = "",
                  allow_inf: bool = False, **kw):
         super().__init__(**kw)
@@ -195,15 +211,11 @@ class Number(Field):
     def _u(self) -> str:
         return f" [{self.unit}]" if self.unit else ""
 
-    def takes_type(self, value) -> bool:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
-
     def describe(self) -> str:
         return f"a number{self._u()}"
 
     def _number(self, value, where, at):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         try:
             number = float(value)
         except OverflowError:
@@ -214,17 +226,18 @@ class Number(Field):
 
     def _bounds(self, number, value, where, at):
         u = self._u()
+        f = _bound_text
         if self.gt is not None and not number > self.gt:
             if self.gt == 0:
                 self._fail(where, at, value, "must not be negative; it must be greater than zero" if number < 0
                            else "must be greater than zero")
-            self._fail(where, at, value, f"must be > {self.gt:g}{u}")
+            self._fail(where, at, value, f"must be > {f(self.gt)}{u}")
         if self.ge is not None and not number >= self.ge:
-            self._fail(where, at, value, "must not be negative" if self.ge == 0 else f"must be >= {self.ge:g}{u}")
+            self._fail(where, at, value, "must not be negative" if self.ge == 0 else f"must be >= {f(self.ge)}{u}")
         if self.lt is not None and not number < self.lt:
-            self._fail(where, at, value, f"must be < {self.lt:g}{u}")
+            self._fail(where, at, value, f"must be < {f(self.lt)}{u}")
         if self.le is not None and not number <= self.le:
-            self._fail(where, at, value, f"must be <= {self.le:g}{u}")
+            self._fail(where, at, value, f"must be <= {f(self.le)}{u}")
         if self.nonzero and number == 0:
             self._fail(where, at, value, f"must not be zero{u}")
 
@@ -237,18 +250,16 @@ class Number(Field):
 class Integer(Number):
     """A TOML integer (not 1.5, not 2.0, not a boolean) within the bounds (default: int64), as int."""
 
+    types = (int,)
+
     def __init__(self, *, ge=-(2**63), le=2**63 - 1, **kw):
         super().__init__(ge=ge, le=le, **kw)
-
-    def takes_type(self, value) -> bool:
-        return isinstance(value, int) and not isinstance(value, bool)
 
     def describe(self) -> str:
         return f"an integer{self._u()}"
 
     def _check(self, value, where, at):
-        if isinstance(value, bool) or not isinstance(value, int):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         self._bounds(value, value, where, at)
         return int(value)
 
@@ -256,15 +267,13 @@ class Integer(Number):
 class Bool(Field):
     """``true`` or ``false`` (not 0/1, not "yes")."""
 
-    def takes_type(self, value) -> bool:
-        return isinstance(value, bool)
+    types = (bool,)
 
     def describe(self) -> str:
         return "true or false"
 
     def _check(self, value, where, at):
-        if not isinstance(value, bool):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         return value
 
 
@@ -272,13 +281,12 @@ class String(Field):
     """A string; ``choices``: the allowed values; ``max_len``: longest accepted (characters);
     ``single_line``: refuse newlines and other control characters (names written into files)."""
 
+    types = (str,)
+
     def __init__(self, *, choices: Iterable[str] | None = None, max_len: int = 4096, single_line: bool = True, **kw):
         super().__init__(**kw)
         self.choices = tuple(choices) if choices is not None else None
         self.max_len, self.single_line = max_len, single_line
-
-    def takes_type(self, value) -> bool:
-        return isinstance(value, str)
 
     def describe(self) -> str:
         if self.choices:
@@ -286,8 +294,7 @@ class String(Field):
         return "a string"
 
     def _check(self, value, where, at):
-        if not isinstance(value, str):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         if self.choices is not None and value not in self.choices:
             self._fail(where, at, value, f"expected {self.describe()}{_suggest(value, self.choices)}")
         if len(value) > self.max_len:
@@ -300,19 +307,17 @@ class String(Field):
 class ListOf(Field):
     """A list whose items all fit ``item``; ``min_len``/``max_len`` bound its length."""
 
+    types = (list,)
+
     def __init__(self, item: Field, *, min_len: int = 0, max_len: int | None = None, **kw):
         super().__init__(**kw)
         self.item, self.min_len, self.max_len = item, min_len, max_len
-
-    def takes_type(self, value) -> bool:
-        return isinstance(value, list)
 
     def describe(self) -> str:
         return f"a list of {self.item.describe().removeprefix('a ').removeprefix('an ')}s"
 
     def _check(self, value, where, at):
-        if not isinstance(value, list):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         if len(value) < self.min_len:
             self._fail(where, at, value, f"needs at least {self.min_len} item(s)")
         if self.max_len is not None and len(value) > self.max_len:
@@ -321,27 +326,32 @@ class ListOf(Field):
 
 
 def _suggest(name: str, known: Iterable[str]) -> str:
-    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]}?)" if close else ""
+    """' (did you mean X?)' for a misspelt key: case, a missing unit suffix (fu -> Fu_N), typos."""
+    known = list(known)
+    lower = {k.lower(): k for k in known}
+    key = name.lower()
+    same = lower.get(key) or next((k for k in known if k.lower().split("_")[0] == key), None)
+    if same is None:
+        close = difflib.get_close_matches(key, list(lower), n=1, cutoff=0.6)
+        same = lower[close[0]] if close else None
+    return f" (did you mean {same}?)" if same and same != name else ""
 
 
 class Table(Field):
     """A TOML table with fixed keys: ``fields`` maps each key to its Field. Keys not in ``fields``
     are an error naming them, unless ``extra=True`` (then kept unchecked)."""
 
+    types = (dict,)
+
     def __init__(self, fields: Mapping[str, Field], *, extra: bool = False, **kw):
         super().__init__(**kw)
         self.fields, self.extra = dict(fields), extra
-
-    def takes_type(self, value) -> bool:
-        return isinstance(value, dict)
 
     def describe(self) -> str:
         return "a table"
 
     def _check(self, value, where, at):
-        if not isinstance(value, dict):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         if not self.extra:
             for key in value:
                 if key not in self.fields:
@@ -377,21 +387,19 @@ class MapOf(Field):
     ``keys``: the allowed key names (None = any); ``key_max_len`` bounds a free key's length;
     ``noun``: what a key is called in messages ("unknown metric [omega2] nrmsee")."""
 
+    types = (dict,)
+
     def __init__(self, value: Field, *, keys: Iterable[str] | None = None, key_max_len: int = 256,
                  min_len: int = 0, noun: str = "key", **kw):
         super().__init__(**kw)
         self.value, self.keys, self.key_max_len, self.min_len = value, (tuple(keys) if keys else None), key_max_len, min_len
         self.noun = noun
 
-    def takes_type(self, value) -> bool:
-        return isinstance(value, dict)
-
     def describe(self) -> str:
         return "a table"
 
     def _check(self, value, where, at):
-        if not isinstance(value, dict):
-            self._expected(where, at, value)
+        self._require_type(value, where, at)
         if len(value) < self.min_len:
             self._fail(where, at, value, f"needs at least {self.min_len} entr{'y' if self.min_len == 1 else 'ies'}")
         out = {}

@@ -6,7 +6,10 @@ Every user error ends with one line ``labtool: error: ...`` on stderr and exit c
 from __future__ import annotations
 
 import importlib
+import os
+import signal
 import sys
+from pathlib import Path
 
 import typer
 
@@ -15,7 +18,8 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from common.errors import LabtoolError
+from common.errors import Interrupted, LabtoolError, OutputError
+from common.files import describe_disk_error, disk_error, signals_interrupt
 from common.names import shown
 
 app = typer.Typer(
@@ -56,32 +60,129 @@ _register_all()
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point; returns the process exit code."""
-    try:
-        rv = app(args=argv, standalone_mode=False, prog_name="labtool")
-        return int(rv) if isinstance(rv, int) else 0
-    except LabtoolError as exc:
-        # one line whatever the message quotes (a file or channel name with a newline in it)
-        typer.echo(f"labtool: error: {shown(str(exc))}", err=True)
-        code = 2
-    except typer.Exit as exc:
-        code = exc.exit_code
-    except typer.Abort:
-        typer.echo("labtool: interrupted", err=True)
-        code = 130
-    except click_exc.UsageError as exc:
-        hint = f" (see 'labtool {exc.ctx.command_path.split(' ', 1)[-1]} --help')" if exc.ctx else ""
-        typer.echo(f"labtool: error: {exc.format_message()}{hint}", err=True)
-        code = 2
-    except click_exc.ClickException as exc:
-        typer.echo(f"labtool: error: {exc.format_message()}", err=True)
-        code = 2
-    except KeyboardInterrupt:
-        typer.echo("labtool: interrupted", err=True)
-        code = 130
+    """Console entry point; returns the process exit code.
+
+    Every way a command can end is one line: ``labtool: error: ...`` and exit 2 for what the user
+    can fix (LabtoolError, bad options, files: OSError, a full or read-only disk), ``labtool:
+    interrupted`` and 128 + signal for Ctrl-C, SIGTERM and SIGHUP (cleanups run first), and
+    ``labtool: internal error: ...`` with exit 70 for a bug (LABTOOL_DEBUG=1 shows the traceback).
+    """
+    _tolerant_stdio()
+    _STATE["exit_at_disk_error"] = argv is None
+    with signals_interrupt():
+        code = _run(argv)
     if argv is None:
         sys.exit(code)
     return code
+
+
+_STATE = {"exit_at_disk_error": False}
+
+
+def _disk_error_seen(code: int) -> int:
+    """After a full disk, HDF5 can crash the process (exit 139) when the objects of the failed
+    write are freed with the exception or at the interpreter's exit: the console command ends here,
+    the one line printed and the outputs already cleaned up (in-process callers get the code)."""
+    if _STATE["exit_at_disk_error"]:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def _invoke(argv):
+    """Run the command without typer's own top-level handler (typer 0.29 turns Ctrl-C into a
+    silent exit 130, so no cleanup message and no way to tell SIGTERM from SIGINT)."""
+    command = typer.main.get_command(app)
+    args = sys.argv[1:] if argv is None else list(argv)
+    with command.make_context("labtool", args) as ctx:
+        return command.invoke(ctx)
+
+
+def _run(argv) -> int:
+    try:
+        rv = _invoke(argv)
+        return int(rv) if isinstance(rv, int) and not isinstance(rv, bool) else 0
+    except LabtoolError as exc:
+        if (isinstance(exc, OutputError) and exc.errno is not None) or disk_error(exc) is not None:
+            return _disk_error_seen(_error(str(exc)))
+        return _error(str(exc))
+    except typer.Exit as exc:
+        return exc.exit_code
+    except (typer.Abort, KeyboardInterrupt) as exc:
+        # click turns KeyboardInterrupt (and so Interrupted, for SIGTERM/SIGHUP) into Abort
+        cause = exc if isinstance(exc, Interrupted) else exc.__cause__ or exc.__context__
+        signum = cause.signum if isinstance(cause, Interrupted) else signal.SIGINT
+        typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); no output was left half-written",
+                   err=True)
+        return 128 + int(signum)
+    except click_exc.UsageError as exc:
+        hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx else ""
+        return _error(f"{exc.format_message() or 'no command given'}{hint}")
+    except click_exc.ClickException as exc:
+        return _error(exc.format_message())
+    except OSError as exc:
+        code = _error(_os_error(exc))
+        return _disk_error_seen(code) if disk_error(exc) is not None else code
+    except UnicodeError as exc:
+        if _surrogates(exc):
+            return _error("a file name given is not valid UTF-8 and cannot be written into the outputs; "
+                          "rename the file (e.g. with convmv) and run again")
+        return _internal(exc)
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        code = disk_error(exc)
+        if code is not None:      # HDF5 and zlib say "errno = 28" in a RuntimeError or ValueError
+            name = getattr(exc, "filename", None)
+            text = (describe_disk_error(code, Path(os.fsdecode(name)), "the output may be incomplete") if name else
+                    f"a write failed: {os.strerror(code).lower()}; the output may be incomplete; "
+                    "free some space or write elsewhere")
+            return _disk_error_seen(_error(text))
+        return _internal(exc)
+
+
+def _error(message: str) -> int:
+    typer.echo(f"labtool: error: {_one_line(message)}", err=True)
+    return 2
+
+
+def _one_line(text) -> str:
+    """The message on one line, whatever it quotes: a newline or another control character (in a
+    file or channel name, a library's text) is shown escaped (common.names.shown)."""
+    return shown(str(text).strip())
+
+
+def _os_error(exc: OSError) -> str:
+    """One line for an OSError that reached the top: what, which file, what to do."""
+    path = exc.filename if exc.filename is not None else None
+    code = disk_error(exc)
+    if code is not None and path is not None:
+        return describe_disk_error(code, Path(os.fsdecode(path)), "the output may be incomplete")
+    where = f"{shown(path)}: " if path is not None else ""
+    reason = exc.strerror or str(exc)
+    return f"{where}{reason}"
+
+
+def _surrogates(exc: UnicodeError) -> bool:
+    obj = getattr(exc, "object", "")
+    return isinstance(obj, str) and any("\ud800" <= c <= "\udfff" for c in obj)
+
+
+def _internal(exc: BaseException) -> int:
+    if os.environ.get("LABTOOL_DEBUG"):
+        raise exc
+    typer.echo(f"labtool: internal error: {type(exc).__name__}: {_one_line(exc)} (a bug in labtool; "
+               "please report it with the command line; LABTOOL_DEBUG=1 shows the traceback)", err=True)
+    return 70
+
+
+def _tolerant_stdio() -> None:
+    """Print file names that are not UTF-8 (escaped) instead of failing on them."""
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):  # pragma: no cover - a closed or replaced stream
+                pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -33,7 +33,9 @@ EXPERIMENT_FU_N = 0.0
 RECORD_SECONDS = 3.0           # 9 cam revolutions at 180 rpm
 
 
-def run_demo(out: Path) -> None:
+def run_demo(out: Path, shown_as: Path | None = None):
+    """Run every step writing into ``out``; returns the function that prints where the results
+    are (called once they are in place; ``shown_as`` is the folder they are then in)."""
     console = new_console()
     t0 = time.perf_counter()
     kin_path = step_kinematics(out, console)
@@ -41,12 +43,19 @@ def run_demo(out: Path) -> None:
     recording = step_acquire(out, console)
     measured = step_process(out, console, recording)
     html, rows = step_report(out, console, measured, recording)
-    console.print(f"\n[bold]demo done[/bold] in {time.perf_counter() - t0:.0f} s: kinematics {escape(str(kin_path))}, "
-                  f"Table 1 comparison {escape(str(table_path))}")
-    console.print(f"[bold]report: {escape(str(html.resolve()))}[/bold]  (open it in a browser; summary.json and report.pdf "
-                  "beside it)", soft_wrap=True)
-    for line in rows:
-        console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
+    elapsed = time.perf_counter() - t0
+
+    def final(path: Path) -> Path:
+        return (shown_as / path.relative_to(out)) if shown_as is not None else path
+
+    def announce() -> None:
+        console.print(f"\n[bold]demo done[/bold] in {elapsed:.0f} s: kinematics {escape(str(final(kin_path)))}, "
+                      f"Table 1 comparison {escape(str(final(table_path)))}")
+        console.print(f"[bold]report: {escape(str(final(html).resolve()))}[/bold]  (open it in a browser; "
+                      "summary.json and report.pdf beside it)", soft_wrap=True)
+        for line in rows:
+            console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
+    return announce
 
 
 def _cli(args: list[str], step: str) -> None:

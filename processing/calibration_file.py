@@ -159,18 +159,10 @@ def calibration_text(doc: dict) -> str:
 
 
 def write_calibration(path, doc: dict) -> None:
-    """Write the file atomically (temp file + rename), readable by others (a calibration is shared)."""
-    from common.files import atomic_write
+    """Write the file atomically, with the user's umask (common.files: a full disk is one line)."""
+    from common.files import write_text
 
-    text = calibration_text(doc)
-
-    def _write(tmp: Path):
-        try:
-            tmp.write_text(text, encoding="utf-8")
-            tmp.chmod(0o644)  # mkstemp makes it private; the user's umask still rules the directory
-        except OSError as exc:
-            raise InputError(f"cannot write {shown(path)}: {exc.strerror or exc}") from None
-    atomic_write(Path(path), _write)
+    write_text(Path(path), calibration_text(doc))
 
 
 __all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "CALIBRATION", "check_document",

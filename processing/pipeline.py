@@ -35,6 +35,7 @@ from common import history as H
 from common import recording_attrs
 from common.errors import InputError
 from common.files import atomic_write
+from common.names import shown
 from models.mechanism import Mechanism
 from models.mechanism.motion_laws import CamProgram
 from processing import cam_angle, cycles, events, filters, follower, kernels, speed, spectra
@@ -278,9 +279,9 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> di
     # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
     # from a synthetic one; the file and the command are in source_file and history
     attrs = cf.global_attrs("labtool measured follower motion", source="recording",
-                            history=f"labtool process {rec.source}")
+                            history=f"labtool process {shown(rec.source)}")
     values = {
-        "source_file": rec.source, "source_format": rec.format, "start_time_utc": rec.start_time_utc,
+        "source_file": shown(rec.source), "source_format": rec.format, "start_time_utc": rec.start_time_utc,
         "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm": cam.rpm,
         "cam_speed_rpm_stated": float(rec.cam_speed_rpm), "law": program.segments[0].law.name,
         "phi1_method": method, "lowpass_hz": lp.cutoff_hz, "DE_m": chain.DE,

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing import impacts
 from reports import align, events, metrics
@@ -125,7 +126,7 @@ def _attr_float(ds, *names):
 def max_cam_speed_rpm() -> float:
     """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
     from models.mechanism import Mechanism
-    return Mechanism.default().omega_sync_motor * 30.0 / math.pi
+    return Mechanism.default().max_cam_speed_rpm
 
 
 def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dict:
@@ -321,7 +322,7 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     say("computing the metrics")
     comparisons = [c for run in sims for c in compare_run(cycles, run)]
     rows = evaluate(thresholds, comparisons) if thresholds else []
-    rep = Report(str(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(meas_ev, sims),
+    rep = Report(shown(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(meas_ev, sims),
                  rows, thresholds.source if thresholds else None, notes, 0.0, time_filter, meas_ev)
     if robustness and any(r.model != "kinematic" for r in sims):
         say("checking the verdict at the other preset and half the length")

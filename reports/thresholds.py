@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from pathlib import Path
 
 from common.errors import InputError
+from common.schema import ListOf, MapOf, Number, OneOf, String, Table, load_toml
 from reports.metrics import METRICS
 
 SIGNALS = ("omega2", "epsilon2")
@@ -68,83 +68,49 @@ class Thresholds:
         return model in self.models and mode in self.omega1
 
 
-def _number(value, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"{where}: a limit must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _names(value, allowed, where: str) -> tuple:
-    if isinstance(value, str):
-        value = [value]
-    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise InputError(f"{where}: expected a list of names")
-    bad = [v for v in value if v not in allowed]
-    if bad:
-        raise InputError(f"{where}: unknown {', '.join(map(repr, bad))}; known: {', '.join(allowed)}")
-    return tuple(value)
+_NAMES = {"models": MODELS, "omega1": MODES}
+_LIMIT = OneOf(Number(), Table({"min": Number(required=False), "max": Number(required=False)}))
+SCHEMA = Table({
+    **{signal: MapOf(_LIMIT, keys=tuple(METRICS), noun="metric", required=False) for signal in SIGNALS},
+    "apply": Table({
+        **{key: OneOf(String(choices=names), ListOf(String(choices=names)), required=False)
+           for key, names in _NAMES.items()},
+        "scope": String(choices=SCOPES, default="overall"),
+    }, default={}),
+})
 
 
 def parse_thresholds(data: dict, source: str = "thresholds") -> Thresholds:
     """Thresholds from the parsed TOML ``data``; ``source`` names the file in error messages."""
+    doc = SCHEMA.check(data, where=source)
     limits = []
-    apply = {}
-    for key, table in data.items():
-        if key == "apply":
-            if not isinstance(table, dict):
-                raise InputError(f"{source}: [apply] must be a table")
-            apply = table
-            continue
-        if key not in SIGNALS:
-            raise InputError(f"{source}: unknown signal [{key}]; known: {', '.join(SIGNALS)}, apply")
-        if not isinstance(table, dict):
-            raise InputError(f"{source}: [{key}] must be a table of metric = limit")
-        for metric, spec in table.items():
-            where = f"{source} [{key}] {metric}"
-            if metric not in METRICS:
-                raise InputError(f"{source}: unknown metric '{metric}' in [{key}]; known: {', '.join(METRICS)}")
+    for signal in SIGNALS:
+        for metric, spec in doc.get(signal, {}).items():
+            where = f"{source}: [{signal}] {metric}"
             if isinstance(spec, dict):
-                extra = set(spec) - {"min", "max"}
-                if extra or not spec:
-                    raise InputError(f"{where}: expected {{min = ..}} and/or {{max = ..}}, got keys {sorted(spec)}")
-                lo = _number(spec["min"], where) if "min" in spec else None
-                hi = _number(spec["max"], where) if "max" in spec else None
+                if not spec:
+                    raise InputError(f"{where}: expected {{min = ..}} and/or {{max = ..}}, got an empty table")
+                lo, hi = spec.get("min"), spec.get("max")
                 if lo is not None and hi is not None and lo > hi:
                     raise InputError(f"{where}: min {lo:g} is above max {hi:g}")
-                limits.append(Limit(key, metric, lo, hi))
+                limits.append(Limit(signal, metric, lo, hi))
+            elif METRICS[metric][0] == "high":      # a bare number: a minimum for scores, a maximum for errors
+                limits.append(Limit(signal, metric, spec, None))
             else:
-                v = _number(spec, where)
-                better = METRICS[metric][0]
-                limits.append(Limit(key, metric, v, None) if better == "high" else Limit(key, metric, None, v))
-    extra = set(apply) - {"models", "omega1", "scope"}
-    if extra:
-        raise InputError(f"{source}: unknown key(s) in [apply]: {', '.join(sorted(extra))}; known: models, omega1, scope")
-    scope = apply.get("scope", "overall")
-    if scope not in SCOPES:
-        raise InputError(f"{source}: [apply] scope must be one of {', '.join(SCOPES)}, got {scope!r}")
-    return Thresholds(
-        limits=tuple(limits),
-        models=_names(apply.get("models", list(MODELS)), MODELS, f"{source} [apply] models"),
-        omega1=_names(apply.get("omega1", list(MODES)), MODES, f"{source} [apply] omega1"),
-        scope=scope,
-        source=source,
-    )
+                limits.append(Limit(signal, metric, None, spec))
+    apply = doc["apply"]
+
+    def names(key):
+        value = apply.get(key, list(_NAMES[key]))
+        return (value,) if isinstance(value, str) else tuple(value)
+
+    return Thresholds(limits=tuple(limits), models=names("models"), omega1=names("omega1"),
+                      scope=apply["scope"], source=source)
 
 
 def load_thresholds(path: Path) -> Thresholds:
-    """Read and check a threshold file (TOML)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"threshold file {path} not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read threshold file {path}: {exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"threshold file {path} is not valid TOML: {exc}") from None
-    return parse_thresholds(data, source=str(path))
+    """Read and check a threshold file (TOML, common.schema)."""
+    return parse_thresholds(load_toml(path, "threshold file"), source=f"threshold file {path}")
 
 
 def evaluate(thresholds: Thresholds, comparisons) -> list[dict]:

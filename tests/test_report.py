@@ -147,16 +147,16 @@ def test_threshold_file_with_an_unknown_metric_is_one_line_exit_2(files, capsys)
     th.write_text("[omega2]\niso_ratin = 0.5\n")
     out = files["dir"] / "x.html"
     _one_line_exit_2(capsys, ["report", str(files["exact"]), "--thresholds", str(th), "-o", str(out)],
-                     "unknown metric 'iso_ratin'")
+                     "unknown metric [omega2] iso_ratin (did you mean iso_rating?)")
     assert not out.exists()
 
 
 @pytest.mark.parametrize("content,fragment", [
-    ("[omega3]\nnrmse = 0.1\n", "unknown signal"),
-    ("[omega2]\nnrmse = 'small'\n", "finite number"),
-    ("[omega2]\nnrmse = { below = 0.1 }\n", "expected {min"),
+    ("[omega3]\nnrmse = 0.1\n", "unknown table [omega3] (did you mean omega2?)"),
+    ("[omega2]\nnrmse = 'small'\n", "expected a number or a table"),
+    ("[omega2]\nnrmse = { below = 0.1 }\n", "unknown key [omega2.nrmse] below; known: min, max"),
     ("[omega2]\nnrmse = { min = 0.5, max = 0.1 }\n", "above max"),
-    ("[apply]\nmodels = ['stiff']\n", "unknown 'stiff'"),
+    ("[apply]\nmodels = ['stiff']\n", '"stiff": expected one of'),
     ("[apply]\nscope = 'sometimes'\n", "scope"),
     ("[omega2\n", "not valid TOML"),
 ])

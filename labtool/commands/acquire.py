@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 import sys
-import tomllib
 from pathlib import Path
 from typing import List, Optional
 
@@ -12,6 +11,8 @@ import typer
 from acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
 from common.errors import InputError
 from common.files import check_output_path
+from common.names import shown
+from common.schema import Integer, Number, String, Table, load_toml
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {
@@ -30,28 +31,38 @@ def register(app: typer.Typer) -> None:
     app.command("acquire")(acquire)
 
 
+# the [stand] table of a scene file (common.schema): types, plausible bounds, unknown keys named
+STAND_SCHEMA = Table({
+    "mode": String(choices=("run", "calibration"), required=False),
+    "law": String(required=False),
+    "cam_speed_rpm": Number(gt=0, le=1e5, unit="rpm", required=False),
+    "Fu_N": Number(ge=0, le=1e6, unit="N", required=False),
+    "backlash_mm": Number(ge=0, le=100, unit="mm", required=False),
+    "jt_factor": Number(gt=0, le=1e3, required=False),
+    "ripple": Number(ge=0, lt=1, required=False),
+    "cal_accel_m_s2": Number(gt=0, le=1e6, unit="m/s^2", required=False),
+    "cal_freq_hz": Number(gt=0, le=1e6, unit="Hz", required=False),
+    "cal_channel": String(max_len=64, required=False),
+    "seed": Integer(ge=0, required=False),
+    "duration_s": Number(gt=0, allow_inf=True, unit="s", required=False),
+    "rate_hz": Number(gt=0, le=1e8, unit="Hz", required=False),
+    "ka_m_s2_per_v": Number(gt=0, le=1e7, unit="m/s^2/V", required=False),
+    "truth_model": String(max_len=64, required=False),      # checked by StandScene (TRUTH_MODELS)
+})
+assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
+# [truth] is checked key by key by acquisition.signal_chain.truth_settings
+SCENE_SCHEMA = Table({"stand": STAND_SCHEMA, "truth": Table({}, extra=True, required=False)})
+
+
 def load_scene(path: Path) -> dict:
     """Option values from a scene file's [stand] table (keys in SCENE_KEYS), and under "_truth"
     the StandScene arguments of its optional [truth] table (acquisition.signal_chain.TRUTH_TABLE_KEYS);
-    InputError if bad."""
-    try:
-        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"scene file {path} does not exist") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"scene file {path} is not valid TOML: {exc}") from None
-    stand = doc.get("stand")
-    if not isinstance(stand, dict):
-        raise InputError(f"scene file {path} has no [stand] table")
-    unknown = set(stand) - set(SCENE_KEYS)
-    if unknown:
-        raise InputError(f"scene file {path}: unknown keys {', '.join(sorted(unknown))}; known: {', '.join(SCENE_KEYS)}")
-    out = {SCENE_KEYS[k]: v for k, v in stand.items()}
+    InputError if bad (common.schema: types, bounds, unknown keys named)."""
+    doc = SCENE_SCHEMA.check(load_toml(path, "scene file"), where=f"scene file {path}")
+    out = {SCENE_KEYS[k]: v for k, v in doc["stand"].items()}
     table = doc.get("truth")
     if table is not None:
         from acquisition.signal_chain import truth_settings
-        if not isinstance(table, dict):
-            raise InputError(f"scene file {path}: [truth] must be a table")
         settings = truth_settings(table, f"scene file {path}")
         if "truth_model" in settings:
             out["truth"] = settings.pop("truth_model")
@@ -144,7 +155,7 @@ def acquire(
 
     dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
                                 iepe_excitation, meta_given, motor_setting)
-    attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
+    attrs["command"] = "labtool acquire " + " ".join(map(shown, sys.argv[2:])) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
     _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
 
 

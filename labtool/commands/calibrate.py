@@ -7,6 +7,7 @@ from typing import List
 import typer
 
 from common.files import check_output_path
+from common.names import utf8_text
 
 
 def register(app: typer.Typer) -> None:
@@ -35,7 +36,7 @@ def calibrate(
     check_output_path(output, force)
     pairs = pair_channels(recordings, channel)
     results = calibrate_pairs(pairs, reference, open_recording)
-    sources = list(dict.fromkeys(str(p) for _, p in pairs))
+    sources = list(dict.fromkeys(utf8_text(p) for _, p in pairs))   # a non-UTF-8 byte is written as \xff
     doc = calibration_document({r.channel: r.entry() for r in results}, reference.as_dict(), "; ".join(sources))
     write_calibration(output, doc)
     _print_table(results, reference, sources)

@@ -20,10 +20,17 @@ def demo(
     output: Path = typer.Option(Path("demo_out"), "-o", "--output", help="folder for the demo's files"),
 ) -> None:
     """Run the demo pipeline and print where its results are."""
+    import contextlib
+
     import matplotlib
 
     matplotlib.use("Agg")
+    from common.files import staged_folder
     from labtool.demo_steps import run_demo
 
-    output.mkdir(parents=True, exist_ok=True)
-    run_demo(output)
+    shown_as = output.absolute()
+    # every file is made in a hidden folder beside the output folder and moved in at the end:
+    # a full disk, Ctrl-C or a failure leaves the output folder as it was
+    with staged_folder(output) as stage, contextlib.chdir(stage):
+        announce = run_demo(Path("."), shown_as=shown_as)
+    announce()

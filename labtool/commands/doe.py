@@ -13,6 +13,7 @@ from typing import List, Optional
 import typer
 
 from common.files import atomic_write, check_output_path
+from common.names import shown
 
 doe_app = typer.Typer(
     help="Simulated experiments: full factorial runs (Tables 2-3) and their ANOVA (eqs 20-28).",
@@ -271,7 +272,9 @@ def plot_effects(data, out, path: Path) -> None:
                                       " *" if term is not None and term.significant else ""), fontsize=8)
             ax.tick_params(labelsize=6)
             ax.legend(fontsize=6)
-    fig.suptitle(f"{data.source}: main effects and two-factor interactions (cell means)", fontsize=9)
+    # the file name is text, not mathtext ('$x^$' in a name raised a ParseException) nor markup
+    fig.suptitle(f"{shown(data.source)}: main effects and two-factor interactions (cell means)", fontsize=9,
+                 parse_math=False)
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=90)
     plt.close(fig)

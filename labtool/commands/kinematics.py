@@ -1,13 +1,17 @@
 """``labtool kinematics``: kinematic analysis of the paper's mechanism at constant cam speed."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Optional
 
 import typer
 
-from common.files import check_output_path, write_netcdf
+from common import budget
+from common.files import OutputSet, check_outputs
 from common.units import DEG
+
+PROBE_ABOVE_POINTS = 200_000        # smaller requests take under ~3 s: no estimate needed
 
 
 def register(app: typer.Typer) -> None:
@@ -26,6 +30,8 @@ def kinematics(
     groove_csv: Optional[Path] = typer.Option(None, help="also write the pitch curve and both flanks [mm] as CSV"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
+    max_seconds: float = typer.Option(budget.DEFAULT_MAX_SECONDS, help="refuse (on a terminal: ask) when the "
+                                      "estimated run time of a large --points is longer [s]"),
 ) -> None:
     """Kinematics over one cam revolution: phi2, omega2, epsilon2, points C/E/N, aE_t/aE_n,
     reduced inertias, pressure angle, groove curvature and the kinetostatic MR13D."""
@@ -36,13 +42,24 @@ def kinematics(
     from models.mechanism.kinematics import analyze, rise_summary
     from models.mechanism import Mechanism
     from models.mechanism.motion_laws import CamProgram
+    from common.errors import InputError
 
-    for path in (output, groove_csv):
-        if path is not None:
-            check_output_path(path, force)
+    check_outputs({"-o": output, "--groove-csv": groove_csv}, force)
+    budget.check_limit(max_seconds)
+    if points < 16:
+        raise InputError(f"--points must be at least 16 per revolution, got {points}")
     mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
     mech = mech.replace(psi_a=stroke_deg * DEG) if stroke_deg != 15.0 else mech
+    mech.check_cam_speed(rpm)
     program = CamProgram.for_mechanism(mech, law=law, rise=rise_deg * DEG, stroke=mech.psi_a)
+    if points > PROBE_ABOVE_POINTS:
+        # measured (docs/robustness.md): peak memory 2.1x the Dataset, plus the NetCDF image when
+        # written; the time per point at 1e6-3e6 points is ~2x that at 5e4
+        est = budget.probe_linear(lambda n: analyze(mech, program, rpm, fu, jt_factor, n_points=int(n)),
+                                  (2_000, 50_000), points, "point",
+                                  nbytes=lambda d: d.nbytes * (3.1 if output is not None else 2.1), large_factor=2.0)
+        confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
+        budget.check(est, f"--points {points}", max_seconds, "use fewer --points", confirm)
     ds = analyze(mech, program, rpm, fu, jt_factor, n_points=points)
     s = rise_summary(ds)
     cut = undercut(mech, program)
@@ -66,9 +83,6 @@ def kinematics(
     for r in rows:
         table.add_row(*r)
     console().print(table)
-    if groove_csv is not None:
-        n = export_groove_csv(groove_csv, mech, program)
-        typer.echo(f"wrote {groove_csv} ({n} points, mm)")
     if output is not None:
         from models.dynamics.provenance import labtool_version, mechanism_attributes
 
@@ -77,5 +91,13 @@ def kinematics(
             f"labtool kinematics --law {law} --rpm {rpm!r} --fu {fu!r} --jt-factor {jt_factor!r}",
             f"--rise-deg {rise_deg!r} --stroke-deg {stroke_deg!r} --points {points}",
             *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
-        write_netcdf(ds, output)
+    # one output set: both files, or neither (a full disk left a truncated groove CSV)
+    with OutputSet() as out:
+        if groove_csv is not None:
+            n = out.write(groove_csv, lambda tmp: export_groove_csv(tmp, mech, program), "--groove-csv")
+        if output is not None:
+            out.write_netcdf(output, ds, "-o")
+    if groove_csv is not None:
+        typer.echo(f"wrote {groove_csv} ({n} points, mm)")
+    if output is not None:
         typer.echo(f"wrote {output}")

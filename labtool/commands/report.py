@@ -13,7 +13,10 @@ from typing import Optional
 
 import typer
 
-from common.files import atomic_write, check_output_path
+from common import budget
+from common.files import OutputSet, check_outputs
+
+PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no estimate needed
 
 
 def register(app: typer.Typer) -> None:
@@ -44,6 +47,28 @@ class _Lines:
             self.last, self.printed = now, True
 
 
+def _check_budget(models, modes, accuracy, revolutions, robustness, max_seconds) -> None:
+    """Estimate the simulations of a long report from each dynamic model at 2 and 4 revolutions
+    (the paper's operating point; the file's may differ, so this is an order of magnitude) times
+    the runs it makes (models x omega1 modes, x2 with the robustness check at the other preset)."""
+    from models.dynamics.scene import Scene
+    from models.dynamics.simulate import simulate
+
+    seconds, peak, bases = 0.0, 0.0, []
+    for model in [m for m in models if m in ("rigid", "elastic")]:
+        scene = Scene(accuracy=accuracy, rise_only=False)
+        est = budget.probe_linear(lambda n: simulate(scene.replace(revolutions=float(n)), model).dataset,
+                                  (2, 4), revolutions, "revolution", nbytes=lambda ds: 2.0 * ds.nbytes)
+        runs = len(modes) * (2 if robustness else 1)
+        seconds += runs * est.seconds
+        peak = max(peak, est.bytes * len(modes))
+        bases.append(f"{model}: {est.basis}, {runs} runs")
+    if seconds > 0:
+        confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
+        budget.check(budget.Estimate(seconds, peak, "; ".join(bases)), f"--revolutions {revolutions}", max_seconds,
+                     "use fewer --revolutions", confirm)
+
+
 def _split(value: str) -> list[str]:
     return [v.strip() for v in value.split(",") if v.strip()]
 
@@ -72,6 +97,8 @@ def report(
     harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
     grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
+    max_seconds: float = typer.Option(budget.DEFAULT_MAX_SECONDS, help="refuse (on a terminal: ask) when the "
+                                      "estimated run time of many --revolutions is longer [s]"),
 ) -> None:
     """Compare a measurement with the rigid and elastic models (omega1 constant and variable):
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
@@ -82,11 +109,10 @@ def report(
     from reports.pipeline import build_report, headline, verdict_lines
     from reports.thresholds import load_thresholds
 
-    outputs = [p for p in (output, pdf, json_path) if p is not None and str(p) != "-"]
-    if len({p.resolve() for p in outputs}) != len(outputs):
-        raise InputError("the HTML, PDF and JSON outputs must be different files")
-    for p in outputs:
-        check_output_path(p, force)
+    check_outputs({"-o": output, "--pdf": pdf, "--json": json_path}, force)
+    budget.check_limit(max_seconds)
+    if revolutions > PROBE_ABOVE_REVOLUTIONS:
+        _check_budget(_split(models), _split(omega1), accuracy, revolutions, robustness, max_seconds)
     th = load_thresholds(thresholds) if thresholds else None
     cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
     overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
@@ -107,16 +133,19 @@ def report(
         from reports.summary import to_json
         figs = all_figures(rep)
         html = render_html(rep, figs)
-        atomic_write(output, lambda tmp: tmp.write_text(html, encoding="utf-8"))
-        if pdf is not None:
-            from reports.pdf import write_pdf
-            atomic_write(pdf, lambda tmp: write_pdf(rep, tmp, figs))
-        if json_path is not None:
-            text = to_json(rep)
-            if str(json_path) == "-":
-                typer.echo(text)
-            else:
-                atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        # the HTML, PDF and JSON are one set: all written, or none (a full disk, Ctrl-C)
+        with OutputSet() as out:
+            out.write_text(output, html, "-o")
+            if pdf is not None:
+                from reports.pdf import write_pdf
+                status.update("writing the PDF")
+                out.write(pdf, lambda tmp: write_pdf(rep, tmp, figs), "--pdf")
+            if json_path is not None:
+                text = to_json(rep)
+                if str(json_path) != "-":
+                    out.write_text(json_path, text + "\n", "--json")
+        if json_path is not None and str(json_path) == "-":
+            typer.echo(text)
     if not quiet:
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "

@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Optional
 
 import typer
 
+from common import budget
 from common.files import check_output_path, write_netcdf
 from common.units import MM
+
+PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 
 
 def register(app: typer.Typer) -> None:
@@ -55,6 +59,8 @@ def simulate(
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="NetCDF file to write (SI units)"),
     as_json: bool = typer.Option(False, "--json", help="print the indicators as one JSON object on stdout"),
     force: bool = typer.Option(False, help="overwrite an existing output file"),
+    max_seconds: float = typer.Option(budget.DEFAULT_MAX_SECONDS, help="refuse (on a terminal: ask) when the "
+                                      "estimated run time of many --revolutions is longer [s]"),
 ) -> None:
     """Simulate the mechanism at one operating point and report the jump indicators."""
     from common.errors import InputError
@@ -76,6 +82,9 @@ def simulate(
                   omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
                   rise_only=rise_only, contact_length=contact_length_mm * MM, kc_factor=kc_factor,
                   contact_damping=contact_damping, elastic_gap=elastic_gap, mechanism=mech)
+    budget.check_limit(max_seconds)
+    if revolutions > PROBE_ABOVE_REVOLUTIONS:
+        _check_budget(scene, model, revolutions, max_seconds, output is not None)
     result = run(scene, model)
     for warning in result.warnings:
         typer.echo(f"labtool: warning: {warning}", err=True)
@@ -98,6 +107,18 @@ def simulate(
             *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
         write_netcdf(ds, output)
         typer.echo(f"wrote {output}", err=as_json)
+
+
+def _check_budget(scene, model: str, revolutions: float, max_seconds: float, writes: bool) -> None:
+    """Refuse (or ask, on a terminal) a run estimated over ``max_seconds`` or the memory there is,
+    from the same scene at 2 and 4 revolutions (peak memory ~2x the Dataset, +1x for the NetCDF)."""
+    from models.dynamics.simulate import simulate as run
+
+    est = budget.probe_linear(lambda n: run(scene.replace(revolutions=float(n)), model).dataset,
+                              (2, 4), revolutions, "revolution",
+                              nbytes=lambda ds: ds.nbytes * (3.0 if writes else 2.0))
+    confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
+    budget.check(est, f"--revolutions {revolutions:g}", max_seconds, "use fewer --revolutions", confirm)
 
 
 _LABELS = {

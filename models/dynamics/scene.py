@@ -60,8 +60,8 @@ class Scene:
 
     def __post_init__(self):
         get_law(self.law)
+        self.mechanism.check_cam_speed(self.cam_speed_rpm)
         checks = [
-            (math.isfinite(self.cam_speed_rpm) and self.cam_speed_rpm > 0, f"cam speed must be > 0 rpm, got {self.cam_speed_rpm}"),
             (math.isfinite(self.Fu) and self.Fu >= 0, f"load Fu must be >= 0 N, got {self.Fu}"),
             (math.isfinite(self.backlash) and self.backlash >= 0, f"backlash must be >= 0 mm, got {self.backlash * 1e3:g} mm"),
             (math.isfinite(self.jt_factor) and self.jt_factor > 0, f"inertia factor Jt must be > 0, got {self.jt_factor}"),

@@ -10,13 +10,13 @@ import dataclasses
 import functools
 import hashlib
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from common.errors import InputError
+from common.schema import Number, String, Table, load_toml, parse_toml
 from common.units import DEG, MM, RPM
 
 _UNIT_SCALE = {"_mm": MM, "_deg": DEG, "_rpm": RPM}
@@ -60,6 +60,39 @@ _FIELDS = [
     ("motor", "n_nominal_rpm", "omega_nominal_motor", False, False),
     ("motor", "Jm_kgm2", "Jm", True, False),
 ]
+
+
+# Plausible bounds of a cam mechanism on a test stand, by unit (a value outside is a typo or a
+# unit mix-up, e.g. 1e300 or metres given as mm); the linkage's own geometry is checked by validate()
+_BOUNDS = {"_mm": 1e4, "_deg": 720.0, "_kg": 1e3, "_kgm2": 1e3, "_m_s2": 100.0, "_W": 1e7, "_rpm": 1e5}
+_UNITS = {"_mm": "mm", "_deg": "deg", "_kg": "kg", "_kgm2": "kg m^2", "_m_s2": "m/s^2", "_W": "W", "_rpm": "rpm"}
+
+
+def _number(key: str, zero_ok: bool, negative_ok: bool, **kw) -> Number:
+    suffix = next(s for s in _BOUNDS if key.endswith(s))
+    bound = _BOUNDS[suffix]
+    if negative_ok:
+        return Number(ge=-bound, le=bound, nonzero=not zero_ok, unit=_UNITS[suffix], **kw)
+    return Number(**({"ge": 0.0} if zero_ok else {"gt": 0.0}), le=bound, unit=_UNITS[suffix], **kw)
+
+
+def _schema() -> Table:
+    """The mechanism file's schema: the parameters of _FIELDS (required) and the optional extras."""
+    sections: dict = {}
+    for section, key, _attr, zero_ok, negative_ok in _FIELDS:
+        sections.setdefault(section, {})[key] = _number(key, zero_ok, negative_ok)
+    sections["cam"].update(diameter_mm=_number("diameter_mm", False, False, default=120.0),
+                           rr_min_mm=_number("rr_min_mm", False, False, required=False),
+                           rr_max_mm=_number("rr_max_mm", False, False, required=False))
+    program = Table({"law": String(required=False),
+                     **{k: _number(k, True, False, required=False)
+                        for k in ("rise_deg", "upper_dwell_deg", "return_deg", "lower_dwell_deg")}},
+                    default={})
+    return Table({"name": String(required=False, max_len=200), "program": program,
+                  **{name: Table(fields) for name, fields in sections.items()}})
+
+
+SCHEMA = _schema()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +176,32 @@ class Mechanism:
         """Nominal motor torque Pn / omega_n in N*m."""
         return self.Pn / self.omega_nominal_motor
 
+    MAX_TRANSMISSION_RATIO = 1000.0      # motor-to-cam speed ratio of any real drive train
+
+    @property
+    def max_cam_speed_rpm(self) -> float:
+        """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
+        return self.omega_sync_motor * 30.0 / math.pi
+
+    @property
+    def min_cam_speed_rpm(self) -> float:
+        """The slowest cam speed the models take (rpm): the motor's nominal speed over a drive
+        ratio of MAX_TRANSMISSION_RATIO (eq. 3 scales the motor by the ratio squared: at 1e-266
+        rpm it overflowed)."""
+        return self.omega_nominal_motor * 30.0 / math.pi / self.MAX_TRANSMISSION_RATIO
+
+    def check_cam_speed(self, rpm: float) -> float:
+        """``rpm`` if min_cam_speed_rpm <= rpm <= max_cam_speed_rpm, else InputError stating the
+        range. One range for every command (simulate, kinematics, doe, report, the simulated stand):
+        the motor cannot drive the cam past its synchronous speed (past it MR13D grows as n1^2 to
+        nonsense), nor through a drive ratio above 1000."""
+        lo, top = self.min_cam_speed_rpm, self.max_cam_speed_rpm
+        if not (math.isfinite(rpm) and lo * (1 - 1e-12) <= rpm <= top * (1 + 1e-12)):    # rpm -> rad/s -> rpm
+            raise InputError(f"cam speed {rpm:.10g} rpm is outside the range the models take: {lo:.4g} <= n1 <= "
+                             f"{top:.10g} rpm (the drive motor's synchronous speed, [motor] n_sync_rpm, and its "
+                             "nominal speed over a drive ratio of 1000)")
+        return rpm
+
     def replace(self, **changes) -> "Mechanism":
         """A copy with some parameters changed (SI values), validated again."""
         new = dataclasses.replace(self, **changes)
@@ -158,42 +217,30 @@ class Mechanism:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Mechanism":
-        path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read mechanism file {path}: {exc.strerror}") from None
-        return cls.from_toml_text(text, source=str(path))
+        """A user's mechanism file (common.schema: types, bounds and unknown keys checked)."""
+        doc = load_toml(path, what="mechanism file")
+        return cls.from_dict(doc, source=str(path), sha256=hashlib.sha256(Path(path).read_bytes()).hexdigest())
 
     @classmethod
     def from_toml_text(cls, text: str, source: str = "<text>") -> "Mechanism":
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"mechanism file {source} is not valid TOML: {exc}") from None
+        return cls.from_dict(parse_toml(text, f"mechanism file {source}"), source=source,
+                             sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "<dict>", sha256: str = "") -> "Mechanism":
+        """From a parsed mechanism document; InputError names the file and the key at fault.
+        ``sha256``: of the text it was parsed from (provenance), empty if none."""
+        doc = SCHEMA.check(data, where=f"mechanism file {source}")
         values: dict = {}
-        for section, key, attr, zero_ok, negative_ok in _FIELDS:
-            try:
-                raw = data[section][key]
-            except (KeyError, TypeError):
-                raise InputError(
-                    f"mechanism file {source}: missing parameter [{section}] {key}"
-                ) from None
-            if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
-                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw!r} is not a finite number")
-            if raw < 0 and not negative_ok:
-                raise InputError(f"mechanism file {source}: [{section}] {key} = {raw} must not be negative")
-            if raw == 0 and not zero_ok:
-                raise InputError(f"mechanism file {source}: [{section}] {key} must be greater than zero")
+        for section, key, attr, _zero_ok, _negative_ok in _FIELDS:
             scale = next((s for suffix, s in _UNIT_SCALE.items() if key.endswith(suffix)), 1.0)
-            values[attr] = float(raw) * scale
-        cam = data.get("cam", {})
-        values["cam_diameter"] = float(cam.get("diameter_mm", 120.0)) * 1e-3
-        values["rr_min"] = float(cam["rr_min_mm"]) * 1e-3 if "rr_min_mm" in cam else None
-        values["rr_max"] = float(cam["rr_max_mm"]) * 1e-3 if "rr_max_mm" in cam else None
-        values["program"] = dict(data.get("program", {}))
-        mech = cls(name=str(data.get("name", source)), source=source,
-                   source_sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), **values)
+            values[attr] = doc[section][key] * scale
+        cam = doc["cam"]
+        values["cam_diameter"] = cam["diameter_mm"] * MM
+        values["rr_min"] = cam["rr_min_mm"] * MM if "rr_min_mm" in cam else None
+        values["rr_max"] = cam["rr_max_mm"] * MM if "rr_max_mm" in cam else None
+        values["program"] = dict(doc["program"])
+        mech = cls(name=doc.get("name", source), source=source, source_sha256=sha256, **values)
         mech.validate()
         return mech
 
