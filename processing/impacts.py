@@ -7,8 +7,11 @@ filter's impulse response times d_omega2, centred on the impact. The detector:
 
 1. residual r = epsilon2 - epsilon2_reference (rad/s^2): the measured acceleration less the one the
    cam law imposes at the measured cam angle and speed;
-2. x = r less its own low-pass at fc / 4 (zero-phase): what is left of the slow departures from the
-   law (a flight through the backlash lasts several pulse widths) is small, an impact's pulse stays;
+2. x = r band-limited to ``band_hz`` = min(fc, half the follower's first structural mode, 1.2 kHz:
+   ``MODE_HZ``), so that the mode's ringing after an impact (the processing low-pass lets it through
+   once fc nears it: 833 Hz at 500 rpm) is not taken for more impacts, less its own low-pass at
+   band / 4 (zero-phase): what is left of the slow departures from the law (a flight through the
+   backlash lasts several pulse widths) is small, an impact's pulse stays;
 3. CLEAN (Hoegbom's deconvolution): the largest |x| is an impact; its step is x / h(0), with h the
    pulse of a unit step through the same two filters (``pulse_kernel``); the pulse is subtracted at
    its sub-sample position and the search repeats until |x| < ``k_sigma`` robust standard
@@ -40,6 +43,11 @@ DEFAULT_K_SIGMA = 8.0          # detection threshold in robust standard deviatio
 DEFAULT_SEQUENCE_GAP_S = 5e-3  # a quiet time longer than this starts a new jump
 FLOOR_FRACTION = 0.05          # smallest visible pulse, fraction of the cam law's peak |epsilon2|
 SIDE_S = 2e-3                  # side windows of the normal channel's check (s)
+# the follower's first bending mode (Hz): the chain's resonance of the simulated stand and the twin's
+# mode (1.2 kHz clamped, 1.39 kHz in flight; docs/twin.md). The detector keeps below half of it, where
+# an order-4 zero-phase low-pass leaves 1/257 of the ring (docs/reports.md)
+MODE_HZ = 1200.0
+MODE_BAND_FRACTION = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,40 +59,55 @@ class Detector:
     order: int = 4
     k_sigma: float = DEFAULT_K_SIGMA
     sequence_gap_s: float = DEFAULT_SEQUENCE_GAP_S
+    mode_hz: float = MODE_HZ
+
+    @property
+    def band_hz(self) -> float:
+        """The detector's band (Hz): the processing low-pass, at most half the structural mode."""
+        return min(self.cutoff_hz, MODE_BAND_FRACTION * self.mode_hz)
 
     @property
     def resolution_s(self) -> float:
-        """Impacts closer than this (s) are one visible impact: half a pulse width, 1 / (2 fc)."""
-        return 0.5 / self.cutoff_hz
+        """Impacts closer than this (s) are one visible impact: half a pulse width, 1 / (2 band)."""
+        return 0.5 / self.band_hz
 
     def describe(self, threshold: float | None = None) -> str:
         thr = "" if threshold is None or not math.isfinite(threshold) else f"; visible: |d omega2| >= {threshold:.3g} rad/s"
         return (f"CLEAN deconvolution of the measured epsilon2 minus the kinematic epsilon2 by the pulse of a velocity "
-                f"step through the processing low-pass ({self.cutoff_hz:.0f} Hz), threshold {self.k_sigma:g} robust "
+                f"step through the processing low-pass ({self.cutoff_hz:.0f} Hz){self._band_text()}, threshold {self.k_sigma:g} robust "
                 f"sigma{thr}; impacts closer than {1e3 * self.resolution_s:.2f} ms are one; a jump = the first visible "
                 f"impact after {1e3 * self.sequence_gap_s:g} ms without one")
 
+    def _band_text(self) -> str:
+        if self.band_hz >= self.cutoff_hz:
+            return ""
+        return f" and the detector's own at {self.band_hz:.0f} Hz (half the {self.mode_hz:.0f} Hz structural mode)"
+
     def kernel(self) -> np.ndarray:
-        return pulse_kernel(self.fs, self.cutoff_hz, self.order)
+        return pulse_kernel(self.fs, self.cutoff_hz, self.order, self.mode_hz)
 
 
-def _highpass(x: np.ndarray, det: Detector) -> np.ndarray:
-    """x less its zero-phase low-pass at fc / 4 (the slow departures from the cam law)."""
+def _band(x: np.ndarray, det: Detector) -> np.ndarray:
+    """x limited to the detector's band (zero-phase low-pass at ``band_hz`` when it is below the
+    processing's), less its zero-phase low-pass at band / 4 (the slow departures from the cam law)."""
     from processing.filters import lowpass_sos, zero_phase
-    return x - zero_phase(lowpass_sos(det.fs, 0.25 * det.cutoff_hz, det.order), x)
+    if det.band_hz < det.cutoff_hz:
+        x = zero_phase(lowpass_sos(det.fs, det.band_hz, det.order), x)
+    return x - zero_phase(lowpass_sos(det.fs, 0.25 * det.band_hz, det.order), x)
 
 
 @functools.lru_cache(maxsize=16)
-def pulse_kernel(fs: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
+def pulse_kernel(fs: float, cutoff_hz: float, order: int = 4, mode_hz: float = MODE_HZ) -> np.ndarray:
     """What a velocity step of 1 rad/s at sample 0 looks like in the detector's x (rad/s^2), on
     samples -L..L (odd length, centre = the step): an impulse of area 1 through the processing
-    low-pass and the detector's high-pass, both zero-phase."""
+    low-pass and the detector's band (``_band``), all zero-phase."""
     from processing.filters import lowpass_sos, zero_phase
-    half = int(math.ceil(6.0 * fs / cutoff_hz))
+    det = Detector(fs, cutoff_hz, order, mode_hz=mode_hz)
+    half = int(math.ceil(6.0 * fs / det.band_hz))
     imp = np.zeros(8 * half + 1)
     imp[4 * half] = fs                               # area 1 (rad/s) over one sample
     y = zero_phase(lowpass_sos(fs, cutoff_hz, order), imp)
-    y = _highpass(y, Detector(fs, cutoff_hz, order))
+    y = _band(y, det)
     out = y[3 * half: 5 * half + 1].copy()
     out.setflags(write=False)
     return out
@@ -101,7 +124,7 @@ def noise_level(x: np.ndarray) -> float:
 
 def prepare(residual: np.ndarray, det: Detector) -> np.ndarray:
     """The detector's x from the residual r (rad/s^2)."""
-    return _highpass(np.asarray(residual, dtype=float), det)
+    return _band(np.asarray(residual, dtype=float), det)
 
 
 def threshold_step(x: np.ndarray, reference_peak: float, det: Detector) -> float:
