@@ -334,7 +334,8 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     meas_ev = _measured_events(cycles, det, op)
     for run in sims:
         if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
-            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"])
+            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"],
+                                          events.motion_starts(cam_program(op)))
     say("computing the metrics")
     comparisons = [c for run in sims for c in compare_run(cycles, run)]
     rows = evaluate(thresholds, comparisons) if thresholds else []
@@ -414,13 +415,18 @@ def _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_fil
         return run
 
 
+def cam_program(op: dict):
+    """The cam program of the operating point (the default mechanism, the op's law)."""
+    from models.mechanism import Mechanism
+    from models.mechanism.motion_laws import CamProgram
+    return CamProgram.for_mechanism(Mechanism.default(), law=op["law"])
+
+
 def _measured_events(cycles, det, op) -> dict | None:
     if det is None:
         return None
     from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
-    mech = Mechanism.default()
-    return events.measured(cycles, det, mech, CamProgram.for_mechanism(mech, law=op["law"]))
+    return events.measured(cycles, det, Mechanism.default(), cam_program(op))
 
 
 def _ratings(cycles, cycle) -> dict:

@@ -136,3 +136,27 @@ def test_the_structural_modes_ringing_is_not_counted_as_impacts():
             assert t.size == 2
             assert np.allclose(t, np.array(sorted(steps)) / FS, atol=0.3e-3)
             assert np.allclose(d, [steps[k] for k in sorted(steps)], rtol=0.15)
+
+
+def test_a_weak_step_in_a_strong_ones_shadow_is_merged_into_it():
+    r = 1e-3
+    t = np.array([0.0, 1.2e-3, 3.0e-3, 10e-3, 11.2e-3])
+    d = np.array([-2.0, -0.2, -0.25, 1.0, 0.5])
+    mt, md = impacts.merge_shadowed(t, d, r)
+    # 0.2 (10 %, 1.2 r away) joins the -2.0; 0.25 is 3 r away; 0.5 is 50 % of its neighbour
+    assert np.allclose(mt, [0.0, 3.0e-3, 10e-3, 11.2e-3]) and np.allclose(md, [-2.2, -0.25, 1.0, 0.5])
+    vt, vd = impacts.visible_events(t, d, threshold=0.1, resolution_s=r)
+    assert vt.size == 4 and np.isclose(vd.sum(), d.sum())
+
+
+def test_a_pickup_just_after_the_law_starts_is_hidden_a_landing_after_a_flight_is_not():
+    from reports.events import flight_starts, hidden_pickups
+    w1, r = 50.0, 0.8e-3                        # rad/s (~480 rpm), resolution s
+    starts = [0.0, math.radians(180.0)]
+    # contacts: at 2 deg of the rise (0.7 ms after it began) after resting in the gap since -5 ms;
+    # at 2 deg of the next rise but 0.3 ms after a rebound's separation; at 35 deg after a 6 ms flight
+    t = np.array([math.radians(2.0) / w1, (2 * math.pi + math.radians(2.0)) / w1, math.radians(35.0) / w1])
+    phi = w1 * t
+    seps = np.array([-5e-3, t[1] - 0.3e-3, t[2] - 6e-3])
+    hidden = hidden_pickups(t, phi, flight_starts(t, seps), starts, w1, r)
+    assert hidden.tolist() == [True, False, False]
