@@ -33,13 +33,17 @@ LABTOOL = str(ROOT / ".venv" / "bin" / "labtool")
 LOSS = {"rigid": {"restitution": 0.2}, "elastic": {"contact_damping": 40.0}}   # the truths' defaults (docs/twin.md)
 
 
+STAND = {"seed": 1, "backlash_mm": 0.128}      # set from the command line
+
+
 def record(d: Path, truth: str, rpm: float, seconds: float) -> tuple[Path, Path]:
     """(recording, measured file) of the simulated stand with ``truth`` at ``rpm``, made once."""
-    rec, nc = d / f"{truth}_{rpm:g}.h5", d / f"{truth}_{rpm:g}.nc"
+    tag = "" if STAND == {"seed": 1, "backlash_mm": 0.128} else f"_s{STAND['seed']}_j{STAND['backlash_mm']:g}"
+    rec, nc = d / f"{truth}_{rpm:g}{tag}.h5", d / f"{truth}_{rpm:g}{tag}.nc"
     if not rec.exists():
         subprocess.run([LABTOOL, "acquire", "--device", "sim", "--truth", truth, "--rpm", f"{rpm:g}", "--duration",
-                        f"{seconds:g}", "--fast", "--seed", "1", "-o", str(rec), "--force"], check=True,
-                       stdout=subprocess.DEVNULL)
+                        f"{seconds:g}", "--fast", "--seed", str(STAND["seed"]), "--backlash-mm",
+                        f"{STAND['backlash_mm']:g}", "-o", str(rec), "--force"], check=True, stdout=subprocess.DEVNULL)
     if not nc.exists():
         subprocess.run([LABTOOL, "process", str(rec), "-o", str(nc), "--force"], check=True, stdout=subprocess.DEVNULL)
     return rec, nc
@@ -151,7 +155,10 @@ if __name__ == "__main__":
     ap.add_argument("checks", nargs="*", choices=list(CHECKS), help="which checks (default: all)")
     ap.add_argument("--seconds", type=float, default=5.0, help="recording length [s]")
     ap.add_argument("--keep", type=Path, default=None, help="folder to keep (and reuse) the recordings in")
+    ap.add_argument("--seed", type=int, default=1, help="noise seed of the simulated stand")
+    ap.add_argument("--backlash-mm", type=float, default=0.128, help="groove backlash j [mm]")
     args = ap.parse_args()
+    STAND.update(seed=args.seed, backlash_mm=args.backlash_mm)
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)

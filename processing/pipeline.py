@@ -287,6 +287,8 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> di
         "omega2_normal_check_rel_rms": st.normal.value, "n_revolutions_averaged": st.cycles.count,
         "n_clipped_samples": st.clip.flagged, "n_segments": n_segs, "n_spikes": st.spikes.seen,
         "n_samples_lost": st.time.samples_lost, H.ATTRIBUTE: hist.to_json(),
+        # the operating point the recording states, for the report's models (left out when unstated)
+        **{k: _float_attr(rec.attrs.get(k)) for k in ("Fu_N", "backlash_mm", "jt_factor")},
     }
     for name in ("aE_t", "aE_n"):
         values[f"ka_{name}_m_s2_per_v"] = cal[name]["ka_m_s2_per_v"]

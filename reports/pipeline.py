@@ -180,6 +180,8 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
                 b = _attr_float(ds, "backlash_m")
                 v = None if b is None else b * 1e3
             out[key] = EXPERIMENT[key] if v is None else v
+            if v is None:        # never silently: the page says which values are the paper's, not the file's
+                out.setdefault("assumed", []).append(key)
     for key, default in MODEL_OPTIONS.items():
         out[key] = default if overrides.get(key) is None else overrides[key]
     return out
@@ -364,6 +366,13 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
     if abs(dev) > 0.10:
         notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
                      f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
+    if op.get("assumed"):
+        names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
+                 "jt_factor": ("inertia factor Jt", "", "--jt-factor")}
+        said = ", ".join(f"{names[k][0]} = {op[k]:g}{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
+        notes.append(f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
+                     f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
+                     "stand ran otherwise")
     stated = op.get("cam_speed_rpm_stated")
     if stated and abs(cycles.cam_speed_rpm / stated - 1.0) > 0.002:
         notes.append(f"the file states {stated:g} rpm ({op['cam_speed_stated_by']}), the cam turned at "
