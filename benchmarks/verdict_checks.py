@@ -86,7 +86,7 @@ def measured_and_true(rec: Path, nc: Path) -> tuple[dict, dict]:
     det = pipeline.detector_for(align.processing_filter(ds), ds)
     m = pipeline._measured_events(cyc, det, op)
     tr = events.truth_statistics(truth_record(rec, float(cyc.time[-1, -1]) + 0.5), cyc, det, m["threshold_rad_s"],
-                                 events.motion_starts(pipeline.cam_program(op)))
+                                 pipeline.cam_program(op))
     return m, tr
 
 

@@ -145,9 +145,10 @@ def visible_statistics(t: np.ndarray, phi1: np.ndarray, d_omega2: np.ndarray, de
     return impacts.per_revolution(angles, jump_angles)
 
 
-def predicted(sim: xr.Dataset, steady: range, det: impacts.Detector, threshold: float, starts=()) -> dict | None:
+def predicted(sim: xr.Dataset, steady: range, det: impacts.Detector, threshold: float,
+              program=None) -> dict | None:
     """Predicted event statistics over the model's steady revolutions ``steady`` (indices k);
-    ``starts``: the law's motion starts (rad, ``motion_starts``) for ``hidden_pickups``."""
+    ``program``: the cam program, whose motion starts ``hidden_pickups`` needs."""
     rec = model_events(sim)
     if rec is None:
         return None
@@ -155,6 +156,7 @@ def predicted(sim: xr.Dataset, steady: range, det: impacts.Detector, threshold: 
     per_rev_all = _by_revolution(rec.time[c], rec.phi1[c], steady)
     sep = ~c
     flights = _by_revolution(rec.time[sep], rec.phi1[sep], steady)
+    starts = motion_starts(program) if program is not None else ()
     hidden = hidden_pickups(rec.time[c], rec.phi1[c], flight_starts(rec.time[c], rec.time[sep]), starts,
                             _mean_speed(rec.time, rec.phi1), det.resolution_s)
     out = visible_statistics(rec.time[c], rec.phi1[c], rec.d_omega2[c], det, threshold,
@@ -171,14 +173,15 @@ def _mean_speed(t, phi1) -> float:
     return float((phi1[-1] - phi1[0]) / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0] else math.nan
 
 
-def truth_statistics(record: dict, cycles, det: impacts.Detector, threshold: float, starts=()) -> dict:
+def truth_statistics(record: dict, cycles, det: impacts.Detector, threshold: float, program=None) -> dict:
     """A known truth's events (the arrays of EVENTS.md, e.g. the simulated stand's
     ``acquisition.signal_chain.truth_events``; times from the recording's first sample) over the
     measured whole revolutions of ``cycles`` (by time), with the same visibility as the measured and
-    predicted ones: what the detector should find. ``starts`` as for ``predicted``."""
+    predicted ones: what the detector should find. ``program`` as for ``predicted``."""
     t_all, phi_all = np.asarray(record["event_time"], float), np.asarray(record["event_phi1"], float)
     c = np.asarray(record["event_kind"]).astype(str) == "contact"
     spans = [(row[0], row[-1] + (row[-1] - row[0]) / (row.size - 1)) for row in cycles.time]
+    starts = motion_starts(program) if program is not None else ()
     hidden = hidden_pickups(t_all[c], phi_all[c], flight_starts(t_all[c], t_all[~c]), starts,
                             _mean_speed(t_all, phi_all), det.resolution_s)
     out = visible_statistics(t_all[c], phi_all[c], record["event_domega2"][c], det, threshold, spans, by="time",
@@ -228,12 +231,12 @@ def measured(cycles, det: impacts.Detector, mech, program) -> dict:
             r = e2[sl] - ref
             peak = max(peak, float(np.max(np.abs(ref))))
             noise.append(impacts.prepare(r, det)[:: max(1, r.size // 5000)])
-            found.append((block, sl, r))
+            found.append((block, sl, r, ref))
     threshold = impacts.threshold_step(np.concatenate(noise), peak, det) if noise else math.nan
     times, steps, checks, jump_t = [], [], [], []
-    for block, sl, r in found:
+    for block, sl, r, law in found:
         t = np.asarray(block["time"].values, float)[sl]
-        tt, dd, jj = impacts.detect_impacts(r, det, threshold)
+        tt, dd, jj = impacts.detect_impacts(r, det, threshold, law=law)
         times.append(t[0] + tt)
         jump_t.append(t[0] + jj)
         steps.append(dd)

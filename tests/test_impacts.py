@@ -160,3 +160,18 @@ def test_a_pickup_just_after_the_law_starts_is_hidden_a_landing_after_a_flight_i
     seps = np.array([-5e-3, t[1] - 0.3e-3, t[2] - 6e-3])
     hidden = hidden_pickups(t, phi, flight_starts(t, seps), starts, w1, r)
     assert hidden.tolist() == [True, False, False]
+
+
+def test_with_the_law_a_flights_drift_is_never_an_impact():
+    """Given the cam law's epsilon2, a component is an impact only with the law's sign (the
+    landing corrects the departure, which has the opposite sign) or in a dwell: a flight's drift
+    (+, the follower keeps its speed while the law decelerates) never counts, the landing does."""
+    n = 20_000
+    law = np.zeros(n)
+    law[8_000:9_000] = np.sin(np.linspace(0, math.pi, 1000)) * 900.0      # the rise's first half
+    law[9_000:11_000] = -np.sin(np.linspace(0, math.pi, 2000)) * 900.0    # ... and its second
+    r = _record({10_080: -2.4}, noise=0.5, flight=(9_000, 10_080, 1500.0))
+    thr = impacts.threshold_step(impacts.prepare(r, DET), 900.0, DET)
+    t, d, jumps = impacts.detect_impacts(r, DET, thr, law=law)
+    assert np.all(d < 0) and jumps.size == 1
+    assert d[0] == pytest.approx(-2.4, rel=0.15) and t[0] == pytest.approx(1.008, abs=0.4e-3)
