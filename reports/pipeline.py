@@ -336,8 +336,7 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     meas_ev = _measured_events(cycles, det, op)
     for run in sims:
         if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
-            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"],
-                                          events.motion_starts(cam_program(op)))
+            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"], cam_program(op))
     say("computing the metrics")
     comparisons = [c for run in sims for c in compare_run(cycles, run)]
     rows = evaluate(thresholds, comparisons) if thresholds else []
@@ -446,10 +445,19 @@ def _ratings(cycles, cycle) -> dict:
     return out
 
 
+TIE = 0.005   # mean ISO ratings closer than this to the best are "as close" (the ratings' own spread)
+
+
+def _mean_rating(r: dict) -> float:
+    return 0.5 * (r["omega2_iso_rating"] + r["epsilon2_iso_rating"])
+
+
 def _variant_row(accuracy, revolutions, entries) -> dict:
-    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings."""
-    best = max(entries, key=lambda e: 0.5 * (e[1]["omega2_iso_rating"] + e[1]["epsilon2_iso_rating"]))
-    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0],
+    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings, ``tied``
+    every label within TIE of it."""
+    best = max(entries, key=lambda e: _mean_rating(e[1]))
+    tied = [lab for lab, r in entries if _mean_rating(r) >= _mean_rating(best[1]) - TIE]
+    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0], "tied": tied,
             "models": [{"label": lab, **r} for lab, r in entries]}
 
 
@@ -509,17 +517,23 @@ def robustness_sentence(rows: list[dict]) -> str | None:
     verdict = robust_verdict(rows)
     if verdict is None:
         return None
+    tied = [t for t in rows[0].get("tied", []) if t != rows[0]["closest"]]
+    also = f" ({', '.join(tied)} within {TIE:g} of its mean ISO rating)" if tied else ""
     if verdict["robust"]:
-        return "verdict robust: the same closest model at both presets and both simulated lengths"
+        return (f"verdict robust: {rows[0]['closest']} is the closest{also} at both presets and both simulated "
+                "lengths")
     return "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}" for r in rows)
 
 
 def robust_verdict(rows: list[dict]) -> dict | None:
-    """Whether the closest model is the same in every robustness row (None without rows)."""
+    """Whether the first row's closest model is the closest, or within TIE of it, in every
+    robustness row (None without rows)."""
     names = [r["closest"] for r in rows if r.get("closest") is not None]
     if not names:
         return None
-    return {"robust": len(set(names)) == 1 and len(names) == len(rows), "closest": sorted(set(names))}
+    first = rows[0].get("closest")
+    robust = len(names) == len(rows) and all(first == r["closest"] or first in r.get("tied", ()) for r in rows)
+    return {"robust": robust, "closest": sorted(set(names))}
 
 
 def _check_choice(values, allowed, what) -> tuple:
