@@ -16,6 +16,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
 from common.errors import LabtoolError
+from common.names import shown
 
 app = typer.Typer(
     name="labtool",
@@ -23,6 +24,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # plain click help: rich markup would read units such as "[mm]" or "[s/m]" as style tags and
+    # drop them, and its option table cuts long option names at 80 columns
+    rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
@@ -34,10 +38,12 @@ COMMAND_MODULES = (
     "labtool.commands.report",
     "labtool.commands.doe",
     "labtool.commands.acquire",
+    "labtool.commands.devices",
     "labtool.commands.calibrate",
     "labtool.commands.process",
     "labtool.commands.export",
     "labtool.commands.bench",
+    "labtool.commands.campaign",
 )
 
 
@@ -55,7 +61,8 @@ def main(argv: list[str] | None = None) -> int:
         rv = app(args=argv, standalone_mode=False, prog_name="labtool")
         return int(rv) if isinstance(rv, int) else 0
     except LabtoolError as exc:
-        typer.echo(f"labtool: error: {exc}", err=True)
+        # one line whatever the message quotes (a file or channel name with a newline in it)
+        typer.echo(f"labtool: error: {shown(str(exc))}", err=True)
         code = 2
     except typer.Exit as exc:
         code = exc.exit_code

@@ -1,62 +1,178 @@
-"""Reading the calibration TOML written by ``labtool calibrate``.
+"""The calibration file (TOML): its schema, reader, writer and merging (which Ka a channel gets
+from it is processing/ka.py).
 
-Format (this module's contract until acquisition/calibration.py fixes its own; unknown keys are
-ignored so the writer may add more)::
+Written by ``labtool calibrate`` (through ``write_calibration``, with tomli-w: never by string
+formatting, so any channel name or file name is quoted as TOML requires) and read by
+``labtool process --calibration`` (``read_calibration``). Format version 1::
 
-    [channels.aE_t]
-    ka_m_s2_per_v = 86.43            # m/s^2 per V, multiplies the recorded volts
-    uncertainty_m_s2_per_v = 0.5     # optional, standard uncertainty of Ka
+    format = "labtool.calibration"
+    format_version = 1
+    created_utc = "2026-11-22T04:30:00+00:00"
+    source = "sample_data/calibration_79p6Hz.h5"   # optional: the reference recording(s), "; "-joined
+    [reference]                  # optional: the exciter, as given to 'labtool calibrate'
+    accel_m_s2 = 9.81            # what the exciter gives, m/s^2 (> 0)
+    convention = "peak"          # "peak" or "rms": what accel_m_s2 means
+    freq_hz = 79.6               # nominal frequency, Hz
+    rel_uncertainty = 0.0        # of the exciter, relative, in [0, 1)
+    [channels.aE_t]              # one table per channel; the name is a quoted TOML key if it must be
+    ka_m_s2_per_v = 86.43        # the factor: acceleration = Ka * volts, m/s^2/V, 1e-3 < Ka < 1e6
+    uncertainty_m_s2_per_v = 0.01  # optional: standard uncertainty (k = 1), fit and reference combined
+    ka_std_fit_m_s2_per_v = 0.01   # optional: the fit's part of it
+    fitted_freq_hz = 79.6          # optional, Hz
+    amplitude_v_peak = 0.1135      # optional, V
+    residual_rms_v = 0.0006        # optional, V
+    harmonic_distortion = 0.001    # optional: (2f, 3f amplitudes) / fundamental
+    n_samples = 20000              # optional
+    n_references = 1               # optional: reference recordings merged into this Ka
+    birge_ratio = 1.0              # optional: their scatter / their stated uncertainty (> 1: inflated)
+    source = "ref.h5"              # optional: where this channel's Ka comes from
 
-This is the layout acquisition/calibration.py writes (there the uncertainty is named
-``ka_std_m_s2_per_v``; both names are read). A flat form ``[aE_t] ka_m_s2_per_v = ...`` and the key ``ka`` are accepted too.
+Strict (common.schema): a key this schema does not know, a bool or a string where a number belongs,
+a number out of range, NaN or inf is refused with one line naming the file and the key. The header
+(``format``, ``format_version``) may be left out of a hand-written file; if present it must match.
 """
 from __future__ import annotations
 
 import dataclasses
+import datetime as _dt
 import math
-import tomllib
 from pathlib import Path
 
-from common.errors import FileFormatError, InputError
+from common.errors import InputError
+from common.names import shown
+from common.schema import Integer, MapOf, Number, SchemaError, String, Table, load_toml
 
-# The paper's calibration (sec. 3, Figure 6): B&K 4291 exciter, 9.81 m/s^2 at 79.6 Hz.
+CAL_FORMAT = "labtool.calibration"
+CAL_VERSION = 1
+# The paper's calibration (sec. 2.4): B&K 4291 exciter, 9.81 m/s^2 at 79.6 Hz -> Ka = 86.43 m/s^2/V.
 PAPER_KA_M_S2_PER_V = 86.43
+# what an accelerometer chain's Ka can be (m/s^2 per V): 1e-3 (a 1 kV/(m/s^2) chain) .. 1e6
+KA_MIN, KA_MAX = 1e-3, 1e6
+KA = "m/s^2/V"
+
+REFERENCE = Table({
+    "accel_m_s2": Number(gt=0, le=1e5, unit="m/s^2"),
+    "convention": String(choices=("peak", "rms")),
+    "freq_hz": Number(gt=0, le=1e5, unit="Hz"),
+    "rel_uncertainty": Number(ge=0, lt=1),
+}, required=False)
+
+CHANNEL = Table({
+    "ka_m_s2_per_v": Number(gt=KA_MIN, lt=KA_MAX, unit=KA),
+    "uncertainty_m_s2_per_v": Number(ge=0, unit=KA, required=False),
+    "ka_std_fit_m_s2_per_v": Number(ge=0, unit=KA, required=False),
+    "ka_std_m_s2_per_v": Number(ge=0, unit=KA, required=False),    # an alias of uncertainty_m_s2_per_v
+    "fitted_freq_hz": Number(gt=0, unit="Hz", required=False),
+    "amplitude_v_peak": Number(gt=0, unit="V", required=False),
+    "residual_rms_v": Number(ge=0, unit="V", required=False),
+    "harmonic_distortion": Number(ge=0, required=False),
+    "n_samples": Integer(ge=1, required=False),
+    "n_references": Integer(ge=1, required=False),
+    "birge_ratio": Number(ge=0, required=False),
+    # file names, as given: a newline in one is quoted by the writer, shown escaped by labtool
+    "source": String(required=False, single_line=False, max_len=65536),
+})
+
+CALIBRATION = Table({
+    "format": String(choices=(CAL_FORMAT,), required=False),
+    "format_version": Integer(ge=CAL_VERSION, le=CAL_VERSION, required=False),
+    "created_utc": String(required=False, max_len=64),
+    "source": String(required=False, single_line=False, max_len=65536),
+    "reference": REFERENCE,
+    "channels": MapOf(CHANNEL, min_len=1, key_max_len=64, noun="channel"),
+})
+
+
+def check_document(data: dict, where: str) -> dict:
+    """The document checked against CALIBRATION (module docstring), plus what a field schema cannot
+    say: channel names are printable, an uncertainty is smaller than its Ka."""
+    doc = CALIBRATION.check(data, where=where)
+    for name, c in doc["channels"].items():
+        if not name.isprintable() or name != name.strip() or not name:
+            raise SchemaError(f"{where}: channel name {shown(repr(name))} holds control characters or blanks "
+                              "at its ends")
+        if "ka_std_m_s2_per_v" in c:   # the alias processing documented; one name only
+            if "uncertainty_m_s2_per_v" in c:
+                raise SchemaError(f"{where}: [channels.{shown(name)}] gives both uncertainty_m_s2_per_v and its alias "
+                                  "ka_std_m_s2_per_v; keep one")
+            c["uncertainty_m_s2_per_v"] = c.pop("ka_std_m_s2_per_v")
+        u = c.get("uncertainty_m_s2_per_v")
+        if u is not None and not u < c["ka_m_s2_per_v"]:
+            raise SchemaError(f"{where}: [channels.{shown(name)}] uncertainty_m_s2_per_v = {u:g}: must be smaller "
+                              f"than Ka ({c['ka_m_s2_per_v']:g} {KA})")
+    return doc
 
 
 @dataclasses.dataclass(frozen=True)
 class ChannelCalibration:
-    """Ka (m/s^2/V) of one channel and its standard uncertainty (m/s^2/V, NaN if not stated)."""
+    """Ka (m/s^2/V) of one channel, its standard uncertainty (m/s^2/V, NaN if not stated) and
+    where it comes from (the calibration file)."""
     ka_m_s2_per_v: float
     uncertainty_m_s2_per_v: float = math.nan
+    source: str = ""                # "calibration file <path>"; "" = processing names it
 
 
 def read_calibration(path) -> dict[str, ChannelCalibration]:
-    """{channel name: ChannelCalibration}; InputError/FileFormatError on a missing or bad file."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"calibration file {p} does not exist")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise FileFormatError(f"{p}: not a calibration TOML file: {exc}") from None
-    table = data.get("channels", None)
-    if table is None:
-        table = {k: v for k, v in data.items() if isinstance(v, dict) and ("ka_m_s2_per_v" in v or "ka" in v)}
-    if not isinstance(table, dict) or not table:
-        raise FileFormatError(f"{p}: calibration file has no [channels.<name>] table with ka_m_s2_per_v")
-    out = {}
-    for name, entry in table.items():
-        if not isinstance(entry, dict):
-            raise FileFormatError(f"{p}: calibration entry '{name}' is not a table")
-        ka = entry.get("ka_m_s2_per_v", entry.get("ka"))
-        if ka is None:
-            raise FileFormatError(f"{p}: channel '{name}' has no ka_m_s2_per_v")
-        try:
-            ka = float(ka)
-            unc = float(entry.get("uncertainty_m_s2_per_v", entry.get("ka_std_m_s2_per_v", math.nan)))
-        except (TypeError, ValueError):
-            raise FileFormatError(f"{p}: channel '{name}': Ka and its uncertainty must be numbers") from None
-        if not (math.isfinite(ka) and ka != 0.0):
-            raise InputError(f"{p}: channel '{name}': Ka = {ka} m/s^2/V is not usable")
-        out[str(name)] = ChannelCalibration(ka, unc)
+    """{channel name: ChannelCalibration} from one file; InputError (one line) if bad."""
+    doc = check_document(load_toml(path, "calibration file"), f"calibration file {shown(path)}")
+    return {name: ChannelCalibration(c["ka_m_s2_per_v"], c.get("uncertainty_m_s2_per_v", math.nan),
+                                     f"calibration file {shown(path)}")
+            for name, c in doc["channels"].items()}
+
+
+def read_calibrations(paths) -> dict[str, ChannelCalibration]:
+    """Several calibration files merged into one table; a channel in two of them is refused.
+
+    Two files that both calibrate a channel may disagree; which one holds is the user's call, not
+    labtool's (``labtool calibrate`` on both reference recordings at once merges them with their
+    uncertainties instead)."""
+    out: dict[str, ChannelCalibration] = {}
+    for p in paths:
+        for name, cal in read_calibration(p).items():
+            if name in out or name.lower() in {k.lower() for k in out}:
+                first = next(v for k, v in out.items() if k.lower() == name.lower())
+                raise InputError(f"channel {shown(name)} is calibrated in both {first.source.removeprefix('calibration file ')} "
+                                 f"and {shown(p)}; give one of them, or calibrate both reference recordings in one "
+                                 "'labtool calibrate' call to merge them with their uncertainties")
+            out[name] = cal
     return out
+
+
+def calibration_document(channels: dict[str, dict], reference: dict | None, source: str | None,
+                         created_utc: str | None = None) -> dict:
+    """A checked document from plain values (the writer's input); InputError if a value is out of range."""
+    created = created_utc or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    data = {"format": CAL_FORMAT, "format_version": CAL_VERSION, "created_utc": created,
+            "channels": {k: {kk: vv for kk, vv in v.items() if vv is not None} for k, v in channels.items()}}
+    if source is not None:
+        data["source"] = source
+    if reference is not None:
+        data["reference"] = reference
+    return check_document(data, "calibration")
+
+
+def calibration_text(doc: dict) -> str:
+    """The file's text: TOML written by tomli-w (every key and string quoted as TOML needs)."""
+    import tomli_w
+
+    return "# labtool calibration file: acceleration (m/s^2) = ka_m_s2_per_v * volts\n" + tomli_w.dumps(doc)
+
+
+def write_calibration(path, doc: dict) -> None:
+    """Write the file atomically (temp file + rename), readable by others (a calibration is shared)."""
+    from common.files import atomic_write
+
+    text = calibration_text(doc)
+
+    def _write(tmp: Path):
+        try:
+            tmp.write_text(text, encoding="utf-8")
+            tmp.chmod(0o644)  # mkstemp makes it private; the user's umask still rules the directory
+        except OSError as exc:
+            raise InputError(f"cannot write {shown(path)}: {exc.strerror or exc}") from None
+    atomic_write(Path(path), _write)
+
+
+__all__ = ["CAL_FORMAT", "CAL_VERSION", "PAPER_KA_M_S2_PER_V", "KA_MIN", "KA_MAX", "CALIBRATION", "check_document",
+           "ChannelCalibration", "read_calibration", "read_calibrations", "calibration_document",
+           "calibration_text", "write_calibration"]

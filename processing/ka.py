@@ -1,7 +1,8 @@
 """Which Ka (m/s^2 per V) multiplies each acceleration channel, and why: stated or refused.
 
-In order: a calibration file's entry; the recording's own ``ka_m_s2_per_v``; the paper's Ka
-(86.43 m/s^2/V) with a warning. A recording that states Ka = 0, a negative or an infinite Ka is
+In order: a calibration file's entry (with a warning when it is more than 20 % off the Ka the
+recording states: a conditioner gain changed since the calibration); the recording's own
+``ka_m_s2_per_v``; the paper's Ka (86.43 m/s^2/V) with a warning. A recording that states Ka = 0, a negative or an infinite Ka is
 damaged: refused, never replaced by the paper's. A channel the file already gives in m/s^2 (a
 TDMS ``unit_string`` as DAQmx writes for an accelerometer; the readers convert g and mm/s^2 to
 m/s^2) takes no Ka: factor 1, and a calibration entry for it is refused as contradictory.
@@ -30,10 +31,16 @@ def ka_for_channels(rec, calibration: dict | None, calibration_source: str, warn
                                  f"but {calibration_source} gives it a Ka; remove that entry or give the volts")
             out[name] = _ka(1.0, math.nan, f"none: the file gives m/s^2 ({rec.unit_sources[j]})")
             continue
-        if cal is not None:
-            out[name] = _ka(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, f"calibration file {calibration_source}")
-            continue
         stated = float(rec.ka_m_s2_per_v[j])
+        if cal is not None:
+            source = getattr(cal, "source", "") or f"calibration file {calibration_source}"
+            out[name] = _ka(cal.ka_m_s2_per_v, cal.uncertainty_m_s2_per_v, source)
+            if math.isfinite(stated) and stated > 0 and not 1 / 1.2 < cal.ka_m_s2_per_v / stated < 1.2:
+                # a factor 10 is the conditioner at another gain than at calibration (x1 vs x10)
+                warn(f"{source} gives Ka = {cal.ka_m_s2_per_v:.4g} m/s^2/V for channel {name}, "
+                     f"{cal.ka_m_s2_per_v / stated:.3g} x the {stated:.4g} m/s^2/V that {rec.source} states: "
+                     "was the calibration made with the same conditioner gain?")
+            continue
         if not math.isnan(stated):
             if not (math.isfinite(stated) and stated > 0):
                 raise InputError(f"{rec.source}: the recording states Ka = {stated!r} m/s^2/V for channel '{name}', "

@@ -120,7 +120,8 @@ def test_any_other_device_name_is_refused(tmp_path_factory, spec):
 SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data"
 
 
-@pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz"])
+@pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz",
+                                  "calibration_79p6Hz_aE_n"])
 def test_sample_data_is_what_its_scene_makes(tmp_path, name):
     out = tmp_path / f"{name}.h5"
     assert main(["acquire", "--scene", str(SAMPLE / "scenes" / f"{name}.toml"), "--fast", "-o", str(out)]) == 0
@@ -132,8 +133,10 @@ def test_sample_data_is_what_its_scene_makes(tmp_path, name):
 
 def test_sample_calibration_gives_the_chains_ka():
     """The sample recordings use the 480C02 at gain x1 (Ka = 864.3 m/s^2/V), calibration included."""
-    from acquisition.calibration import load_calibration
-    assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(864.3, rel=0.005)
+    from processing.calibration_file import read_calibration
+    cal = read_calibration(SAMPLE / "calibration.toml")
+    assert cal["aE_t"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)
+    assert cal["aE_n"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)
 
 
 def test_truth_from_a_recordings_attributes(tmp_path):

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -17,7 +17,8 @@ def register(app: typer.Typer) -> None:
 def process(
     recording: Path = typer.Argument(..., help="recording to process: labtool HDF5 (v1), LabVIEW TDMS or CSV"),
     output: Path = typer.Option(..., "-o", "--output", help="NetCDF file to write (measured.nc)"),
-    calibration: Optional[Path] = typer.Option(None, help="calibration TOML from 'labtool calibrate' (Ka per channel)"),
+    calibration: Optional[List[Path]] = typer.Option(None, help="calibration TOML from 'labtool calibrate' (Ka per channel); "
+                                                     "repeatable: the files' channels are merged, a channel in two is refused"),
     sample_rate: Optional[float] = typer.Option(None, help="sample rate [Hz] for TDMS/CSV files that state none"),
     law: Optional[str] = typer.Option(None, help="motion law of the cam (default: the recording's, else sine)"),
     rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
@@ -35,7 +36,7 @@ def process(
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
     averages and spikes, with every step in the processing history (docs/processing.md)."""
     from common.errors import InputError
-    from processing.calibration_file import read_calibration
+    from processing.calibration_file import read_calibrations
     from processing.pipeline import ProcessOptions, process_recording
     from processing.readers import open_recording
 
@@ -51,7 +52,7 @@ def process(
 
     mapping = _channel_map(channels) if channels else {}
     mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
-    cal = read_calibration(calibration) if calibration is not None else None
+    cal = read_calibrations(calibration) if calibration else None
     rec = open_recording(recording, sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
                          decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
     try:
@@ -63,7 +64,8 @@ def process(
     def warn(msg: str) -> None:
         typer.echo(f"labtool: warning: {msg}", err=True)
 
-    opts = ProcessOptions(calibration=cal, calibration_source=str(calibration or ""), law=law, cam_speed_rpm=rpm,
+    sources = "; ".join(str(c) for c in calibration or [])
+    opts = ProcessOptions(calibration=cal, calibration_source=sources, law=law, cam_speed_rpm=rpm,
                           lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples,
                           mechanism=mech)
     try:
@@ -81,6 +83,24 @@ def process(
                f"{summary['revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
                f"{summary['spikes']} spikes, {summary['clipped']} clipped samples, "
                f"|omega2| vs sqrt(aE_n/DE): {100 * check:.1f} % rms of peak")
+    typer.echo(_ka_line(summary.get("history", [])))
+
+
+def _ka_line(history) -> str:
+    """'Ka: aE_t 864.39 +- 0.07 m/s^2/V (source), aE_n ...' from the apply_ka step of the history."""
+    from common.names import shown
+
+    step = next((h for h in history if isinstance(h, dict) and h.get("step") == "apply_ka"), {})
+    chans = step.get("channels") or step.get("parameters", {}).get("channels") or {}
+    parts = []
+    for ch in ("aE_t", "aE_n"):
+        c = chans.get(ch)
+        if not c:
+            continue
+        u = c.get("uncertainty_m_s2_per_v")
+        unc = f" +- {u:.4g}" if isinstance(u, (int, float)) and u == u else " (uncertainty unknown)"
+        parts.append(f"{ch} {c['ka_m_s2_per_v']:.6g}{unc} m/s^2/V ({shown(str(c.get('source', '?')))})")
+    return "Ka: " + ", ".join(parts)
 
 
 def _channel_map(text: str) -> dict[str, str]:

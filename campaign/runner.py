@@ -1,0 +1,224 @@
+"""``run_campaign``: every point of a plan acquired, processed and compared, resumably.
+
+For each point in the plan's order: acquire (after the settle wait), process, compare; each step
+is skipped when ``point.json`` says it finished from today's inputs with its outputs intact
+(campaign.state). A point whose acquisition did not finish (killed, a disconnect, Ctrl-C) is
+redone from its acquisition; a finished recording is never thrown away silently: if the plan now
+says something else for a point that has one, the run stops with one line unless the point is
+named in ``redo``. A step whose inputs changed downstream of the recording (a new calibration,
+other models or thresholds) is simply recomputed.
+
+Progress goes to a ``Reporter`` (the CLI draws it); warnings of the layers go to its ``warn``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import time
+from pathlib import Path
+
+from common.errors import InputError, LabtoolError
+from common.names import shown
+from campaign import steps
+from campaign.plan import Plan
+from campaign.state import CampaignLock, PointState, clean_partials, sha256_file, sha256_json
+
+POINTS_DIR = "points"
+
+
+class Reporter:
+    """What the runner tells the user; the default says nothing. Override what you show."""
+
+    def campaign_start(self, plan: Plan, folder: Path, done: int) -> None: ...
+    def point_start(self, k: int, n: int, point) -> None: ...
+    def step(self, point, step: str, status: str, detail: str = "") -> None: ...
+    def point_done(self, k: int, n: int, point, wall_s: float, eta_s: float | None, worked: bool) -> None: ...
+    def warn(self, message: str) -> None: ...
+    def say(self, message: str) -> None: ...
+    def ask(self, message: str) -> None:
+        raise InputError("this run cannot ask the operator (no terminal)")
+    def acquisition_progress(self, point, recorder, elapsed_s: float) -> None: ...
+
+
+@dataclasses.dataclass
+class CampaignResult:
+    folder: Path
+    points: list          # (Point, folder)
+    ran: list             # names of the points that did some work in this run
+    kept: list            # names of the points that were already finished
+    wall_s: float
+
+
+def point_folder(folder: Path, point) -> Path:
+    return Path(folder) / POINTS_DIR / point.name
+
+
+def _inputs(plan: Plan, point, state: PointState, step: str) -> str:
+    """sha256 of everything ``step`` of ``point`` is made from (plan parts and files read)."""
+    if step == "acquire":
+        # how the stand was paced or waited for does not change what it recorded
+        device = {k: v for k, v in plan.doc.device.as_dict().items()
+                  if k != "pacing" and not k.startswith("settle")}
+        return sha256_json({"point": point.spec(), "device": device, "test": plan.digest("test")})
+    if step == "process":
+        return sha256_json({"recording": state.output_digest("acquire", "recording.h5"),
+                            "calibration": [sha256_file(p) for p in plan.calibration_files],
+                            "law": point.law, "rpm": point.rpm})
+    return sha256_json({"measured": state.output_digest("process", "measured.nc"), "compare": plan.digest("compare"),
+                        "thresholds": sha256_file(plan.thresholds) if plan.thresholds else None,
+                        "overrides": steps.overrides(plan, point)})
+
+
+def _check_existing(plan: Plan, point, state: PointState, redo: set) -> None:
+    """Refuse to replace a finished recording the plan no longer describes (unless redo)."""
+    if point.name in redo or "acquire" not in state.steps:
+        return
+    if state.steps["acquire"].get("inputs") == _inputs(plan, point, state, "acquire"):
+        return
+    keys = state.changed_keys()
+    what = f"its {', '.join(keys)} changed" if keys else "the plan's device or test metadata changed"
+    raise InputError(f"point {point.name} in {shown(state.folder.parent.parent)} was recorded with other settings "
+                     f"({what}); rerun with --redo {point.name} to record it again, or use another output folder")
+
+
+def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> bool:
+    """Bring one point up to date; True when it did any work."""
+    if point.name in redo and folder.exists():
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in clean_partials(folder):
+        rep.warn(f"point {point.name}: removed {name}, left by an interrupted write")
+    state = PointState.load(folder, point.name, point.spec())
+    _check_existing(plan, point, state, redo)
+    worked = False
+    for step in ("acquire", "process", "compare"):
+        inputs = _inputs(plan, point, state, step)
+        if state.finished(step, inputs):
+            rep.step(point, step, "kept")
+            continue
+        if step == "acquire" and (folder / "recording.h5").exists():
+            rep.warn(f"point {point.name}: its acquisition did not finish (killed or stopped); recording it again")
+        t0 = time.perf_counter()
+        _ensure_space(folder, point, step, plan)
+        try:
+            state.forget_from(step)
+            rep.step(point, step, "running")
+            info = _do(plan, point, folder, step, rep)
+            info["wall_s"] = time.perf_counter() - t0
+            state.record(step, inputs, info)
+        except OSError as exc:   # a full disk, a read-only folder: what is finished stays finished
+            raise InputError(f"point {point.name} ({step}): cannot write in {shown(folder)}: "
+                             f"{exc.strerror or exc}; the finished points and steps are kept, rerun to resume") from None
+        rep.step(point, step, "done", _detail(step, info))
+        worked = True
+    return worked
+
+
+def _need_bytes(folder: Path, point, step: str, plan: Plan) -> int:
+    """A generous estimate of what ``step`` writes (bytes), from the files it reads: measured.nc
+    was 2.6 x its recording and a point's pages 0.9 x its measured.nc on the paper's points."""
+    if step == "acquire":
+        return int(point.duration_s * plan.doc.device.rate_hz * 3 * 4 * 1.2) + (64 << 10)
+    if step == "process":
+        return 3 * (folder / "recording.h5").stat().st_size + (64 << 10)
+    return int(1.2 * (folder / "measured.nc").stat().st_size) + (256 << 10)
+
+
+def _ensure_space(folder: Path, point, step: str, plan: Plan) -> None:
+    """Refuse a step that would not fit on the disk, before it writes anything: HDF5 may crash
+    (not raise) when a write fails for lack of space, and the finished steps must stay finished."""
+    need = _need_bytes(folder, point, step, plan)
+    free = shutil.disk_usage(folder).free
+    if free < need:
+        raise InputError(f"point {point.name} ({step}): {free / 1e6:.1f} MB free in {shown(folder)}, about "
+                         f"{need / 1e6:.1f} MB needed; the finished points and steps are kept: free space and rerun")
+
+
+def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter) -> dict:
+    try:
+        if step == "acquire":
+            (folder / "recording.h5").unlink(missing_ok=True)
+            return steps.acquire(plan, point, folder / "recording.h5", ask=rep.ask, say=rep.say,
+                                 progress=lambda recorder, t: rep.acquisition_progress(point, recorder, t))
+        if step == "process":
+            return steps.process(plan, point, folder / "recording.h5", folder / "measured.nc",
+                                 warn=lambda m: rep.warn(f"point {point.name}: {m}"))
+        report = steps.build(folder / "measured.nc", plan.doc.compare, plan.thresholds, steps.overrides(plan, point),
+                             say=lambda m: rep.step(point, "compare", "running", m))
+        steps.write_point_outputs(report, folder, {"html": "report.html", "summary": "summary.json",
+                                                   "cycles": "cycles.nc"})
+        from reports.pipeline import closest
+        best = closest(report)
+        return {"closest": None if best is None else best["label"], "passed": bool(report.passed),
+                "notes": list(report.notes)}
+    except LabtoolError as exc:
+        raise type(exc)(f"point {point.name} ({step}): {exc}") from None
+
+
+def _detail(step: str, info: dict) -> str:
+    if step == "acquire":
+        return f"{info['n_samples']} samples at {info['rate_hz']:g} Hz, {info['overruns']} overruns"
+    if step == "process":
+        return (f"cam {info.get('cam_speed_rpm', float('nan')):.2f} rpm, {info.get('revolutions_averaged', 0)} "
+                "revolutions averaged")
+    return f"closest: {info.get('closest')}"
+
+
+def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, redo=()) -> CampaignResult:
+    """Run (or resume) the campaign of ``plan`` into ``folder`` (module docstring)."""
+    rep = reporter or Reporter()
+    folder = Path(folder)
+    redo = set(redo)
+    names = {p.name for p in plan.points}
+    unknown = sorted(redo - names)
+    if unknown:
+        raise InputError(f"--redo {', '.join(unknown)}: no such point in the plan (points: {', '.join(sorted(names))})")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{shown(folder)} is a file; give a folder for the campaign")
+    try:
+        (folder / POINTS_DIR).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
+    t0 = time.perf_counter()
+    ran, kept, walls = [], [], []
+    lock = CampaignLock(folder)
+    try:
+        lock.__enter__()
+    except OSError as exc:
+        raise InputError(f"cannot write in the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
+    try:
+        try:
+            _keep_plan_copy(plan, folder)
+        except OSError as exc:
+            raise InputError(f"cannot write in the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
+        states = [PointState.load(point_folder(folder, p), p.name, p.spec()) for p in plan.points]
+        for p, st in zip(plan.points, states):
+            _check_existing(plan, p, st, redo)
+        rep.campaign_start(plan, folder, sum(1 for s in states if s.done()))
+        n = len(plan.points)
+        for k, point in enumerate(plan.points, start=1):
+            rep.point_start(k, n, point)
+            tp = time.perf_counter()
+            worked = _run_point(plan, point, point_folder(folder, point), rep, redo)
+            wall = time.perf_counter() - tp
+            (ran if worked else kept).append(point.name)
+            if worked:
+                walls.append(wall)
+            left = n - k
+            eta = (sum(walls) / len(walls)) * left if walls and left else (0.0 if not left else None)
+            rep.point_done(k, n, point, wall, eta, worked)
+    finally:
+        lock.__exit__(None, None, None)
+    return CampaignResult(folder, [(p, point_folder(folder, p)) for p in plan.points], ran, kept,
+                          time.perf_counter() - t0)
+
+
+def _keep_plan_copy(plan: Plan, folder: Path) -> None:
+    """plan.toml in the folder: the plan of the latest run (the points' records say what each used)."""
+    from common.files import atomic_write
+
+    data = Path(plan.path).read_bytes()
+    target = folder / "plan.toml"
+    if target.exists() and target.read_bytes() == data:
+        return
+    atomic_write(target, lambda tmp: tmp.write_bytes(data))

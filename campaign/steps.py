@@ -1,0 +1,213 @@
+"""The three steps of a point, as narrow adapters over the layers' library functions.
+
+acquire  -> acquisition.session.run on the plan's device (the simulated stand or NI-DAQmx),
+            after waiting for a steady cam speed (campaign.settle);
+process  -> processing.pipeline.process_recording with the plan's calibration files;
+compare  -> reports.pipeline.build_report, then the per-point page (reports.html), its JSON
+            summary (reports.summary) and the overlay data the campaign page draws (cycles.nc).
+
+Each step writes its outputs atomically (temp file + rename) or, for the recording, as the
+recorder does (``complete`` set last); nothing here calls the CLI. When the layers' interfaces
+change, this module is the one place to follow them.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from common.errors import InputError
+from common.names import shown
+
+# --------------------------------------------------------------------------- acquire
+
+
+def _sim_device(plan, point, duration_s: float):
+    from acquisition import signal_chain as sc
+    from acquisition.sim_stand import SimStand
+
+    dev = plan.doc.device
+    kw = {} if dev.truth is None else {"truth_model": dev.truth}
+    if dev.truth in sc.MODEL_TRUTHS:
+        kw["ripple"] = 0.0    # a model truth's cam runs at constant speed, as 'labtool acquire' does
+    scene = sc.StandScene(mode="run", law=point.law, cam_speed_rpm=point.rpm, Fu=point.Fu_N,
+                          backlash=point.backlash_mm * 1e-3, jt_factor=point.jt_factor, **kw)
+    if dev.truth in sc.MODEL_TRUTHS and sc.model_truth_span(scene) < duration_s:
+        raise InputError(f"the {dev.truth} truth does not reach a periodic steady state, so it cannot cover "
+                         f"{duration_s:g} s of point {point.name}; record fewer revolutions or use the twin truth")
+    k = float(dev.ka_m_s2_per_v or sc.DEFAULT_KA)
+    params = sc.ChainParams(ka_m_s2_per_v=(k, k), resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
+    device = SimStand(scene, params, seed=point.seed, duration_s=duration_s, realtime=dev.pacing == "realtime")
+    attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k, "pacing": dev.pacing}
+    return device, [k, k, math.nan], attrs
+
+
+def _nidaqmx_device(plan, point, duration_s: float):
+    """The NI device of the plan: its device file (channels by role, ranges, coupling, IEPE,
+    sensitivities, trigger; acquisition.nidaqmx_config) and/or its physical channels."""
+    from acquisition import nidaqmx_config as nc
+    from acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
+
+    dev = plan.doc.device
+    doc = nc.load_device_file(plan.device_file) if plan.device_file is not None else None
+    cfg = nc.build(expand_channels(dev.channels) if dev.channels else None, doc,
+                   source=f"device file {shown(plan.device_file)}" if plan.device_file else f"campaign plan {plan.path.name}",
+                   iepe_excitation_a=0.004 if dev.iepe_excitation else None)
+    device = NIDAQmxDevice(cfg)
+    # Ka: the plan's calibration files, applied by processing; the nominal one (sensitivity x gain)
+    # is stored as the recording's own, as 'labtool acquire' does
+    ka = [float(k) if c.kind == "accel" else math.nan for c, k in zip(cfg.channels, device.ka_nominal)]
+    return device, ka, {"ka_source": "nominal from the device configuration; the campaign's calibration files "
+                                     "are applied by processing", **dict(cfg.metadata)}
+
+
+def make_device(plan, point, duration_s: float | None = None):
+    """(device, Ka per channel (NaN: none), extra attributes) for one point; ``duration_s`` (s) bounds
+    what the simulated stand generates (default: the point's recording)."""
+    make = _sim_device if plan.doc.device.kind == "sim" else _nidaqmx_device
+    return make(plan, point, point.duration_s if duration_s is None else duration_s)
+
+
+def point_attrs(plan, point) -> dict:
+    """Root attributes every recording of the campaign carries: the operating point as the plan
+    states it, the test metadata, and where the point sits in the campaign."""
+    t = plan.doc.test
+    return {"law": point.law, "cam_speed_rpm": float(point.rpm), "Fu_N": float(point.Fu_N),
+            "backlash_mm": float(point.backlash_mm), "jt_factor": float(point.jt_factor),
+            "operating_point_source": f"campaign plan {plan.path.name}",
+            "test_id": t.test_id, "operator": t.operator, "notes": t.notes,
+            "campaign": plan.doc.campaign.name, "campaign_point": point.name,
+            "campaign_point_index": int(point.index), "seed": int(point.seed)}
+
+
+def settle(plan, point, ask=None, say=None):
+    """Wait for a steady cam speed as the plan says (None when it says "none")."""
+    from campaign import settle as st
+
+    dev = plan.doc.device
+    mode = dev.settle_mode
+    if mode == "none":
+        return None
+    msg = (f"point {point.name}: set the stand to {point.rpm:g} rpm (law {point.law}, Fu {point.Fu_N:g} N, "
+           f"j {point.backlash_mm:g} mm, Jt x{point.jt_factor:g})")
+    if mode == "prompt":
+        if ask is None:
+            raise InputError("the plan's device.settle = \"prompt\" needs a terminal to ask the operator; "
+                             "use settle = \"tacho\" to wait on the tacho instead")
+        return st.wait_for_operator(ask, msg + " and press Enter when its speed is steady")
+    if say is not None:
+        say(msg + "; waiting on the tacho")
+    # the simulated stand (a test of this path) generates just enough turns to be judged
+    device, _, _ = make_device(plan, point, (dev.settle_revolutions + 3) * 60.0 / point.rpm)
+    return st.wait_for_tacho(device, dev.rate_hz, point.rpm, dev.settle_tolerance, dev.settle_revolutions,
+                             dev.settle_timeout_s, say=say)
+
+
+def acquire(plan, point, path: Path, ask=None, say=None, progress=None) -> dict:
+    """Record the point into ``path`` (format v1); InputError unless the run reached its duration."""
+    from acquisition import session
+
+    settled = settle(plan, point, ask, say)
+    device, ka, attrs = make_device(plan, point)
+    attrs.update(point_attrs(plan, point))
+    if settled is not None:
+        attrs.update(settled.attrs())
+    res = session.run(device, path, plan.doc.device.rate_hz, point.duration_s, attrs, ka_m_s2_per_v=ka,
+                      progress=progress)
+    target = int(round(point.duration_s * res.rate_hz))
+    if res.outcome == "interrupted":
+        raise KeyboardInterrupt
+    if res.outcome != "done" or not res.complete or res.n_samples < target:
+        raise InputError(f"point {point.name}: the acquisition ended early ({res.message}; {res.n_samples} of "
+                         f"{target} samples); the recording {shown(path)} is kept for inspection and redone on rerun")
+    return {"n_samples": res.n_samples, "rate_hz": res.rate_hz, "overruns": res.overruns, "gaps": res.gaps,
+            "samples_lost": res.samples_lost, "clipped": list(res.clipped), "wall_s": res.wall_s}
+
+
+# --------------------------------------------------------------------------- process
+
+
+def process(plan, point, recording: Path, measured: Path, warn=None) -> dict:
+    """recording -> measured.nc with the plan's calibration files (processing.pipeline)."""
+    from processing.calibration_file import read_calibrations
+    from processing.pipeline import ProcessOptions, process_recording
+    from processing.readers import open_recording
+
+    cal = read_calibrations(plan.calibration_files) if plan.calibration_files else None
+    opts = ProcessOptions(calibration=cal, calibration_source="; ".join(str(p) for p in plan.calibration_files),
+                          law=point.law, cam_speed_rpm=point.rpm)
+    rec = open_recording(recording)
+    try:
+        summary = process_recording(rec, measured, opts, warn=warn)
+    finally:
+        rec.close()
+    return {k: summary[k] for k in ("cam_speed_rpm", "revolutions_averaged", "spikes", "clipped",
+                                    "normal_check_rel_rms", "lowpass_hz", "phi1_method") if k in summary}
+
+
+# --------------------------------------------------------------------------- compare
+
+
+def overrides(plan, point=None) -> dict:
+    """labtool report's overrides: the point's operating point (None: the file's) and the model options."""
+    c = plan.doc.compare if plan is not None else None
+    out = {}
+    if point is not None:
+        out.update({"cam_speed_rpm": point.rpm, "law": point.law, "Fu": point.Fu_N,
+                    "backlash_mm": point.backlash_mm, "jt_factor": point.jt_factor})
+    if c is not None:
+        out.update({k: getattr(c, k) for k in ("restitution", "contact_damping", "contact_length_mm", "elastic_gap")})
+    return out
+
+
+def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dict, say=None):
+    """reports.pipeline.build_report with the plan's [compare] choices."""
+    from reports.pipeline import build_report
+    from reports.thresholds import load_thresholds
+
+    from reports.pipeline import DEFAULT_REVOLUTIONS
+
+    th = load_thresholds(thresholds_path) if thresholds_path is not None else None
+    return build_report(Path(measured), tuple(compare.models), tuple(compare.omega1), th, overrides_,
+                        compare.accuracy, compare.revolutions or DEFAULT_REVOLUTIONS, progress=say)
+
+
+def write_point_outputs(report, folder: Path, names: dict) -> None:
+    """The per-point page (reports.html), its JSON summary and the overlay data, each atomically."""
+    from common.files import atomic_write, write_netcdf
+    from reports.figures import all_figures
+    from reports.html import render_html
+    from reports.summary import to_json
+
+    html = render_html(report, all_figures(report))
+    atomic_write(folder / names["html"], lambda tmp: tmp.write_text(html, encoding="utf-8"))
+    text = to_json(report)
+    atomic_write(folder / names["summary"], lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+    write_netcdf(cycles_dataset(report), folder / names["cycles"])
+
+
+def cycles_dataset(report) -> xr.Dataset:
+    """What the campaign page overlays: the measured cycle average and scatter of omega2 and
+    epsilon2 on the report's cam-angle grid, and each simulation's steady revolution on it."""
+    from reports.pipeline import SIGNALS
+
+    cyc = report.cycles
+    grid = np.asarray(cyc.grid, dtype=float)
+    ds = xr.Dataset(coords={"phi1": ("phi1", grid, {"units": "rad", "long_name": "cam angle from the start of the rise"})})
+    units = {"omega2": "rad/s", "epsilon2": "rad/s^2"}
+    for s in SIGNALS:
+        ds[f"measured_{s}_mean"] = ("phi1", cyc.mean(s), {"units": units[s], "long_name": f"measured {s}, cycle average"})
+        ds[f"measured_{s}_std"] = ("phi1", cyc.std(s), {"units": units[s],
+                                                         "long_name": f"measured {s}, standard deviation over the revolutions"})
+    runs = report.sims
+    ds = ds.assign_coords(sim=("sim", np.arange(len(runs))))
+    for name in ("label", "requested", "model", "omega1"):
+        ds[f"sim_{name}"] = ("sim", np.array([str(getattr(r, name)) for r in runs], dtype=object))
+    for s in SIGNALS:
+        data = np.array([np.where(r.cycle.covered, r.cycle.signals[s], np.nan) for r in runs]).reshape(len(runs), grid.size)
+        ds[f"sim_{s}"] = (("sim", "phi1"), data, {"units": units[s], "long_name": f"simulated {s}, steady revolution"})
+    ds.attrs.update({"title": "labtool campaign point: cycle overlays", "cam_speed_rpm_measured": float(cyc.cam_speed_rpm),
+                     "whole_revolutions": int(len(cyc.revolutions)), "cam_speed_rpm_simulated": float(report.scene["cam_speed_rpm"])})
+    return ds
