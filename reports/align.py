@@ -140,7 +140,7 @@ class MeasuredCycles:
         return self.signals[name].std(axis=0)
 
 
-MAX_REVOLUTIONS = 240      # the report reads at most this many whole revolutions of a recording
+MAX_REVOLUTIONS = 160      # the report reads at most this many whole revolutions of a recording
 BLOCK_REVOLUTIONS = 20     # ... in blocks of this many consecutive ones, evenly spread
 
 

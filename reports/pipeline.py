@@ -348,7 +348,13 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
         if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
             run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"], cam_program(op))
     say("computing the metrics")
-    comparisons = [c for run in sims for c in compare_run(cycles, run)]
+    comparisons, done = [], {}
+    for run in sims:
+        # a reused run (the same motion, _same_motion) has the same metrics: copied, not recomputed
+        key = id(run.cycle)
+        rows = [dict(c, omega1=run.omega1, label=run.label) for c in done[key]] if key in done else compare_run(cycles, run)
+        done.setdefault(key, rows)
+        comparisons += rows
     rows = evaluate(thresholds, comparisons) if thresholds else []
     rep = Report(str(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(meas_ev, sims),
                  rows, thresholds.source if thresholds else None, notes, 0.0, time_filter, meas_ev)
