@@ -525,6 +525,13 @@ def verdict_lines(report: "Report") -> list[str]:
         first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
         lines.append(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
                      f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+        # the models' events with the same definition: where ratings tie, the events may not
+        pred = [(r.label, r.events) for r in report.sims if r.events and r.events.get("impacts_per_rev") is not None
+                and r.omega1 == "const"]
+        if pred:
+            lines.append("predicted, same definition: " + "; ".join(
+                f"{lab} {e['detectable_impacts_per_rev']:.2f} visible impacts, first at "
+                + ("-" if e["first_impact_deg"] is None else f"{e['first_impact_deg']:.1f} deg") for lab, e in pred))
     return lines
 
 
