@@ -151,7 +151,7 @@ def groove_energy_loss(recording: Path) -> dict:
 def step_report(out: Path, console: Console, measured: Path, recording: Path) -> tuple[Path, list[str]]:
     """The report: both models, both omega1 modes, 'fast' preset, with the robustness check."""
     from common.files import atomic_write
-    from reports.figures import all_figures
+    from reports.figures import all_figures, render
     from reports.html import render_html
     from reports.pdf import write_pdf
     from reports.pipeline import build_report, headline, verdict_lines
@@ -164,7 +164,7 @@ def step_report(out: Path, console: Console, measured: Path, recording: Path) ->
                   f"variable; the groove's energy loss: {escape(said)}")
     rep = build_report(measured, ("rigid", "elastic"), ("const", "var"), overrides=loss, accuracy="fast",
                        progress=lambda msg: console.print(f"  {msg}", highlight=False), stand_in_on_failure=True)
-    figs = all_figures(rep)
+    figs = render(all_figures(rep))
     html = render_html(rep, figs)
     atomic_write(html_path, lambda tmp: tmp.write_text(html, encoding="utf-8"))
     text = to_json(rep)

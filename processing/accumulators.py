@@ -78,15 +78,18 @@ class ClipCounter:
     """Samples flagged as clipped (events, rails, runs at a channel's extreme)."""
 
     MIN_RUN = 3  # samples in a row at a channel's extreme value that make a clip
+    MIN_DROP_LEVELS = 3  # ... entered or left by a step of at least this many ADC levels (when known)
 
-    def __init__(self, rail_v: float | None, recorder_events: np.ndarray):
+    def __init__(self, rail_v: float | None, recorder_events: np.ndarray, lsb_v: float | None = None):
         self.rail_v = rail_v
+        self.min_drop_v = self.MIN_DROP_LEVELS * lsb_v if lsb_v else 0.0
         self.events = recorder_events
         self.flagged = 0
 
     def mask(self, volts, lo, hi, wa: int, wb: int) -> np.ndarray:
         """Clip flags of a window's samples [wa, wb) (volts (n, nch), per-channel extremes lo, hi)."""
-        out = kernels.clip_mask(np.ascontiguousarray(volts), lo, hi, self.rail_v or 0.0, self.MIN_RUN)
+        out = kernels.clip_mask(np.ascontiguousarray(volts), lo, hi, self.rail_v or 0.0, self.MIN_RUN,
+                                 self.min_drop_v)
         sel = self.events[(self.events >= wa) & (self.events < wb)]
         out[sel - wa] = True
         return out

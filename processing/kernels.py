@@ -244,9 +244,11 @@ def follower_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE,
 
 
 @nb.njit(cache=True, nogil=True)
-def clip_mask(volts, lo, hi, rail, min_run):
+def clip_mask(volts, lo, hi, rail, min_run, min_drop=0.0):
     """pipeline._clipped without the recorder's events: |v| >= rail (rail <= 0: none), or runs of
-    >= min_run samples at a channel's extreme value (lo, hi per channel)."""
+    >= min_run samples at a channel's extreme value (lo, hi per channel) entered or left by a step
+    of at least ``min_drop`` volts (or at the block's edge): a quantised smooth peak holds its top
+    level for a few samples too, but its neighbours lie one level below, not a saturation's many."""
     n, nch = volts.shape
     out = np.zeros(n, np.bool_)
     if rail > 0:
@@ -264,7 +266,9 @@ def clip_mask(volts, lo, hi, rail, min_run):
                 j = i
                 while j < n and (volts[j, c] == hi[c] or volts[j, c] == lo[c]):
                     j += 1
-                if j - i >= min_run:
+                steep = (i == 0 or j == n or abs(volts[i - 1, c] - v) >= min_drop
+                         or abs(volts[j, c] - v) >= min_drop)
+                if j - i >= min_run and steep:
                     out[i:j] = True
                 i = j
             else:

@@ -197,10 +197,11 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
     bits = _float_attr(rec.attrs.get("adc_bits")) or 16
     # the ADC's rails, when the recording states its range (the simulated stand and the recorder do)
     rail = adc - 2.5 * (2 * adc / 2**bits) if adc and adc > 0 else None
+    lsb = 2 * adc / 2**bits if rail else None
     st = PassState(welch=spectra.WelchAccumulator(fs, spectra.default_nperseg(fs, max(b - a for a, b in segs)), 2),
                    cycles=cycles.CycleAccumulator(CYCLE_NAMES, opts.grid_points),
                    spikes=SpikeCollector(fs, opts.spike_k_sigma), normal=NormalCheck(),
-                   clip=ClipCounter(rail, rec.clip_indices()), time=TimeAxis(rec, warn))
+                   clip=ClipCounter(rail, rec.clip_indices(), lsb), time=TimeAxis(rec, warn))
     lo, hi = marks["vmin"][[it, inn]], marks["vmax"][[it, inn]]
     rev_offset = 0
     for iseg, ((a_seg, b_seg), m, irregular) in enumerate(zip(segs, marks["by_segment"], cam.irregular_by_segment)):

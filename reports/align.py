@@ -140,7 +140,7 @@ class MeasuredCycles:
         return self.signals[name].std(axis=0)
 
 
-MAX_REVOLUTIONS = 240      # the report reads at most this many whole revolutions of a recording
+MAX_REVOLUTIONS = 160      # the report reads at most this many whole revolutions of a recording
 BLOCK_REVOLUTIONS = 20     # ... in blocks of this many consecutive ones, evenly spread
 
 
@@ -157,16 +157,49 @@ def revolution_blocks(ds: xr.Dataset, max_revolutions: int = MAX_REVOLUTIONS,
     marks = marks[np.isfinite(marks)]
     if marks.size <= max_revolutions + 2:
         return None
-    t = ds["time"].values                         # the index coordinate is in memory already
+    n = ds.sizes["time"]
     n_blocks = max(1, max_revolutions // per_block)
     starts = np.linspace(0, marks.size - per_block - 1, n_blocks).round().astype(int)
     out = []
     for i in starts:
-        a = int(np.searchsorted(t, marks[i], side="left"))
-        b = int(np.searchsorted(t, marks[i + per_block], side="right"))
+        a, b = lazy_searchsorted(ds["time"], [marks[i], marks[i + per_block]])
         # a few samples either side so the end marks' revolutions are whole in the slice
-        out.append((slice(max(a - 4, 0), min(b + 4, t.size)), int(i)))
+        out.append((slice(max(a - 4, 0), min(b + 5, n)), int(i)))
     return out, int(marks.size)
+
+
+def lazy_searchsorted(var: xr.DataArray, values, window: int = 512) -> list[int]:
+    """``numpy.searchsorted(var.values, v)`` for each v without reading ``var`` whole: an
+    interpolation search on a lazily opened, increasing 1-D variable (a time axis, uniform between
+    gaps, so one or two probes find the window), then the exact position within the window read.
+    Falls back to bisection when interpolation does not shrink the bracket."""
+    n = var.size
+
+    def read(a, b):
+        return np.asarray(var[a:b].values, dtype=float)
+
+    out = []
+    for v in values:
+        lo, hi = 0, n                                # the answer lies in [lo, hi]
+        for step in range(64):
+            if hi - lo <= window:
+                break
+            t_lo, t_hi = read(lo, lo + 1)[0], read(hi - 1, hi)[0]
+            if v <= t_lo or v > t_hi:
+                lo = hi = lo if v <= t_lo else hi
+                break
+            g = lo + int((v - t_lo) / (t_hi - t_lo) * (hi - 1 - lo)) if step < 8 else (lo + hi) // 2
+            # a window around the guess: the answer inside it is exact, else the bracket shrinks
+            a, b = max(g - window // 2, lo), min(g + window // 2, hi)
+            seg = read(a, b)
+            if seg[0] < v <= seg[-1]:
+                lo = hi = a + int(np.searchsorted(seg, v, side="left"))
+                break
+            lo, hi = (b, hi) if seg[-1] < v else (lo, a + 1)
+        if hi > lo:
+            lo += int(np.searchsorted(read(lo, hi), v, side="left"))
+        out.append(lo)
+    return out
 
 
 def read_measured(ds: xr.Dataset, names, cond: Conditioning, extra=(),

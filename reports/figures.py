@@ -11,6 +11,7 @@ measurement; model curves beyond it are clipped and marked (``plot_clipped``).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -20,6 +21,7 @@ from matplotlib.figure import Figure
 from common.cf import elapsed_seconds
 
 COLORS = {"const": "tab:blue", "var": "tab:red"}
+STYLES = {"const": "-", "var": (0, (4, 3))}
 SIGNAL_LABEL = {"omega2": ("ω2", "rad/s"), "epsilon2": ("ε2", "rad/s²")}
 
 
@@ -75,8 +77,9 @@ def fig_mr13d(sims) -> tuple[str, Figure] | None:
         return None
     has_perc = any("event_percussion" in r.dataset and "event_phi1" in r.dataset for r in sims)
     rows = len(models) + int(has_perc)
-    fig = Figure(figsize=(9, 2.4 * rows + 0.6), layout="constrained")
+    fig = Figure(figsize=(9, 2.4 * rows + 0.6))
     axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    margins(fig, left=0.95, top=0.55, hspace=0.25)
     for ax, model in zip(axes, models):
         runs = [r for r in sims if r.requested == model and "MR13D" in r.dataset]
         vals = []
@@ -116,15 +119,21 @@ def fig_mr13d(sims) -> tuple[str, Figure] | None:
     return "MR13D per model and percussions (Figs 7-9)", fig
 
 
-def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
-    """Amplitude spectra (variables over ``frequency``) and the measured aE_n, aE_t (Fig 11)."""
-    spectra = [n for n in ds.data_vars if ds[n].dims == ("frequency",)][:4]
-    series = [n for n in ("aE_n", "aE_t") if n in ds and ds[n].dims == ("time",)]
+def fig_spectra(ds, block=None, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
+    """Amplitude spectra (variables over ``frequency``) of the measured file ``ds`` and the
+    measured aE_n, aE_t over the first ``max_time_s`` of ``block`` (the first samples the report
+    read; default ``ds``) (Fig 11)."""
+    block = ds if block is None else block
+    spectra = [n for n in ds.data_vars if ds[n].dims == ("frequency",)]
+    # the amplitude spectra (the paper's Fig 11a-b); the PSDs say the same in other units
+    spectra = [n for n in spectra if n.endswith("_amplitude")][:2] or spectra[:2]
+    series = [n for n in ("aE_n", "aE_t") if n in block and block[n].dims == ("time",)]
     if not spectra and not series:
         return None
     rows = max(len(spectra), len(series))
-    fig = Figure(figsize=(11, 2.6 * rows), layout="constrained")
+    fig = Figure(figsize=(11, 2.6 * rows))
     axes = fig.subplots(rows, 2, squeeze=False)
+    margins(fig, left=0.8, top=0.55, hspace=0.5, wspace=0.22)
     f = np.asarray(ds["frequency"].values, dtype=float) if spectra else None
     for i, n in enumerate(spectra):
         ax = axes[i, 0]
@@ -138,12 +147,12 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
         ax.grid(True, alpha=0.3)
     if spectra:
         axes[len(spectra) - 1, 0].set_xlabel("frequency [Hz]")
-    t = elapsed_seconds(ds["time"].values) if series else None  # CF time may decode to datetime64
+    t = elapsed_seconds(block["time"].values) if series else None  # CF time may decode to datetime64
     sel = slice(0, int(np.searchsorted(t, t[0] + max_time_s, side="right"))) if series else None
     for i, n in enumerate(series):
         ax = axes[i, 1]
-        ax.plot(t[sel], np.asarray(ds[n][sel].values, dtype=float), lw=0.6)   # reads only that second
-        ax.set_ylabel(plain(f"{n} [{ds[n].attrs.get('units', 'm/s²')}]"))
+        ax.plot(t[sel], np.asarray(block[n][sel].values, dtype=float), lw=0.6)
+        ax.set_ylabel(plain(f"{n} [{block[n].attrs.get('units', 'm/s²')}]"))
         ax.set_title(f"{n}, filtered and translated (first {max_time_s:g} s)", fontsize=9)
         ax.grid(True, alpha=0.3)
     if series:
@@ -166,8 +175,9 @@ def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
     cyc = report.cycles
     deg = np.degrees(cyc.grid)
     sym, unit = SIGNAL_LABEL[signal]
-    fig = Figure(figsize=(10, 4.2), layout="constrained")
+    fig = Figure(figsize=(10, 4.2))
     ax = fig.subplots()
+    margins(fig, top=0.85)
     revs = cyc.signals[signal]
     mean, sd = cyc.mean(signal), cyc.std(signal)
     lim = measured_limits(np.concatenate([revs.ravel(), mean + 2 * sd, mean - 2 * sd]))
@@ -183,7 +193,8 @@ def fig_compare(report, model: str, signal: str) -> tuple[str, Figure] | None:
             s2 = 2 * r.cycle.std[signal]
             ax.fill_between(deg, np.clip(y - s2, *lim), np.clip(y + s2, *lim), color=COLORS[r.omega1], alpha=0.15, lw=0)
         label = r.label + ("" if r.cycle.periodic else f" (mean of {r.cycle.n_used} rev, ±2σ)")
-        clipped += plot_clipped(ax, deg, y, lim, color=COLORS[r.omega1], lw=1.1, label=label)
+        # var dashed: where a model's two modes coincide (elastic: the same constant speed) both show
+        clipped += plot_clipped(ax, deg, y, lim, color=COLORS[r.omega1], lw=1.1, ls=STYLES[r.omega1], label=label)
     ax.set_ylim(*lim)
     ax.set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
     ax.set_ylabel(f"{sym} [{unit}]")
@@ -211,8 +222,9 @@ def fig_residuals(report, signal: str) -> tuple[str, Figure] | None:
     cyc = report.cycles
     deg = np.degrees(cyc.grid)
     sym, unit = SIGNAL_LABEL[signal]
-    fig = Figure(figsize=(10, 3.6), layout="constrained")
+    fig = Figure(figsize=(10, 3.6))
     ax = fig.subplots()
+    margins(fig)
     sd = cyc.std(signal)
     mean = cyc.mean(signal)
     half = max(3.0 * float(np.max(2 * sd)), 0.25 * float(np.ptp(mean)))
@@ -239,8 +251,9 @@ def fig_iso_per_revolution(report) -> tuple[str, Figure] | None:
     """ISO/TS 18571 rating of every simulation against each measured revolution."""
     if not report.comparisons:
         return None
-    fig = Figure(figsize=(10, 3.4), layout="constrained")
+    fig = Figure(figsize=(10, 3.4))
     axes = fig.subplots(1, 2, sharey=True)
+    margins(fig, top=0.6, wspace=0.08)
     for ax, signal in zip(axes, ("omega2", "epsilon2")):
         for c in report.comparisons:
             if c["signal"] != signal:
@@ -264,17 +277,48 @@ def fig_iso_per_revolution(report) -> tuple[str, Figure] | None:
 def all_figures(report) -> list[tuple[str, Figure]]:
     """Every figure of the report, in the order it shows them."""
     figs = [fig_compare(report, m, s) for m in dict.fromkeys(r.requested for r in report.sims) for s in ("omega2", "epsilon2")]
+    block = report.cycles.blocks[0] if report.cycles.blocks else None
     figs += [fig_residuals(report, "omega2"), fig_residuals(report, "epsilon2"), fig_iso_per_revolution(report),
-             fig_mr13d(report.sims), fig_spectra(report.measured)]
+             fig_mr13d(report.sims), fig_spectra(report.measured, block)]
     return [f for f in figs if f is not None]
 
 
-def png_bytes(fig: Figure, dpi: int = 90) -> bytes:
-    """The figure as PNG bytes (Agg canvas; no display needed)."""
+def margins(fig: Figure, left: float = 0.75, right: float = 0.25, bottom: float = 0.55, top: float = 0.35,
+            hspace: float = 0.2, wspace: float = 0.2) -> None:
+    """Fixed margins in inches (the layout engines measure every label: ~40 % of a figure's cost)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        hspace=hspace, wspace=wspace)
+
+
+@dataclasses.dataclass
+class Rendered:
+    """One figure drawn once (Agg): its PNG for the page and its pixels for the PDF."""
+
+    title: str
+    png: bytes
+    rgba: np.ndarray          # (height, width, 4) uint8
+    dpi: int
+
+    @property
+    def size_inches(self) -> tuple[float, float]:
+        return self.rgba.shape[1] / self.dpi, self.rgba.shape[0] / self.dpi
+
+
+def render(figures, dpi: int = 100) -> list[Rendered]:
+    """Draw each (title, Figure) once on an Agg canvas; the PNG (fast zlib level) and the pixels
+    serve the HTML and the PDF alike, so no figure is drawn twice."""
     import io
 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    return buf.getvalue()
+    from PIL import Image
+    out = []
+    for title, fig in figures:
+        fig.set_dpi(dpi)
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        rgba = np.asarray(canvas.buffer_rgba()).copy()
+        buf = io.BytesIO()
+        Image.fromarray(rgba).save(buf, format="png", compress_level=3)
+        out.append(Rendered(title, buf.getvalue(), rgba, dpi))
+    return out

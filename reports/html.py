@@ -14,7 +14,7 @@ from pathlib import Path
 import jinja2
 import numpy as np
 
-from reports.figures import all_figures, png_bytes
+from reports.figures import all_figures, render
 from reports.align import PERIODIC_TOL
 from reports.pipeline import Report, closest, headline, robust_verdict
 from reports.summary import build_summary
@@ -57,15 +57,12 @@ def _attr_text(v, limit: int = 400) -> str:
     return s if len(s) <= limit else s[:limit] + " …"
 
 
-def render_html(report: Report, figures=None, dpi: int = 90) -> str:
-    """The report page as a string. ``figures``: list of (title, Figure); default all_figures(report)."""
-    figures = all_figures(report) if figures is None else figures
-    figs = []
-    for title, fig in figures:
-        png = png_bytes(fig, dpi=dpi)
-        w, h = fig.get_size_inches() * dpi
-        figs.append({"title": title, "png_b64": base64.b64encode(png).decode("ascii"), "width": int(round(w)),
-                     "height": int(round(h))})
+def render_html(report: Report, rendered=None, dpi: int = 100) -> str:
+    """The report page as a string. ``rendered``: figures.Rendered list (drawn once, shared with
+    the PDF); default all of the report's figures drawn at ``dpi``."""
+    rendered = render(all_figures(report), dpi) if rendered is None else rendered
+    figs = [{"title": r.title, "png_b64": base64.b64encode(r.png).decode("ascii"), "width": int(r.rgba.shape[1]),
+             "height": int(r.rgba.shape[0])} for r in rendered]
     summary = build_summary(report)
     ds = report.measured
     variables = [{"name": str(n), "dims": ", ".join(map(str, ds[n].dims)), "units": str(ds[n].attrs.get("units", "")),

@@ -8,7 +8,7 @@ from pathlib import Path
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
-from reports.figures import all_figures
+from reports.figures import all_figures, render
 from reports.pipeline import Report, headline, verdict_lines
 
 
@@ -18,7 +18,7 @@ def _dash(v, spec=".2f") -> str:
 
 def _summary_lines(report: Report) -> list[str]:
     lines = [f"labtool report: {report.measured_path}",
-             f"cam speed {report.scene['cam_speed_rpm']:g} rpm (measured {report.cycles.cam_speed_rpm:.2f} rpm), "
+             f"cam speed simulated {report.scene['cam_speed_rpm']:.2f} rpm ({report.scene['cam_speed_source']}), "
              f"law {report.scene['law']}, Fu {report.scene['Fu']:g} N, j {report.scene['backlash_mm']:g} mm, "
              f"{len(report.cycles.revolutions)} whole revolution(s) used", ""]
     if report.threshold_rows:
@@ -61,10 +61,14 @@ def _summary_page(report: Report) -> Figure:
     return fig
 
 
-def write_pdf(report: Report, path: Path, figures=None) -> None:
-    """Write the summary page and the figures to ``path`` (the caller makes it atomic)."""
-    figures = all_figures(report) if figures is None else figures
+def write_pdf(report: Report, path: Path, rendered=None) -> None:
+    """Write the summary page and the figures to ``path`` (the caller makes it atomic).
+    ``rendered``: figures.Rendered list (drawn once for the page; each becomes a page of its pixels
+    at its size, not drawn again); default the report's figures drawn now."""
+    rendered = render(all_figures(report)) if rendered is None else rendered
     with PdfPages(path) as pdf:
         pdf.savefig(_summary_page(report))
-        for _, fig in figures:
-            pdf.savefig(fig)
+        for r in rendered:
+            page = Figure(figsize=r.size_inches, dpi=r.dpi)
+            page.figimage(r.rgba, resize=False)
+            pdf.savefig(page, dpi=r.dpi)

@@ -91,9 +91,10 @@ def load_measured(path: Path) -> xr.Dataset:
     if not path.is_file():
         raise InputError(f"measured file {path} not found")
     try:
-        # lazily: the report reads only the revolutions it uses (align.read_measured); the CF time
-        # ('seconds since <start>') kept in seconds, as revolution_start_time and spike_time are
-        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
+        # lazily and without the time index (a 1-hour recording's is 288 MB): the report reads only
+        # the revolutions it uses (align.read_measured); the CF time ('seconds since <start>') kept
+        # in seconds, as revolution_start_time and spike_time are
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False, create_default_indexes=False)
     except Exception as exc:   # h5py/xarray raise many types for a file that is not NetCDF4
         raise FileFormatError(f"{path} is not a NetCDF4 file written by 'labtool process' "
                               f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
@@ -123,31 +124,51 @@ def _attr_float(ds, *names):
     return None
 
 
+def no_load_factor() -> float:
+    """No-load over nominal cam speed of the models' drive with omega1 variable (n_sync / n_nominal)."""
+    from models.mechanism import Mechanism
+    m = Mechanism.default()
+    return m.omega_sync_motor / m.omega_nominal_motor
+
+
 def max_cam_speed_rpm() -> float:
     """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
     from models.mechanism import Mechanism
     return Mechanism.default().max_cam_speed_rpm
 
 
+def stated_cam_speed(ds: xr.Dataset) -> tuple[float | None, str | None]:
+    """The nominal cam speed the file states (rpm) and the attribute that states it."""
+    # labtool process keeps the recording's nominal speed as cam_speed_rpm_stated
+    for name in ("cam_speed_rpm_stated", "cam_speed_rpm", "n1_rpm"):
+        rpm = _attr_float(ds, name)
+        if rpm is not None:
+            return rpm, name
+    return None, None
+
+
 def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dict:
     """Scene parameters (edge units) for the simulations: CLI overrides, else the file's attributes,
-    else the paper's experiment; the cam speed is the file's nominal speed, else the measured one."""
+    else the paper's experiment.
+
+    The cam speed is ``--rpm``, else the **measured** mean speed of the whole revolutions, not the
+    nominal one the file states: a stand's drive slips under load and its speed setting is not
+    the paper's (the twin's variator gives the nominal speed at no load; the paper's models
+    with omega1 variable turn 1.087 x n1 at no load, docs/mechanism.md), so only the measured speed
+    puts a model's cycle on the measured one. omega1 const runs at that speed; omega1 var has its
+    drive set so that its no-load speed is that speed (nominal n1 = speed x n_nominal / n_sync,
+    ``omega1_var_n1_rpm``), as the stand's operator sets the variator."""
     rpm = overrides.get("cam_speed_rpm")
-    src = "option"
+    src = "option --rpm"
     if rpm is None:
-        # the nominal speed the stand was set to; labtool process keeps it as cam_speed_rpm_stated
-        for name in ("cam_speed_rpm_stated", "cam_speed_rpm", "n1_rpm"):
-            rpm = _attr_float(ds, name)
-            if rpm is not None:
-                src = f"file attribute {name}"
-                break
-    if rpm is None:
-        rpm, src = measured_rpm, "measured from phi1"
+        rpm, src = measured_rpm, "measured: mean over the whole revolutions"
     limit = max_cam_speed_rpm()
     if not (math.isfinite(rpm) and 0 < rpm <= limit):
         raise InputError(f"cam speed {rpm:g} rpm ({src}) is outside what the models can simulate: "
                          f"0 < n1 <= {limit:g} rpm (the drive motor's synchronous speed)")
-    out = {"cam_speed_rpm": float(rpm), "cam_speed_source": src}
+    stated, stated_name = stated_cam_speed(ds)
+    out = {"cam_speed_rpm": float(rpm), "cam_speed_source": src, "cam_speed_rpm_stated": stated,
+           "cam_speed_stated_by": stated_name, "omega1_var_n1_rpm": float(rpm) / no_load_factor()}
     for key, attr_names in (("law", ("law",)), ("Fu", ("Fu_N", "Fu")), ("backlash_mm", ("backlash_mm",)),
                             ("jt_factor", ("jt_factor",))):
         if overrides.get(key) is not None:
@@ -164,8 +185,10 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
                     break
             if v is None and key == "backlash_mm" and _attr_float(ds, "backlash_m") is not None:
                 v, name = _attr_float(ds, "backlash_m") * 1e3, "backlash_m"
-        if v is None:  # not in the file: the paper's experiment, said so
+        if v is None:  # not in the file: the paper's experiment, said so (and noted on the page)
             out[key], out[f"{key}_source"] = EXPERIMENT[key], "not in the file: the paper's experiment"
+            if key != "law":
+                out.setdefault("assumed", []).append(key)
         else:
             stated = ds.attrs.get(f"{name}_source")
             out[key] = v
@@ -178,9 +201,11 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
 # --------------------------------------------------------------------------- simulations
 
 def model_scene(op: dict, mode: str, accuracy: str, revolutions: float):
-    """The models' Scene for the operating point ``op`` (edge units) over whole revolutions."""
+    """The models' Scene for the operating point ``op`` (edge units) over whole revolutions; with
+    omega1 var the drive's nominal n1 is ``omega1_var_n1_rpm`` (its no-load speed is the op's)."""
     from models.dynamics.scene import Scene
-    return Scene(law=op["law"], cam_speed_rpm=op["cam_speed_rpm"], Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
+    rpm = op["cam_speed_rpm"] if mode == "const" else op.get("omega1_var_n1_rpm", op["cam_speed_rpm"])
+    return Scene(law=op["law"], cam_speed_rpm=rpm, Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
                  jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
                  rise_only=False, restitution=op.get("restitution", 1.0),
                  contact_damping=op.get("contact_damping", 0.0),
@@ -308,6 +333,10 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     sims = []
     for model in models:
         for mode in modes:
+            same = _same_motion(sims, model, mode, accuracy)
+            if same is not None:
+                sims.append(same)
+                continue
             say(f"simulating {model}, omega1 {mode} ({accuracy}, {revolutions:g} revolutions)")
             run = _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_filter, stand_in_on_failure)
             if run.warning:
@@ -318,9 +347,15 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     meas_ev = _measured_events(cycles, det, op)
     for run in sims:
         if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
-            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"])
+            run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"], cam_program(op))
     say("computing the metrics")
-    comparisons = [c for run in sims for c in compare_run(cycles, run)]
+    comparisons, done = [], {}
+    for run in sims:
+        # a reused run (the same motion, _same_motion) has the same metrics: copied, not recomputed
+        key = id(run.cycle)
+        rows = [dict(c, omega1=run.omega1, label=run.label) for c in done[key]] if key in done else compare_run(cycles, run)
+        done.setdefault(key, rows)
+        comparisons += rows
     rows = evaluate(thresholds, comparisons) if thresholds else []
     rep = Report(shown(measured_path), ds, cycles, cond, op, sims, comparisons, event_table(meas_ev, sims),
                  rows, thresholds.source if thresholds else None, notes, 0.0, time_filter, meas_ev)
@@ -347,6 +382,18 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
     if abs(dev) > 0.10:
         notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
                      f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
+    if op.get("assumed"):
+        names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
+                 "jt_factor": ("inertia factor Jt", "", "--jt-factor")}
+        said = ", ".join(f"{names[k][0]} = {op[k]:g}{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
+        notes.append(f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
+                     f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
+                     "stand ran otherwise")
+    stated = op.get("cam_speed_rpm_stated")
+    if stated and abs(cycles.cam_speed_rpm / stated - 1.0) > 0.002:
+        notes.append(f"the file states {stated:g} rpm ({op['cam_speed_stated_by']}), the cam turned at "
+                     f"{cycles.cam_speed_rpm:.2f} rpm: the models run at {op['cam_speed_rpm']:.2f} rpm "
+                     f"({op['cam_speed_source']})")
     if cycles.partial:
         notes.append(f"{cycles.partial} partial revolution(s) of the recording left out (ends or gaps)")
     if cycles.in_file is not None:
@@ -354,6 +401,24 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
                      f"{len(cycles.blocks)} blocks of consecutive revolutions spread evenly over it (the report's cost "
                      "does not grow with the length)")
     return notes
+
+
+CONSTANT_SPEED_VAR = ("elastic", "kinematic")   # levels whose omega1 var is the no-load speed, constant
+
+
+def _same_motion(runs: list, model: str, mode: str, accuracy: str) -> SimRun | None:
+    """The elastic model and the kinematic level with omega1 var turn the cam at constant speed,
+    the drive's no-load speed (models.dynamics.elastic, simulate._kinematic), which the report sets
+    to the simulated speed: the same motion as omega1 const. That run is reused (labelled var, with
+    a note) instead of simulated again."""
+    if model not in CONSTANT_SPEED_VAR or mode != "var":
+        return None
+    for r in runs:
+        if r.requested == model and r.model == model and r.omega1 == "const" and r.accuracy == accuracy:
+            note = (f"the {model} model turns its cam at the drive's no-load speed, constant, which is the simulated "
+                    "speed: the same motion as omega1 const (not simulated twice)")
+            return dataclasses.replace(r, omega1="var", note=note, wall_s=0.0)
+    return None
 
 
 def _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_filter, stand_in) -> SimRun:
@@ -375,13 +440,18 @@ def _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_fil
         return run
 
 
+def cam_program(op: dict):
+    """The cam program of the operating point (the default mechanism, the op's law)."""
+    from models.mechanism import Mechanism
+    from models.mechanism.motion_laws import CamProgram
+    return CamProgram.for_mechanism(Mechanism.default(), law=op["law"])
+
+
 def _measured_events(cycles, det, op) -> dict | None:
     if det is None:
         return None
     from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
-    mech = Mechanism.default()
-    return events.measured(cycles, det, mech, CamProgram.for_mechanism(mech, law=op["law"]))
+    return events.measured(cycles, det, Mechanism.default(), cam_program(op))
 
 
 def _ratings(cycles, cycle) -> dict:
@@ -392,10 +462,19 @@ def _ratings(cycles, cycle) -> dict:
     return out
 
 
+TIE = 0.005   # mean ISO ratings closer than this to the best are "as close" (the ratings' own spread)
+
+
+def _mean_rating(r: dict) -> float:
+    return 0.5 * (r["omega2_iso_rating"] + r["epsilon2_iso_rating"])
+
+
 def _variant_row(accuracy, revolutions, entries) -> dict:
-    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings."""
-    best = max(entries, key=lambda e: 0.5 * (e[1]["omega2_iso_rating"] + e[1]["epsilon2_iso_rating"]))
-    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0],
+    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings, ``tied``
+    every label within TIE of it."""
+    best = max(entries, key=lambda e: _mean_rating(e[1]))
+    tied = [lab for lab, r in entries if _mean_rating(r) >= _mean_rating(best[1]) - TIE]
+    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0], "tied": tied,
             "models": [{"label": lab, **r} for lab, r in entries]}
 
 
@@ -409,12 +488,15 @@ def robustness_rows(rep: Report, accuracy: str, revolutions: float, say) -> list
     rows = []
     for acc in (accuracy, other):
         runs, error = [], None
+        done = []
         for run in rep.sims:
             if acc == accuracy or run.model == "kinematic":
                 runs.append((run.label, run.cycle))
                 continue
             try:
-                r2 = run_simulation(rep.scene, run.model, run.omega1, acc, revolutions, rep.conditioning, rep.time_filter)
+                r2 = _same_motion(done, run.model, run.omega1, acc) or run_simulation(
+                    rep.scene, run.model, run.omega1, acc, revolutions, rep.conditioning, rep.time_filter)
+                done.append(r2)
                 runs.append((run.label, r2.cycle))
             except LabtoolError as exc:
                 error = f"{run.label}: {exc}"
@@ -444,6 +526,13 @@ def verdict_lines(report: "Report") -> list[str]:
         first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
         lines.append(f"measured: {m['impacts_per_rev']:.2f} visible impacts and {m['jumps_per_rev']:.2f} jumps per "
                      f"revolution, first impact at {first} (visible: |d omega2| >= {m['threshold_rad_s']:.3g} rad/s)")
+        # the models' events with the same definition: where ratings tie, the events may not
+        pred = [(r.label, r.events) for r in report.sims if r.events and r.events.get("impacts_per_rev") is not None
+                and r.omega1 == "const"]
+        if pred:
+            lines.append("predicted, same definition: " + "; ".join(
+                f"{lab} {e['detectable_impacts_per_rev']:.2f} visible impacts, first at "
+                + ("-" if e["first_impact_deg"] is None else f"{e['first_impact_deg']:.1f} deg") for lab, e in pred))
     return lines
 
 
@@ -452,17 +541,23 @@ def robustness_sentence(rows: list[dict]) -> str | None:
     verdict = robust_verdict(rows)
     if verdict is None:
         return None
+    tied = [t for t in rows[0].get("tied", []) if t != rows[0]["closest"]]
+    also = f" ({', '.join(tied)} within {TIE:g} of its mean ISO rating)" if tied else ""
     if verdict["robust"]:
-        return "verdict robust: the same closest model at both presets and both simulated lengths"
+        return (f"verdict robust: {rows[0]['closest']} is the closest{also} at both presets and both simulated "
+                "lengths")
     return "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}" for r in rows)
 
 
 def robust_verdict(rows: list[dict]) -> dict | None:
-    """Whether the closest model is the same in every robustness row (None without rows)."""
+    """Whether the first row's closest model is the closest, or within TIE of it, in every
+    robustness row (None without rows)."""
     names = [r["closest"] for r in rows if r.get("closest") is not None]
     if not names:
         return None
-    return {"robust": len(set(names)) == 1 and len(names) == len(rows), "closest": sorted(set(names))}
+    first = rows[0].get("closest")
+    robust = len(names) == len(rows) and all(first == r["closest"] or first in r.get("tied", ()) for r in rows)
+    return {"robust": robust, "closest": sorted(set(names))}
 
 
 def _check_choice(values, allowed, what) -> tuple:

@@ -99,3 +99,17 @@ def test_clip_mask_equals_numpy(rail):
     got = kernels.clip_mask(np.ascontiguousarray(v), lo, hi, rail, 3)
     assert np.array_equal(got, ref) and got[100:104].all()
     assert rail or not got[2000:2002].any()
+
+
+def test_clip_mask_a_rounded_top_is_not_a_clip_a_flat_cut_is():
+    """A run at the extreme whose neighbours are one level below (a quantised smooth peak) is not
+    a clip when min_drop asks for a steeper entry; a run entered by a big step is."""
+    q = 0.01
+    peak = np.array([0, 3, 6, 8, 9, 10, 10, 10, 10, 9, 8, 6, 3, 0] * 3, float) * q   # rounded top, 4 samples
+    cut = np.array([0, 20, 40, 40, 40, 40, 20, 0], float) * q                      # saturated, steep entry
+    v = np.concatenate([peak, -cut])[:, None]
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    old = kernels.clip_mask(np.ascontiguousarray(v), lo, hi, 0.0, 3)
+    new = kernels.clip_mask(np.ascontiguousarray(v), lo, hi, 0.0, 3, 3 * q)
+    assert old[5:9].all() and not new[:peak.size].any()
+    assert new[peak.size + 2:peak.size + 6].all() and new.sum() == 4

@@ -313,3 +313,30 @@ def test_a_channel_missing_from_the_calibration_names_its_fallback(tmp_path):
     assert len(missing) == 1
     assert "using the" in missing[0] and f"Ka = {ds.attrs['ka_aE_n_m_s2_per_v']:.4g}" in missing[0]
     assert not any("aE_t" in m for m in msgs if "no entry" in m)
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_quantised_quiet_channel_is_not_taken_for_clipping(tmp_path):
+    """At Ka = 8643 m/s^2/V (gain x0.1) aE_n spans a few dozen ADC levels and holds its top code
+    for several samples at every omega2 peak: that is quantisation, not a saturated conditioner,
+    so no sample is flagged and the revolutions are averaged. The same recording clipped at
+    +-1 V on a stated 10 V range is still flagged."""
+    volts, scene, _, fs = stand_volts(2.0, 500.0, params={"ka_m_s2_per_v": (8643.0, 8643.0)})
+    lsb = 20.0 / 2**16
+    levels = (volts[:, 1].max() - volts[:, 1].min()) / lsb
+    top_run = np.diff(np.flatnonzero(np.diff(np.concatenate([[0], volts[:, 1] == volts[:, 1].max(), [0]]).astype(int))))
+    assert levels < 256 and top_run.max() >= 3          # the case: few levels, runs at the extreme
+    adc = {"adc_range_v": 10.0, "adc_bits": 16}
+    p = tmp_path / "quiet.h5"
+    write_v1(p, volts, fs=fs, cam_speed_rpm=500.0, ka=[8643.0, 8643.0, np.nan], attrs=adc)
+    with open_recording(p) as rec:
+        s = process_recording(rec, tmp_path / "quiet.nc", warn=lambda m: None)
+    assert s["clipped"] == 0
+    ds = xr.open_dataset(tmp_path / "quiet.nc", engine="h5netcdf", decode_times=False).load()
+    assert ds.attrs["n_revolutions_averaged"] > 10
+    sat = volts.copy()
+    sat[:, :2] = np.clip(sat[:, :2] * 100.0, -1.0, 1.0 - lsb)     # Ka 86.43 on a conditioner saturating at 1 V
+    p2 = tmp_path / "sat.h5"
+    write_v1(p2, sat, fs=fs, cam_speed_rpm=500.0, ka=[86.43, 86.43, np.nan], attrs=adc)
+    with open_recording(p2) as rec:
+        assert process_recording(rec, tmp_path / "sat.nc", warn=lambda m: None)["clipped"] > 100

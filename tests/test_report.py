@@ -35,10 +35,6 @@ def files(tmp_path_factory):
     no_omega = exact.drop_vars("omega2")
     paths["no_omega2"] = d / "no_omega2.nc"
     write_netcdf(no_omega, paths["no_omega2"])
-    fast = exact.copy()
-    fast.attrs["cam_speed_rpm"] = 5000.0
-    paths["too_fast"] = d / "too_fast.nc"
-    write_netcdf(fast, paths["too_fast"])
     paths["dir"] = d
     return paths
 
@@ -137,7 +133,7 @@ def test_measured_file_without_omega2_is_one_line_exit_2(files, capsys):
 
 def test_cam_speed_the_models_cannot_do_is_one_line_exit_2(files, capsys):
     out = files["dir"] / "x.html"
-    _one_line_exit_2(capsys, ["report", str(files["too_fast"]), "-o", str(out)], "5000 rpm")
+    _one_line_exit_2(capsys, ["report", str(files["exact"]), "--rpm", "5000", "-o", str(out)], "5000 rpm")
     _one_line_exit_2(capsys, ["report", str(files["exact"]), "--rpm", "-10", "-o", str(out)], "-10 rpm")
     assert not out.exists()
 
@@ -306,6 +302,27 @@ def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
     rep = pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",), overrides={"cam_speed_rpm": 250.0})
     assert any("differs by -28 %" in n for n in rep.notes)
     assert not any("differs" in n for n in _kin_report(files["exact"]).notes)
+
+
+def test_the_models_run_at_the_measured_speed_not_the_stated_one(tmp_path):
+    """A stand whose drive slips (or is set differently from the paper's) turns at another speed than
+    it states: the models run at the measured mean speed; omega1 var has its drive set to that speed
+    at no load, so its cam turns at it on average too (no load: the inertia moments average out)."""
+    ds = synthetic_measured(noise=0.01, revolutions=4.3)
+    ds.attrs["cam_speed_rpm_stated"] = 200.0
+    path = tmp_path / "m.nc"
+    write_netcdf(ds, path)
+    rep = pipeline.build_report(path, models=("rigid",), modes=("const", "var"), accuracy="fast", revolutions=3,
+                                overrides={"restitution": 0.5}, robustness=False)
+    op = rep.scene
+    assert op["cam_speed_rpm"] == pytest.approx(180.0, rel=1e-5) and op["cam_speed_rpm_stated"] == 200.0
+    assert op["omega1_var_n1_rpm"] == pytest.approx(180.0 * 920.0 / 1000.0, rel=1e-3)
+    assert any("the file states 200 rpm" in n and "180.00 rpm" in n for n in rep.notes)
+    for run in rep.sims:
+        t, ph = run.dataset["time"].values, run.dataset["phi1"].values
+        last = ph >= 2 * math.pi
+        rpm = (ph[-1] - ph[last][0]) / (t[-1] - t[last][0]) * 30 / math.pi
+        assert rpm == pytest.approx(180.0, rel=5e-3), run.omega1
 
 
 def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_stand_in(files, monkeypatch):

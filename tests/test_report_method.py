@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from common.files import write_netcdf
 from reports import align, pipeline
@@ -70,6 +72,29 @@ def test_a_long_recording_is_read_in_bounded_blocks(tmp_path):
     assert full.in_file is None and len(full.revolutions) == 59
     # the same cycle average from the sample as from everything (the stand repeats itself)
     assert np.allclose(cyc.mean("omega2"), full.mean("omega2"), atol=0.01 * np.abs(full.mean("omega2")).max())
+
+
+@settings(max_examples=150, deadline=None)
+@given(n=st.integers(1, 5000), gaps=st.lists(st.tuples(st.floats(0, 1), st.floats(0, 0.5)), max_size=3),
+       probes=st.lists(st.floats(-0.1, 1.1), min_size=1, max_size=20), window=st.sampled_from([4, 16, 512]))
+def test_lazy_searchsorted_equals_numpys_on_a_time_axis_with_gaps(n, gaps, probes, window):
+    """The long file's time axis is never read whole (a 1-hour recording's is 288 MB): the interpolation
+    search finds numpy's answer, gaps (lost samples counted in time) or not, inside or outside."""
+    import xarray as xr
+    t = np.arange(n) * 1e-4
+    for at, jump in gaps:
+        t[int(at * (n - 1)):] += jump
+    values = [t[0] + p * (t[-1] - t[0] + 1e-4) for p in probes] + [t[int(p * (n - 1))] for p in probes if 0 <= p <= 1]
+    assert align.lazy_searchsorted(xr.DataArray(t, dims="time"), values, window) == \
+        list(np.searchsorted(t, values, side="left"))
+
+
+def test_a_long_file_is_opened_without_its_time_index(tmp_path):
+    ds = synthetic_measured(noise=0.01, revolutions=4.3)
+    path = tmp_path / "m.nc"
+    write_netcdf(ds, path)
+    opened = pipeline.load_measured(path)
+    assert "time" not in opened.indexes and "time" in opened.coords
 
 
 def test_the_robustness_rows_name_the_closest_model_at_both_presets_and_lengths(tmp_path):

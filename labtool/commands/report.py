@@ -128,10 +128,10 @@ def report(
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
                            progress=lambda msg: status.update(msg), robustness=robustness)
         status.update("drawing the figures")
-        from reports.figures import all_figures
+        from reports.figures import all_figures, render
         from reports.html import render_html
         from reports.summary import to_json
-        figs = all_figures(rep)
+        figs = render(all_figures(rep))          # drawn once, for the page and the PDF
         html = render_html(rep, figs)
         # the HTML, PDF and JSON are one set: all written, or none (a full disk, Ctrl-C)
         with OutputSet() as out:
