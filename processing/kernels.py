@@ -22,17 +22,12 @@ TWO_PI = 2.0 * math.pi
 
 
 @nb.njit(cache=True, nogil=True)
-def _sos_pass(sos, zi, x, out, reverse):
+def sos_pass_state(sos, z, x, out, reverse):
     """Direct-form-II-transposed SOS pass over the columns of ``x`` (m, nch) into ``out``, all
-    channels per sample (independent recursions side by side), initial state zi * first sample."""
+    channels per sample (independent recursions side by side), from the state z (nch, ns, 2),
+    which is left as the state after the last sample (scipy.signal.sosfilt with zi)."""
     ns = sos.shape[0]
     m, nch = x.shape
-    z = np.empty((nch, ns, 2))
-    i0 = m - 1 if reverse else 0
-    for c in range(nch):
-        for s in range(ns):
-            z[c, s, 0] = zi[s, 0] * x[i0, c]
-            z[c, s, 1] = zi[s, 1] * x[i0, c]
     for t in range(m):
         i = m - 1 - t if reverse else t
         for c in range(nch):
@@ -43,6 +38,20 @@ def _sos_pass(sos, zi, x, out, reverse):
                 z[c, s, 1] = sos[s, 2] * v - sos[s, 5] * y
                 v = y
             out[i, c] = v
+
+
+@nb.njit(cache=True, nogil=True)
+def _sos_pass(sos, zi, x, out, reverse):
+    """sos_pass_state from the steady state of the first sample in the pass's direction (zi * x0)."""
+    ns = sos.shape[0]
+    m, nch = x.shape
+    z = np.empty((nch, ns, 2))
+    i0 = m - 1 if reverse else 0
+    for c in range(nch):
+        for s in range(ns):
+            z[c, s, 0] = zi[s, 0] * x[i0, c]
+            z[c, s, 1] = zi[s, 1] * x[i0, c]
+    sos_pass_state(sos, z, x, out, reverse)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -283,3 +292,49 @@ def extremes(block, vmin, vmax):
                 vmin[c] = v
             if v > vmax[c]:
                 vmax[c] = v
+
+
+@nb.njit(cache=True, nogil=True)
+def find_peaks(x, height, distance):
+    """scipy.signal.find_peaks(x, height=height, distance=distance)[0] (indices, int64).
+
+    Local maxima (a flat top gives its middle sample, rounded down) at least ``height``; then, from
+    the highest down, every peak closer than ``distance`` samples to a kept higher one is dropped.
+    Equal heights are taken in the order of a stable sort (scipy's quicksort may order ties of more
+    than 16 peaks otherwise).
+    """
+    n = x.shape[0]
+    peaks = np.empty(n // 2 + 1, np.int64)
+    m = 0
+    i = 1
+    while i < n - 1:
+        if x[i - 1] < x[i]:
+            ahead = i + 1
+            while ahead < n - 1 and x[ahead] == x[i]:
+                ahead += 1
+            if x[ahead] < x[i]:
+                mid = (i + ahead - 1) // 2
+                if x[mid] >= height:
+                    peaks[m] = mid
+                    m += 1
+                i = ahead
+        i += 1
+    peaks = peaks[:m]
+    dist = int(math.ceil(distance))
+    if m < 2 or dist <= 1:
+        return peaks
+    keep = np.ones(m, np.bool_)
+    order = np.argsort(x[peaks], kind="mergesort")
+    for r in range(m - 1, -1, -1):
+        j = order[r]
+        if not keep[j]:
+            continue
+        k = j - 1
+        while k >= 0 and peaks[j] - peaks[k] < dist:
+            keep[k] = False
+            k -= 1
+        k = j + 1
+        while k < m and peaks[k] - peaks[j] < dist:
+            keep[k] = False
+            k += 1
+    return peaks[keep]

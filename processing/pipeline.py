@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-from scipy import signal
 
 from common import cf
 from common import history as H
@@ -172,7 +171,7 @@ def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
     hist.add(H.Epsilon2(DE_m=mech.DE))
     omega = hist.add(H.Omega2(dwell_margin_deg=opts.dwell_margin_deg,
                               dwell_margin_samples=max(1, int(round(opts.dwell_margin_deg / 360.0 * cam.period_samples)))))
-    return Chain(fs=fs, ka=ka, sos=sos, zi=signal.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
+    return Chain(fs=fs, ka=ka, sos=sos, zi=filters.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
                  tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau)
 
 
