@@ -79,6 +79,18 @@ class TachoEdges:
         return np.asarray(edges, dtype=float)
 
 
+class CompiledTachoEdges(TachoEdges):
+    """TachoEdges with ``feed`` compiled (kernels.tacho_edges; tests/test_proc_kernels.py checks
+    that both find the same edges over any split into blocks)."""
+
+    def __init__(self, min_range: float = 0.1):
+        super().__init__(min_range)
+        self._state = np.array([math.inf, -math.inf, 0.0, 0.0, 0.0])
+
+    def feed(self, start: int, x: np.ndarray) -> np.ndarray:
+        return kernels.tacho_edges(x, start, self._state, self.min_range)
+
+
 def template_aE_t(mech, program, n_per_rev: int) -> np.ndarray:
     """Ideal aE_t (m/s^2 at 1 rad/s cam speed, i.e. d2psi/dphi1^2 * DE) over one revolution, phi1 = 2 pi k / n."""
     phi1 = TWO_PI * np.arange(n_per_rev) / n_per_rev

@@ -282,19 +282,6 @@ def clip_mask(volts, lo, hi, rail, min_run):
 
 
 @nb.njit(cache=True, nogil=True)
-def extremes(block, vmin, vmax):
-    """Per-channel running min and max over a (n, nch) block, updated in place."""
-    n, nch = block.shape
-    for i in range(n):
-        for c in range(nch):
-            v = block[i, c]
-            if v < vmin[c]:
-                vmin[c] = v
-            if v > vmax[c]:
-                vmax[c] = v
-
-
-@nb.njit(cache=True, nogil=True)
 def find_peaks(x, height, distance):
     """scipy.signal.find_peaks(x, height=height, distance=distance)[0] (indices, int64).
 
@@ -338,3 +325,66 @@ def find_peaks(x, height, distance):
             keep[k] = False
             k += 1
     return peaks[keep]
+
+
+@nb.njit(cache=True, nogil=True)
+def scan_block(block, vmin, vmax):
+    """Per-channel running min and max of a (n, nch) block, updated in place; returns the flat
+    (row-major) index of the first NaN/Inf sample, or -1 (the extremes are then incomplete)."""
+    n, nch = block.shape
+    for i in range(n):
+        for c in range(nch):
+            v = block[i, c]
+            if not np.isfinite(v):
+                return i * nch + c
+            if v < vmin[c]:
+                vmin[c] = v
+            if v > vmax[c]:
+                vmax[c] = v
+    return -1
+
+
+@nb.njit(cache=True, nogil=True)
+def tacho_edges(x, start, state, min_range):
+    """cam_angle.TachoEdges.feed(start, x), compiled: rising edges (sub-sample positions) of the
+    pulse channel ``x`` (n,), any float dtype. ``state`` (float64, 5): lo, hi, armed (0/1), the
+    last sample's value, whether there was one (0/1); updated in place."""
+    n = x.shape[0]
+    if n == 0:
+        return np.empty(0)
+    lo, hi = state[0], state[1]
+    for i in range(n):
+        v = float(x[i])
+        lo = min(lo, v)
+        hi = max(hi, v)
+    state[0], state[1] = lo, hi
+    rng = hi - lo
+    if rng < min_range:
+        state[3], state[4] = float(x[n - 1]), 1.0
+        return np.empty(0)
+    mid = 0.5 * (hi + lo)
+    low_level, high_level = mid - 0.1 * rng, mid + 0.1 * rng
+    edges = np.empty(n // 2 + 1)
+    m = 0
+    armed = state[2] != 0.0
+    for i in range(n):
+        v = float(x[i])
+        if v <= low_level:
+            armed = True
+        elif v >= high_level:
+            if armed:  # a passage from below the band to above it: the edge is the mid crossing
+                j = i
+                while j > 0 and float(x[j - 1]) >= mid:
+                    j -= 1
+                if j == 0:
+                    x0 = state[3] if state[4] != 0.0 else float(x[0])
+                    i0, x1 = -1, float(x[0])
+                else:
+                    i0, x0, x1 = j - 1, float(x[j - 1]), float(x[j])
+                frac = (mid - x0) / (x1 - x0) if x1 != x0 else 0.0
+                edges[m] = start + i0 + min(max(frac, 0.0), 1.0)
+                m += 1
+            armed = False
+    state[2] = 1.0 if armed else 0.0
+    state[3], state[4] = float(x[n - 1]), 1.0
+    return edges[:m]

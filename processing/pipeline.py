@@ -39,6 +39,7 @@ from processing import cam_angle, cycles, events, filters, follower, kernels, sp
 from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
+from processing.readers.base import check_finite
 from processing.writer import MeasuredWriter
 
 CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]
@@ -199,6 +200,8 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
                    spikes=SpikeCollector(fs, opts.spike_k_sigma), normal=NormalCheck(),
                    clip=ClipCounter(rail, rec.clip_indices()), time=TimeAxis(rec, warn))
     lo, hi = marks["vmin"][[it, inn]], marks["vmax"][[it, inn]]
+    # samples checked finite by pass 1 (_scan): read as stored into one reused buffer
+    buf = np.empty((min(opts.chunk_samples + 2 * chain.margin, rec.n_samples), rec.n_channels), dtype=rec.raw_dtype)
     rev_offset = 0
     for iseg, ((a_seg, b_seg), m, irregular) in enumerate(zip(segs, marks["by_segment"], cam.irregular_by_segment)):
         st.welch.reset_continuity()
@@ -208,7 +211,7 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
         for a in range(a_seg, b_seg, opts.chunk_samples):
             b = min(a + opts.chunk_samples, b_seg)
             wa, wb = max(a_seg, a - chain.margin), min(b_seg, b + chain.margin)
-            block = rec.read(wa, wb)
+            block = rec.read_unchecked(wa, wb, buf)
             volts = np.ascontiguousarray(block[:, [it, inn]])
             c0, c1 = a - wa, b - wa
             clipped = st.clip.mask(volts, lo, hi, wa, wb)
@@ -328,12 +331,14 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
             warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
                  f"{rpm_hint:g} rpm by more than 20 %; using the data")
     marks_by_seg = []
+    buf = np.empty((min(chunk, rec.n_samples), rec.n_channels), dtype=rec.raw_dtype)
     for a_seg, b_seg in segs:
         marks = []
         if method == "tacho":
-            det = cam_angle.TachoEdges()
-            for a, block in rec.chunks(chunk, a_seg, b_seg):
-                kernels.extremes(np.ascontiguousarray(block), vmin, vmax)
+            det = cam_angle.CompiledTachoEdges()
+            for a in range(a_seg, b_seg, chunk):
+                block = rec.read_unchecked(a, min(a + chunk, b_seg), buf)
+                _scan(rec, block, a, vmin, vmax)
                 marks.extend(det.feed(a, block[:, itacho]))
                 progress(len(block))
         else:
@@ -341,11 +346,17 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
             for a in range(a_seg, b_seg, chunk):
                 b = min(a + chunk, b_seg)
                 block = rec.read(a, min(b + corr.n + 2, b_seg))
-                kernels.extremes(np.ascontiguousarray(block[: b - a]), vmin, vmax)
+                _scan(rec, block[: b - a], a, vmin, vmax)
                 marks.extend(corr.feed(a, block[:, it] * ka_t, a, b))
                 progress(b - a)
         marks_by_seg.append(np.asarray(marks, dtype=float))
     return marks_by_seg, vmin, vmax, period_est
+
+
+def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
+    """Extremes of every channel; every sample checked finite (pass 2 reads unchecked after this)."""
+    if kernels.scan_block(block, vmin, vmax) >= 0:
+        check_finite(np.asarray(block, dtype=float), first, rec.channel_names, rec.source)
 
 
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:

@@ -146,3 +146,27 @@ def test_clip_mask_equals_numpy(rail):
     got = kernels.clip_mask(np.ascontiguousarray(v), lo, hi, rail, 3)
     assert np.array_equal(got, ref) and got[100:104].all()
     assert rail or not got[2000:2002].any()
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 6000), block=st.integers(1, 3000), noise=st.floats(0, 0.5), offset=st.floats(-3, 3),
+       seed=st.integers(0, 999), f32=st.booleans())
+def test_compiled_tacho_edges_equal_numpy(n, block, noise, offset, seed, f32):
+    """The same edges over any split into blocks: pulses, noise, a silent start, float32 input."""
+    rng = np.random.default_rng(seed)
+    i = np.arange(n)
+    x = offset + 5.0 * ((i % 713) < 40) * (i > n // 5) + rng.normal(0, noise, n)
+    x = x.astype(np.float32) if f32 else x
+    ref_det, got_det = cam_angle.TachoEdges(), cam_angle.CompiledTachoEdges()
+    ref = np.concatenate([ref_det.feed(a, x[a:a + block]) for a in range(0, n, block)] or [np.empty(0)])
+    got = np.concatenate([got_det.feed(a, x[a:a + block]) for a in range(0, n, block)] or [np.empty(0)])
+    assert got.tolist() == ref.tolist()
+
+
+def test_scan_block_extremes_and_first_bad_sample():
+    x = np.random.default_rng(0).normal(size=(1000, 3)).astype(np.float32)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    assert kernels.scan_block(x, lo, hi) == -1
+    assert lo.tolist() == x.min(axis=0).tolist() and hi.tolist() == x.max(axis=0).tolist()
+    x[700, 2], x[701, 0] = np.nan, np.inf
+    assert kernels.scan_block(x, lo, hi) == 700 * 3 + 2
