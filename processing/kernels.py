@@ -76,18 +76,6 @@ def sosfiltfilt(sos, zi, x, padlen):
 
 
 @nb.njit(cache=True, nogil=True)
-def residual(phys, lp, valid):
-    """(phys - lp) where valid, else 0: the content above the processing band, per channel (n, nch)."""
-    n, nch = phys.shape
-    out = np.zeros((n, nch))
-    for i in range(n):
-        if valid[i]:
-            for c in range(nch):
-                out[i, c] = phys[i, c] - lp[i, c]
-    return out
-
-
-@nb.njit(cache=True, nogil=True)
 def phi1_from_marks(first, n, marks, fallback_period):
     """cam_angle.phi1_from_marks for the contiguous samples first..first+n-1: (phi1 rad, revolution)."""
     nm = marks.shape[0]
@@ -253,32 +241,181 @@ def follower_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE,
 
 
 @nb.njit(cache=True, nogil=True)
-def clip_mask(volts, lo, hi, rail, min_run):
-    """pipeline._clipped without the recorder's events: |v| >= rail (rail <= 0: none), or runs of
-    >= min_run samples at a channel's extreme value (lo, hi per channel)."""
-    n, nch = volts.shape
+def clip_mask(block, cols, lo, hi, rail, min_run):
+    """pipeline._clipped without the recorder's events, on the columns ``cols`` of ``block`` (n, nch)
+    (any float dtype): |v| >= rail (rail <= 0: none), or runs of >= min_run samples at a channel's
+    extreme value (lo, hi per selected channel)."""
+    n = block.shape[0]
     out = np.zeros(n, np.bool_)
     if rail > 0:
         for i in range(n):
-            for c in range(nch):
-                if abs(volts[i, c]) >= rail:
+            for j in range(cols.shape[0]):
+                if abs(block[i, cols[j]]) >= rail:
                     out[i] = True
-    for c in range(nch):
-        if not hi[c] > lo[c]:
+    for j in range(cols.shape[0]):
+        c = cols[j]
+        if not hi[j] > lo[j]:
             continue
         i = 0
         while i < n:
-            v = volts[i, c]
-            if v == hi[c] or v == lo[c]:
-                j = i
-                while j < n and (volts[j, c] == hi[c] or volts[j, c] == lo[c]):
-                    j += 1
-                if j - i >= min_run:
-                    out[i:j] = True
-                i = j
+            v = block[i, c]
+            if v == hi[j] or v == lo[j]:
+                k = i
+                while k < n and (block[k, c] == hi[j] or block[k, c] == lo[j]):
+                    k += 1
+                if k - i >= min_run:
+                    out[i:k] = True
+                i = k
             else:
                 i += 1
     return out
+
+
+@nb.njit(cache=True, nogil=True)
+def scaled_columns(block, cols, factors):
+    """block[:, cols] * factors as float64 (n, len(cols)): the Ka-scaled channels of a window."""
+    n = block.shape[0]
+    out = np.empty((n, cols.shape[0]))
+    for i in range(n):
+        for j in range(cols.shape[0]):
+            out[i, j] = float(block[i, cols[j]]) * factors[j]
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def core_outputs(acc, eps, omega, phi1, rev, absn, moving, clipped, c0, c1, rev_offset, t_first, fs,
+                 out_f, out_rev, out_clip, out_time, normal):
+    """The per-sample outputs of a window's core [c0, c1) in the file's types, and the normal check.
+
+    out_f (5, >= c1 - c0) float32: aE_t, aE_n, epsilon2, omega2, phi1; out_rev int32 (revolution +
+    rev_offset, -1 before the first mark); out_clip int8; out_time float64 (t_first + j) / fs
+    (t_first: the core's first row plus the samples lost before it). normal (3,): the sum of
+    (|omega2| - |omega2| from aE_n)^2, the count and the largest |omega2| over the finite motion
+    samples (accumulators.NormalCheck.feed's sums), updated in place.
+    """
+    for j in range(c1 - c0):
+        i = c0 + j
+        out_f[0, j] = acc[i, 0]
+        out_f[1, j] = acc[i, 1]
+        out_f[2, j] = eps[i]
+        out_f[3, j] = omega[i]
+        out_f[4, j] = phi1[i]
+        out_rev[j] = rev[i] + rev_offset if rev[i] >= 0 else -1
+        out_clip[j] = 1 if clipped[i] else 0
+        out_time[j] = (t_first + j) / fs
+        w = omega[i]
+        if moving[i] and np.isfinite(w):
+            d = abs(w) - absn[i]
+            normal[0] += d * d
+            normal[1] += 1.0
+            normal[2] = max(normal[2], abs(w))
+
+
+@nb.njit(cache=True, nogil=True)
+def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
+    """pipeline._add_cycles' resampling, compiled: each revolution [m0[k], m1[k]) (window sample
+    positions) that is free of clipped and NaN samples, interpolated linearly at m0 + frac (m1 - m0)
+    (frac = grid / 2 pi), added to sums and sumsq (5, n_grid) in the order aE_t, aE_n, epsilon2,
+    omega2, |omega2| from aE_n (pipeline.CYCLE_NAMES). Returns (revolutions used, rejected)."""
+    n = eps.shape[0]
+    ng = frac.shape[0]
+    loc = np.zeros((5, ng))
+    locsq = np.zeros((5, ng))
+    used, rejected = 0, 0
+    for k in range(m0.shape[0]):
+        if not (m0[k] >= 0 and math.floor(m1[k]) + 1 < n):
+            continue
+        good = True
+        for i in range(int(math.floor(m0[k])), int(math.floor(m1[k])) + 2):
+            if clipped[i] or not (np.isfinite(acc[i, 0]) and np.isfinite(acc[i, 1]) and np.isfinite(eps[i])
+                                  and np.isfinite(omega[i]) and np.isfinite(absn[i])):
+                good = False
+                break
+        if not good:
+            rejected += 1
+            continue
+        used += 1
+        span = m1[k] - m0[k]
+        for q in range(ng):
+            x = m0[k] + frac[q] * span
+            i0 = int(math.floor(x))
+            w = x - i0
+            for v in range(5):
+                if v < 2:
+                    y = acc[i0, v] * (1.0 - w) + acc[i0 + 1, v] * w
+                elif v == 2:
+                    y = eps[i0] * (1.0 - w) + eps[i0 + 1] * w
+                elif v == 3:
+                    y = omega[i0] * (1.0 - w) + omega[i0 + 1] * w
+                else:
+                    y = absn[i0] * (1.0 - w) + absn[i0 + 1] * w
+                loc[v, q] += y
+                locsq[v, q] += y * y
+    if used:
+        sums += loc
+        sumsq += locsq
+    return used, rejected
+
+
+@nb.njit(cache=True, nogil=True)
+def spikes(phys, lp, valid, c, k_sigma, floor_fraction, distance):
+    """events.detect_spikes on channel c of the window's residual (phys - lp where valid, else 0),
+    compiled: (peak indices, signed residual at them, threshold). The scale comes from every 8th
+    sample (all of them up to 4096), the full residual is only scanned against the threshold."""
+    n = phys.shape[0]
+    step = 8 if n > 4096 else 1
+    m = (n + step - 1) // step
+    sub = np.empty(m)
+    for j in range(m):
+        i = j * step
+        sub[j] = phys[i, c] - lp[i, c] if valid[i] else 0.0
+    med = np.median(sub)
+    sigma = 1.4826 * np.median(np.abs(sub - med))
+    peak = 0.0
+    for i in range(n):
+        peak = max(peak, abs(lp[i, c]))
+    thr = max(k_sigma * sigma, floor_fraction * peak)
+    none = np.empty(0, np.int64)
+    if thr <= 0 or n < 3:
+        return none, np.empty(0), thr
+    mag = np.empty(n)
+    hit = False
+    for i in range(n):
+        r = phys[i, c] - lp[i, c] if valid[i] else 0.0
+        mag[i] = abs(r - med)
+        hit = hit or mag[i] > thr
+    if not hit:  # the usual case: nothing to look for
+        return none, np.empty(0), thr
+    pk = find_peaks(mag, thr, distance)
+    amp = np.empty(pk.shape[0])
+    for j in range(pk.shape[0]):
+        i = pk[j]
+        amp[j] = phys[i, c] - lp[i, c] if valid[i] else 0.0
+    return pk, amp, thr
+
+
+@nb.njit(cache=True, nogil=True)
+def welch_accumulate(spec, means, wfft, sum_amp, sum_pow):
+    """spectra.WelchAccumulator.feed after the transforms, compiled: X = spec - mean W (each
+    segment's mean removed, float32 as the transforms), |X| and |X|^2 summed over the segments in
+    float64 into sum_amp and sum_pow (n_freq, nch). spec (nch, nseg, n_freq) complex64."""
+    nch, nseg, nf = spec.shape
+    a = np.empty(nf)
+    p = np.empty(nf)
+    for c in range(nch):
+        a[:] = 0.0
+        p[:] = 0.0
+        for s in range(nseg):  # the segments in order for each frequency, as numpy's sum over them
+            m = means[c, s]
+            for f in range(nf):
+                x = spec[c, s, f] - m * wfft[f]
+                re, im = float(x.real), float(x.imag)
+                mag = np.float32(math.sqrt(re * re + im * im))  # hypotf, as numpy's abs of complex64
+                a[f] += mag
+                p[f] += mag * mag
+        for f in range(nf):
+            sum_amp[f, c] += a[f]
+            sum_pow[f, c] += p[f]
 
 
 @nb.njit(cache=True, nogil=True)

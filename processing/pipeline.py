@@ -40,9 +40,9 @@ from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
 from processing.readers.base import check_finite
-from processing.writer import MeasuredWriter
+from processing.writer import CoreBlock, MeasuredWriter
 
-CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]
+CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
 
 
 class ProcessingWarning(UserWarning):
@@ -190,7 +190,7 @@ class PassState:
 def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState:
     """Every chunk of every segment through the chain; outputs written, accumulators fed."""
     fs = chain.fs
-    it, inn = rec.channel_index("aE_t"), rec.channel_index("aE_n")
+    cols = np.array([rec.channel_index("aE_t"), rec.channel_index("aE_n")], dtype=np.int64)
     adc = _float_attr(rec.attrs.get("adc_range_v"))
     bits = _float_attr(rec.attrs.get("adc_bits")) or 16
     # the ADC's rails, when the recording states its range (the simulated stand and the recorder do)
@@ -199,9 +199,10 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
                    cycles=cycles.CycleAccumulator(CYCLE_NAMES, opts.grid_points),
                    spikes=SpikeCollector(fs, opts.spike_k_sigma), normal=NormalCheck(),
                    clip=ClipCounter(rail, rec.clip_indices()), time=TimeAxis(rec, warn))
-    lo, hi = marks["vmin"][[it, inn]], marks["vmax"][[it, inn]]
+    lo, hi = marks["vmin"][cols], marks["vmax"][cols]
     # samples checked finite by pass 1 (_scan): read as stored into one reused buffer
     buf = np.empty((min(opts.chunk_samples + 2 * chain.margin, rec.n_samples), rec.n_channels), dtype=rec.raw_dtype)
+    core = CoreBlock(min(opts.chunk_samples, rec.n_samples))
     rev_offset = 0
     for iseg, ((a_seg, b_seg), m, irregular) in enumerate(zip(segs, marks["by_segment"], cam.irregular_by_segment)):
         st.welch.reset_continuity()
@@ -212,21 +213,25 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
             b = min(a + opts.chunk_samples, b_seg)
             wa, wb = max(a_seg, a - chain.margin), min(b_seg, b + chain.margin)
             block = rec.read_unchecked(wa, wb, buf)
-            volts = np.ascontiguousarray(block[:, [it, inn]])
             c0, c1 = a - wa, b - wa
-            clipped = st.clip.mask(volts, lo, hi, wa, wb)
+            clipped = st.clip.mask(block, cols, lo, hi, wa, wb)
             st.clip.count(clipped[c0:c1])
-            phys = volts * chain.ka[None, :]
+            phys = kernels.scaled_columns(block, cols, chain.ka)
             st.welch.feed(phys[c0:c1], clipped[c0:c1])
-            res = None
+            t_first = float(a + st.time.lost_before(a))
             if len(m) >= 2:
                 res = _process_window(phys, clipped, wa, m, cam.period_samples, chain, irregular)
-                res["revolution"] = np.where(res["revolution"] >= 0, res["revolution"] + rev_offset, -1)
-                st.normal.feed(res["omega2"][c0:c1], res["omega2_abs_from_aE_n"][c0:c1], res["moving"][c0:c1])
                 st.spikes.feed(phys, res["lowpassed"], clipped, wa, c0, c1)
                 _add_cycles(st.cycles, res, clipped, m, a, b, wa, wb - wa)
-            core = {k: v[c0:c1] for k, v in res.items()} if res is not None else None
-            out.write_block(a, b, st.time.seconds(np.arange(a, b)), core, clipped[c0:c1])
+                kernels.core_outputs(res["acc"], res["epsilon2"], res["omega2"], res["phi1"], res["revolution"],
+                                     res["omega2_abs_from_aE_n"], res["moving"], clipped, c0, c1, rev_offset,
+                                     t_first, fs, core.floats, core.revolution, core.clipped, core.time,
+                                     st.normal.sums)
+            else:
+                core.unusable(b - a)
+                core.clipped[:b - a] = clipped[c0:c1]
+                core.time[:b - a] = (t_first + np.arange(b - a)) / fs
+            out.write_block(a, b, core.arrays(b - a))
             progress(b - a)
         rev_offset += len(m)
     return st
@@ -249,8 +254,8 @@ def _process_window(phys, clipped, wa, marks, period, chain: Chain, irregular) -
     acc, eps, omega, absn, moving = kernels.follower_chain(
         lp, phi1, rev, irregular.astype(np.bool_), clipped, t.gravity, t.moving, chain.DE, chain.fs,
         chain.dwell.middle_fraction, chain.dwell.min_dwell_samples, chain.omega.dwell_margin_samples)
-    return {"aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega, "omega2_abs_from_aE_n": absn,
-            "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
+    return {"acc": acc, "aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega,
+            "omega2_abs_from_aE_n": absn, "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
 
 
 def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal, hist, out, warn) -> dict:
@@ -312,6 +317,10 @@ class TimeAxis:
             warn(f"{self.unknown} gap/overrun events do not say how many samples were lost; after them the time "
                  "axis runs on the sample clock (the segments still split there)")
 
+    def lost_before(self, row: int) -> int:
+        """Samples lost before ``row`` (at the gaps up to and including it): constant over a segment."""
+        return int(self.cum[np.searchsorted(self.rows, row, side="right")])
+
     def seconds(self, rows) -> np.ndarray:
         rows = np.asarray(rows, dtype=float)
         return (rows + self.cum[np.searchsorted(self.rows, rows, side="right")]) / self.fs
@@ -360,31 +369,19 @@ def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
 
 
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
-    """Resample every complete revolution starting in [a, b) on the phi1 grid, all at once.
+    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.add_cycles).
 
     phi1 is linear in the sample index within a revolution, so linear interpolation in the sample
     index at m_k + (phi/2 pi)(m_{k+1} - m_k) is linear interpolation in phi1.
     """
     k = np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b))
-    m0, m1 = marks[k] - wa, marks[k + 1] - wa
-    inside = (m0 >= 0) & (np.floor(m1) + 1 < n)
-    m0, m1 = m0[inside], m1[inside]
-    if len(m0) == 0:
+    if len(k) == 0:
         return
-    bad = clipped.copy()
-    for name in cyc.names:
-        bad |= ~np.isfinite(res[name])
-    bc = np.concatenate([[0], np.cumsum(bad)])
-    lo, hi = np.floor(m0).astype(np.int64), np.floor(m1).astype(np.int64) + 2
-    good = (bc[hi] - bc[lo]) == 0
-    cyc.rejected += int((~good).sum())
-    m0, m1 = m0[good], m1[good]
-    if len(m0) == 0:
-        return
-    x = m0[:, None] + (cyc.grid / (2.0 * math.pi))[None, :] * (m1 - m0)[:, None]
-    i0 = np.floor(x).astype(np.int64)
-    w = x - i0
-    cyc.add_block({name: res[name][i0] * (1.0 - w) + res[name][i0 + 1] * w for name in cyc.names})
+    used, rejected = kernels.add_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
+                                        clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
+                                        cyc.sums, cyc.sumsqs)
+    cyc.count += used
+    cyc.rejected += rejected
 
 
 class KinematicTables:

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+from processing import kernels
+
 
 def default_nperseg(fs: float, n_samples: int, seconds: float = 4.0) -> int:
     """Power of two nearest ``seconds`` of signal, at most the recording's length, at least 16."""
@@ -65,10 +67,9 @@ class WelchAccumulator:
             if len(starts):
                 segs = np.lib.stride_tricks.sliding_window_view(buf, self.nperseg, axis=1)[:, starts]
                 spec = sfft.rfft(segs * self._w32, axis=-1)
-                spec -= segs.mean(axis=-1)[:, :, None] * self._wfft32
-                mag = np.abs(spec)                               # (nch, nseg, nfreq) float32
-                self.sum_amp += mag.sum(axis=1, dtype=np.float64).T
-                self.sum_pow += np.square(mag).sum(axis=1, dtype=np.float64).T
+                # |X - mean W| and its square summed over the segments (numpy: spec -= mean * W;
+                # mag = abs(spec); sum_amp += mag.sum(axis=1, dtype=float64).T, the same for mag**2)
+                kernels.welch_accumulate(spec, segs.mean(axis=-1), self._wfft32, self.sum_amp, self.sum_pow)
                 self.count += len(starts)
             keep_from = nseg * self.hop
         else:

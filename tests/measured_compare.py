@@ -7,7 +7,8 @@ read with h5py, a variable at a time in slices, so an hour of output is compared
 Equal means: the same variables with the same shapes, integer and text variables identical, NaN at
 the same samples, and every float within ``rtol`` of the variable's largest magnitude (float32
 resolution is 6e-8: reordered float64 arithmetic passes, a changed sample does not); the same
-global attributes (numbers within ``rtol``), the processing history equal but for the source path.
+global attributes (numbers within ``rtol``), the processing history equal but for the source path
+(numbers in it within ``rtol``).
 """
 from __future__ import annotations
 
@@ -36,6 +37,17 @@ def _history(text) -> list:
     for s in steps:
         s.get("parameters", {}).pop("source", None)
     return steps
+
+
+def _same_json(a, b, rtol: float) -> bool:
+    """Equal structures, numbers within rtol (a history records computed values too)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_json(a[k], b[k], rtol) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same_json(x, y, rtol) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, (int, float)) and not isinstance(b, bool):
+        return math.isclose(a, b, rel_tol=rtol) or (math.isnan(a) and math.isnan(b))
+    return a == b
 
 
 def _same_attr(a, b, rtol: float) -> bool:
@@ -100,7 +112,7 @@ def compare_measured(reference, candidate, rtol: float = 1e-6) -> tuple[list[str
             problems.append(f"attribute {k}: only in the {'reference' if k in ar else 'candidate'}")
         for k in sorted(set(ar) & set(ac)):
             if k == "processing_history":
-                if _history(ar[k]) != _history(ac[k]):
+                if not _same_json(_history(ar[k]), _history(ac[k]), rtol):
                     problems.append("processing_history differs (beyond the source path)")
             elif not _same_attr(ar[k], ac[k], rtol):
                 problems.append(f"attribute {k}: {ac[k]!r} != {ar[k]!r}")
