@@ -221,7 +221,8 @@ def _argv(peer, src: Path, out: Path) -> list[str]:
 def _child(peer, src: Path, out: Path, root: Path = ROOT) -> dict:
     """Run one peer in a fresh process: wall time (parent's clock), CPU time (user + system of the child)."""
     before, w0 = os.times(), time.perf_counter()
-    proc = subprocess.run(_argv(peer, src, out), env=_env(root), capture_output=True, text=True)
+    # cwd = the checkout: ``python -m`` puts the working directory first on sys.path
+    proc = subprocess.run(_argv(peer, src, out), env=_env(root), cwd=root, capture_output=True, text=True)
     wall, after = time.perf_counter() - w0, os.times()
     if proc.returncode != 0:
         print(proc.stdout, proc.stderr)
@@ -236,10 +237,20 @@ def _peak_rss_mb(peer, src: Path, out: Path, root: Path = ROOT) -> float:
     code = ("import resource, subprocess, sys\n"
             "r = subprocess.run(sys.argv[1:])\n"
             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")
-    r = subprocess.run([sys.executable, "-c", code, *_argv(peer, src, out)], env=_env(root),
+    r = subprocess.run([sys.executable, "-c", code, *_argv(peer, src, out)], env=_env(root), cwd=root,
                        capture_output=True, text=True)
     out.unlink(missing_ok=True)
     return int(r.stdout.split()[-1]) / 1024.0
+
+
+def _check_checkout(name: str, root: Path) -> None:
+    """The peer imports the code of its own checkout (not an installed or editable copy)."""
+    r = subprocess.run([sys.executable, "-c", "import processing.pipeline as p, labtool; print(p.__file__)"],
+                       env=_env(root), cwd=root, capture_output=True, text=True)
+    path = Path(r.stdout.strip()).resolve()
+    if root.resolve() not in path.parents:
+        raise SystemExit(f"{name}: imports {path}, not the checkout {root}")
+    print(f"  {name}: {path.relative_to(root.resolve().parent)}")
 
 
 def _compare(reference: Path, candidate: Path) -> None:
@@ -279,6 +290,7 @@ def main() -> None:
               f"{src.stat().st_size / 1e6:.0f} MB float32, written in {time.perf_counter() - t0:.1f} s; "
               f"load average {os.getloadavg()[0]:.1f}")
         for name, peer, root in peers:  # warm-up on 1 minute: numba's on-disk cache of each checkout
+            _check_checkout(name, root)
             _child(peer, warm, out, root)
         runs = {name: [] for name, _, _ in peers}
         for k in range(args.repeats):  # interleaved
