@@ -26,14 +26,15 @@ class SpikeCollector:
         self.threshold: list[float] = []
         self.seen = 0
 
-    def feed(self, phys, lowpassed, clipped, wa: int, c0: int, c1: int) -> None:
-        """phys, lowpassed: (n, 2) over the window starting at sample ``wa``; core [c0, c1)."""
-        valid = ~clipped
+    def feed(self, phys, lowpassed, clipped, wa: int, c0: int, c1: int, scratch=None) -> None:
+        """phys, lowpassed: (n, 2) over the window starting at sample ``wa``; core [c0, c1);
+        scratch: a reusable float array of >= n samples."""
+        scratch = np.empty(len(phys)) if scratch is None else scratch
         distance = float(max(1, int(events.DEFAULT_REFRACTORY_S * self.fs)))
         for j, name in enumerate(("aE_t", "aE_n")):
             # events.detect_spikes on the residual, compiled (tests/test_proc_kernels.py)
-            pk, amp, thr = kernels.spikes(phys, lowpassed, valid, j, self.k_sigma, events.DEFAULT_FLOOR_FRACTION,
-                                          distance)
+            pk, amp, thr = kernels.spikes(phys, lowpassed, clipped, j, self.k_sigma, events.DEFAULT_FLOOR_FRACTION,
+                                          distance, scratch)
             if not len(pk):
                 continue
             keep = (pk >= c0) & (pk < c1)
@@ -94,10 +95,11 @@ class ClipCounter:
         self.events = recorder_events
         self.flagged = 0
 
-    def mask(self, block, cols, lo, hi, wa: int, wb: int) -> np.ndarray:
-        """Clip flags of a window's samples [wa, wb): columns ``cols`` of ``block`` (volts, as read),
-        per-channel extremes lo, hi of those columns."""
-        out = kernels.clip_mask(block, cols, lo, hi, self.rail_v or 0.0, self.MIN_RUN)
+    def mask(self, block, cols, lo, hi, wa: int, wb: int, out=None) -> np.ndarray:
+        """Clip flags of a window's samples [wa, wb) (into ``out`` if given): columns ``cols`` of
+        ``block`` (volts, as read), per-channel extremes lo, hi of those columns."""
+        out = np.empty(wb - wa, dtype=np.bool_) if out is None else out
+        kernels.clip_mask(block, cols, lo, hi, self.rail_v or 0.0, self.MIN_RUN, out)
         sel = self.events[(self.events >= wa) & (self.events < wb)]
         out[sel - wa] = True
         return out

@@ -40,6 +40,7 @@ from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
 from processing.readers.base import check_finite
+from processing.workspace import Workspace
 from processing.writer import CoreBlock, MeasuredWriter
 
 CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
@@ -200,8 +201,9 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
                    spikes=SpikeCollector(fs, opts.spike_k_sigma), normal=NormalCheck(),
                    clip=ClipCounter(rail, rec.clip_indices()), time=TimeAxis(rec, warn))
     lo, hi = marks["vmin"][cols], marks["vmax"][cols]
-    # samples checked finite by pass 1 (_scan): read as stored into one reused buffer
-    buf = np.empty((min(opts.chunk_samples + 2 * chain.margin, rec.n_samples), rec.n_channels), dtype=rec.raw_dtype)
+    # samples checked finite by pass 1 (_scan): read as stored into the workspace, reused by every window
+    ws = Workspace(min(opts.chunk_samples + 2 * chain.margin, rec.n_samples), chain.padlen, rec.n_channels,
+                   rec.raw_dtype)
     core = CoreBlock(min(opts.chunk_samples, rec.n_samples))
     rev_offset = 0
     for iseg, ((a_seg, b_seg), m, irregular) in enumerate(zip(segs, marks["by_segment"], cam.irregular_by_segment)):
@@ -212,16 +214,17 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
         for a in range(a_seg, b_seg, opts.chunk_samples):
             b = min(a + opts.chunk_samples, b_seg)
             wa, wb = max(a_seg, a - chain.margin), min(b_seg, b + chain.margin)
-            block = rec.read_unchecked(wa, wb, buf)
+            w = ws.window(wb - wa)
+            block = rec.read_unchecked(wa, wb, ws.block)
             c0, c1 = a - wa, b - wa
-            clipped = st.clip.mask(block, cols, lo, hi, wa, wb)
+            clipped = st.clip.mask(block, cols, lo, hi, wa, wb, w["clipped"])
             st.clip.count(clipped[c0:c1])
-            phys = kernels.scaled_columns(block, cols, chain.ka)
-            st.welch.feed(phys[c0:c1], clipped[c0:c1])
+            kernels.scaled_columns(block, cols, chain.ka, w["phys"])
+            st.welch.feed(w["phys"][c0:c1], clipped[c0:c1])
             t_first = float(a + st.time.lost_before(a))
             if len(m) >= 2:
-                res = _process_window(phys, clipped, wa, m, cam.period_samples, chain, irregular)
-                st.spikes.feed(phys, res["lowpassed"], clipped, wa, c0, c1)
+                res = _process_window(w, ws.ext, wa, m, cam.period_samples, chain, irregular)
+                st.spikes.feed(w["phys"], res["lowpassed"], clipped, wa, c0, c1, w["mag"])
                 _add_cycles(st.cycles, res, clipped, m, a, b, wa, wb - wa)
                 kernels.core_outputs(res["acc"], res["epsilon2"], res["omega2"], res["phi1"], res["revolution"],
                                      res["omega2_abs_from_aE_n"], res["moving"], clipped, c0, c1, rev_offset,
@@ -237,25 +240,30 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
     return st
 
 
-def _process_window(phys, clipped, wa, marks, period, chain: Chain, irregular) -> dict:
-    """The chain on one window of one segment (samples wa.. of the recording), compiled kernels.
+def _process_window(w: dict, ext, wa, marks, period, chain: Chain, irregular) -> dict:
+    """The chain on one window of one segment (samples wa.. of the recording), compiled kernels
+    writing into the workspace's views ``w`` (phys and clipped filled; ext the filter's scratch).
 
     Defined by the pure functions it fuses: filters.zero_phase, cam_angle.phi1_from_marks,
     follower.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
     follower.omega2_from_normal (tests/test_proc_kernels.py checks the equality).
     """
-    lp = kernels.sosfiltfilt(chain.sos, chain.zi, phys, min(chain.padlen, len(phys) - 1))
+    phys, lp, n = w["phys"], w["lp"], len(w["phys"])
+    kernels.sosfiltfilt_into(chain.sos, chain.zi, phys, min(chain.padlen, n - 1), ext, lp)
     if chain.tau:
         # inverse of the first-order high-pass; the integration constant and the ramp an offset
         # makes are constant/linear, and the dwell reference below removes both
-        lp = lp + np.cumsum(lp - lp[0], axis=0) / (chain.fs * chain.tau)
-    phi1, rev = kernels.phi1_from_marks(wa, len(phys), marks, float(period))
+        lp += np.cumsum(lp - lp[0], axis=0) / (chain.fs * chain.tau)
+    kernels.phi1_from_marks_into(wa, n, marks, float(period), w["phi1"], w["rev"])
     t = chain.tables
-    acc, eps, omega, absn, moving = kernels.follower_chain(
-        lp, phi1, rev, irregular.astype(np.bool_), clipped, t.gravity, t.moving, chain.DE, chain.fs,
-        chain.dwell.middle_fraction, chain.dwell.min_dwell_samples, chain.omega.dwell_margin_samples)
-    return {"acc": acc, "aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega,
-            "omega2_abs_from_aE_n": absn, "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
+    kernels.follower_chain_into(
+        lp, w["phi1"], w["rev"], irregular.astype(np.bool_), w["clipped"], t.gravity, t.moving, chain.DE, chain.fs,
+        chain.dwell.middle_fraction, chain.dwell.min_dwell_samples, chain.omega.dwell_margin_samples,
+        w["acc"], w["moving"], w["bad"], w["eps"], w["omega"], w["absn"], w["starts"], w["stops"])
+    acc = w["acc"]
+    return {"acc": acc, "aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": w["eps"], "omega2": w["omega"],
+            "omega2_abs_from_aE_n": w["absn"], "phi1": w["phi1"], "revolution": w["rev"], "moving": w["moving"],
+            "lowpassed": lp}
 
 
 def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal, hist, out, warn) -> dict:

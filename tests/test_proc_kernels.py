@@ -146,7 +146,8 @@ def test_clip_mask_equals_numpy(rail):
             if b - a >= 3:
                 ref[a:b] = True
     block = np.column_stack([np.zeros(len(v)), v[:, 0], np.ones(len(v)), v[:, 1]]).astype(np.float32)
-    got = kernels.clip_mask(block, np.array([1, 3]), lo.astype(np.float32).astype(float), hi.astype(np.float32).astype(float), rail, 3)
+    got = np.ones(len(v), bool)
+    kernels.clip_mask(block, np.array([1, 3]), lo, hi, rail, 3, got)
     assert np.array_equal(got, ref) and got[100:104].all()
     assert rail or not got[2000:2002].any()
 
@@ -188,7 +189,8 @@ def test_spikes_kernel_equals_detect_spikes(n, bursts, seed, n_clip):
     for c in range(2):
         res = np.where(~clipped, phys[:, c] - lp[:, c], 0.0)
         ref = events.detect_spikes(res, lp[:, c], 10000.0)
-        got = kernels.spikes(phys, lp, ~clipped, c, events.DEFAULT_K_SIGMA, events.DEFAULT_FLOOR_FRACTION, 20.0)
+        got = kernels.spikes(phys, lp, clipped, c, events.DEFAULT_K_SIGMA, events.DEFAULT_FLOOR_FRACTION, 20.0,
+                             np.empty(n + 5))
         assert got[0].tolist() == ref[0].tolist()
         np.testing.assert_array_equal(got[1], ref[1])
         assert got[2] == pytest.approx(ref[2], rel=1e-12)
