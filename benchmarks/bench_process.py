@@ -5,7 +5,7 @@ simulated stand, acquisition/sim_stand.py, 30 cam revolutions at 180 rpm, tiled:
 continuous). Then, interleaved ``--repeats`` times, each in a fresh single-threaded child process
 (OMP/MKL/OpenBLAS/numba threads = 1):
 
-- **labtool**: ``labtool process`` as the CLI runs it (processing.pipeline.process_recording);
+- **labtool**: ``python -m labtool process rec.h5 -o out.nc`` (the CLI: start-up and imports included);
 - **plain**: the chain a skilled user writes with numpy/scipy (``plain_chain`` below), at its best
   chunk size (2^19 samples: 2^17 costs it 1.5x, 2^18 1.3x, 2^20 1.3x on this machine): the same two
   passes and chunk overlap, Ka, scipy.signal.sosfiltfilt, cam angle from the tacho, gravity and
@@ -13,10 +13,18 @@ continuous). Then, interleaved ``--repeats`` times, each in a fresh single-threa
   check, spikes (median/MAD + find_peaks), clipping runs, Welch spectra, cycle averages, and the
   same seven per-sample outputs plus time written with h5py in the same HDF5 layout (2^17-sample chunks).
 
-Prints wall and CPU time per run, the medians, the ratio labtool / plain (throughput), and each
-child's peak resident memory (ru_maxrss). No asserts: a benchmark reports.
+- **main** (with ``--main <checkout>``): main's ``labtool process`` from that checkout, and its
+  output is compared with labtool's (tests/measured_compare.py: every variable within 1e-6 of its
+  peak, NaN and integers identical, the same attributes and history).
 
-    .venv/bin/python benchmarks/bench_process.py [--minutes 60] [--repeats 2] [--keep]
+Each peer first runs once on a 1-minute file (numba's on-disk cache of each checkout). Prints wall
+(the parent's clock) and CPU time (user + system of the child) per run, the medians, the
+throughput ratios labtool / plain and labtool / main in CPU and wall time, and each peer's peak
+resident memory (ru_maxrss). No asserts: a benchmark reports. Under load (``uptime``), wall times
+mostly measure the scheduler; CPU times are the comparable figure then.
+
+    git archive main | tar -x -C /tmp/main-check       # main before the change, to compare with
+    .venv/bin/python benchmarks/bench_process.py [--minutes 60] [--repeats 2] [--main /tmp/main-check]
 """
 from __future__ import annotations
 
@@ -57,24 +65,14 @@ def make_file(path: Path, minutes: float) -> int:
     return n
 
 
-LABTOOL = r"""
-import sys, time
-t0 = time.perf_counter()
-from processing.readers import open_recording
-from processing.pipeline import process_recording
-with open_recording(sys.argv[1]) as rec:
-    s = process_recording(rec, sys.argv[2], warn=lambda m: None)
-print("WALL", time.perf_counter() - t0)
-print("INFO", s["cam_speed_rpm"], s["revolutions_averaged"], s["normal_check_rel_rms"])
-"""
+# labtool as a user runs it: the CLI in a fresh interpreter (start-up and imports included)
+LABTOOL = ["-m", "labtool", "process", "{src}", "-o", "{out}", "--force"]
 
 PLAIN = r"""
-import sys, time
-t0 = time.perf_counter()
+import sys
 sys.path.insert(0, {bench!r})
 from bench_process import plain_chain
 s = plain_chain(sys.argv[1], sys.argv[2])
-print("WALL", time.perf_counter() - t0)
 print("INFO", s["cam_speed_rpm"], s["revolutions_averaged"], s["normal_check_rel_rms"])
 """
 
@@ -209,33 +207,63 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
             "normal_check_rel_rms": math.sqrt(chk_sq / chk_n) / chk_pk, "spikes": n_spikes}
 
 
-def _child(code: str, src: Path, out: Path, root: Path = ROOT) -> dict:
-    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-               NUMBA_NUM_THREADS="1", MPLBACKEND="Agg", PYTHONPATH=str(root))
-    before = os.times()
-    proc = subprocess.run([sys.executable, "-c", code, str(src), str(out)], env=env, capture_output=True, text=True)
-    after = os.times()
+def _env(root: Path) -> dict:
+    return dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
+                NUMBA_NUM_THREADS="1", MPLBACKEND="Agg", PYTHONPATH=str(root))
+
+
+def _argv(peer, src: Path, out: Path) -> list[str]:
+    if isinstance(peer, list):
+        return [sys.executable, *(a.format(src=src, out=out) for a in peer)]
+    return [sys.executable, "-c", peer, str(src), str(out)]
+
+
+def _child(peer, src: Path, out: Path, root: Path = ROOT) -> dict:
+    """Run one peer in a fresh process: wall time (parent's clock), CPU time (user + system of the child)."""
+    before, w0 = os.times(), time.perf_counter()
+    # cwd = the checkout: ``python -m`` puts the working directory first on sys.path
+    proc = subprocess.run(_argv(peer, src, out), env=_env(root), cwd=root, capture_output=True, text=True)
+    wall, after = time.perf_counter() - w0, os.times()
     if proc.returncode != 0:
-        print(proc.stderr)
+        print(proc.stdout, proc.stderr)
         raise SystemExit(1)
-    lines = proc.stdout.splitlines()
-    wall = float(next(x.split()[1] for x in lines if x.startswith("WALL")))
-    info = next(x for x in lines if x.startswith("INFO")).split()[1:]
-    out.unlink(missing_ok=True)
-    return {"wall": wall, "cpu": (after.children_user - before.children_user) + (after.children_system - before.children_system),
-            "info": info}
+    cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
+    return {"wall": wall, "cpu": cpu}
 
 
-def _peak_rss_mb(code: str, src: Path, out: Path) -> float:
-    """Peak RSS of one more child, by GNU time's maximum resident set size if present, else ru_maxrss."""
-    import resource
-    env = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1", PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, "-c", "import resource, runpy, sys\n" + code +
-                        "\nprint('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)", str(src), str(out)],
-                       env=env, capture_output=True, text=True)
+def _peak_rss_mb(peer, src: Path, out: Path, root: Path = ROOT) -> float:
+    """Peak resident memory (MB) of one more run of the peer: the ru_maxrss of that process, read by
+    a small parent that waits for it (RUSAGE_CHILDREN holds the largest child's)."""
+    code = ("import resource, subprocess, sys\n"
+            "r = subprocess.run(sys.argv[1:])\n"
+            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")
+    r = subprocess.run([sys.executable, "-c", code, *_argv(peer, src, out)], env=_env(root), cwd=root,
+                       capture_output=True, text=True)
     out.unlink(missing_ok=True)
-    line = next((x for x in r.stdout.splitlines() if x.startswith("RSS")), None)
-    return int(line.split()[1]) / 1024.0 if line else resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    return int(r.stdout.split()[-1]) / 1024.0
+
+
+def _check_checkout(name: str, root: Path) -> None:
+    """The peer imports the code of its own checkout (not an installed or editable copy)."""
+    r = subprocess.run([sys.executable, "-c", "import processing.pipeline as p, labtool; print(p.__file__)"],
+                       env=_env(root), cwd=root, capture_output=True, text=True)
+    path = Path(r.stdout.strip()).resolve()
+    if root.resolve() not in path.parents:
+        raise SystemExit(f"{name}: imports {path}, not the checkout {root}")
+    print(f"  {name}: {path.relative_to(root.resolve().parent)}")
+
+
+def _compare(reference: Path, candidate: Path) -> None:
+    sys.path.insert(0, str(ROOT / "tests"))
+    from measured_compare import compare_measured
+
+    problems, rel = compare_measured(reference, candidate)
+    worst = max(rel, key=rel.get)
+    print(f"output vs main's on this recording: {'EQUAL' if not problems else 'DIFFERENT'} "
+          f"(tests/measured_compare.py: within 1e-6 of each variable's peak, NaN and integers identical); "
+          f"{len(rel)} float variables, largest relative difference {rel[worst]:.2g} ({worst})")
+    for p in problems[:20]:
+        print("   ", p)
 
 
 def main() -> None:
@@ -244,42 +272,53 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--keep", action="store_true")
     ap.add_argument("--main", type=Path, default=None,
-                    help="a checkout of main (git worktree add /tmp/main-check main): its labtool runs too")
+                    help="a checkout of main (git archive main | tar -x -C /tmp/main-check): its labtool runs "
+                         "too, and labtool's output is compared with its output")
     args = ap.parse_args()
     tmpdir = Path(tempfile.mkdtemp(prefix="bench_process_", dir="/tmp"))
-    src, out = tmpdir / "rec.h5", tmpdir / "out.nc"
+    src, out, warm = tmpdir / "rec.h5", tmpdir / "out.nc", tmpdir / "warm.h5"
     plain = PLAIN.format(bench=str(ROOT / "benchmarks"))
+    peers = [("labtool", LABTOOL, ROOT), ("plain", plain, ROOT)]
+    if args.main is not None:
+        peers.append(("main", LABTOOL, args.main.resolve()))
+    kept = {name: tmpdir / f"out_{name}.nc" for name in ("labtool", "main")}
     try:
         t0 = time.perf_counter()
         n = make_file(src, args.minutes)
+        make_file(warm, 1.0)
         print(f"recording: {n} samples x 3 channels ({args.minutes:g} min at 10 kHz), "
-              f"{src.stat().st_size / 1e6:.0f} MB float32, written in {time.perf_counter() - t0:.1f} s")
-        _child(LABTOOL, src, out)  # warm-up: numba's cache, the page cache
-        peers = [("labtool", LABTOOL, ROOT), ("plain", plain, ROOT)]
-        if args.main is not None:
-            peers.append(("main", LABTOOL, args.main.resolve()))
+              f"{src.stat().st_size / 1e6:.0f} MB float32, written in {time.perf_counter() - t0:.1f} s; "
+              f"load average {os.getloadavg()[0]:.1f}")
+        for name, peer, root in peers:  # warm-up on 1 minute: numba's on-disk cache of each checkout
+            _check_checkout(name, root)
+            _child(peer, warm, out, root)
         runs = {name: [] for name, _, _ in peers}
-        for k in range(args.repeats):
-            for name, code, root in peers:
-                r = _child(code, src, out, root)
+        for k in range(args.repeats):  # interleaved
+            for name, peer, root in peers:
+                target = kept[name] if k == 0 and name in kept and args.main is not None else out
+                r = _child(peer, src, target, root)
                 runs[name].append(r)
+                out.unlink(missing_ok=True)
                 print(f"  run {k + 1} {name:8s} wall {r['wall']:6.1f} s  cpu {r['cpu']:6.1f} s  "
-                      f"({3 * n / r['wall'] / 1e6:.1f} M samples/s)  rpm {float(r['info'][0]):.2f}")
-        med = {name: statistics.median(r["wall"] for r in rs) for name, rs in runs.items()}
+                      f"({3 * n / r['wall'] / 1e6:5.1f} M samples/s wall, {3 * n / r['cpu'] / 1e6:5.1f} per CPU s)")
+        wall = {name: statistics.median(r["wall"] for r in rs) for name, rs in runs.items()}
         cpu = {name: statistics.median(r["cpu"] for r in rs) for name, rs in runs.items()}
-        print(f"median wall: labtool {med['labtool']:.1f} s, plain {med['plain']:.1f} s -> "
-              f"labtool is {med['plain'] / med['labtool']:.2f}x the plain chain's throughput "
-              f"(CPU time: {cpu['plain'] / cpu['labtool']:.2f}x)")
-        if "main" in med:
-            print(f"main's labtool: {med['main']:.1f} s wall -> labtool is {med['main'] / med['labtool']:.2f}x main "
-                  f"(CPU {cpu['main'] / cpu['labtool']:.2f}x); plain is {med['main'] / med['plain']:.2f}x main")
-        print(f"labtool: {3 * n / med['labtool'] / 1e6:.1f} M samples/s (samples x channels, incl. start-up)")
-        for name, code in (("labtool", LABTOOL), ("plain", plain)):
-            print(f"peak RSS {name}: {_peak_rss_mb(code, src, out):.0f} MB")
-        print("goal (issue 17): >= 2x the plain chain, peak RSS <= 300 MB")
+        print(f"median: labtool wall {wall['labtool']:.1f} s cpu {cpu['labtool']:.1f} s; plain wall "
+              f"{wall['plain']:.1f} s cpu {cpu['plain']:.1f} s")
+        print(f"labtool / plain throughput: CPU {cpu['plain'] / cpu['labtool']:.2f}x, "
+              f"wall {wall['plain'] / wall['labtool']:.2f}x   (goal >= 2x)")
+        if "main" in wall:
+            print(f"labtool / main (before) throughput: CPU {cpu['main'] / cpu['labtool']:.2f}x, "
+                  f"wall {wall['main'] / wall['labtool']:.2f}x; main / plain CPU {cpu['plain'] / cpu['main']:.2f}x")
+        for name, peer, root in peers:
+            print(f"peak RSS {name}: {_peak_rss_mb(peer, src, out, root):.0f} MB")
+        print("goal (issue 17): >= 2x the plain chain, peak RSS <= 300 MB; "
+              f"load average now {os.getloadavg()[0]:.1f}")
+        if args.main is not None:
+            _compare(kept["main"], kept["labtool"])
     finally:
         if not args.keep:
-            for p in (src, out):
+            for p in (src, out, warm, *kept.values()):
                 p.unlink(missing_ok=True)
             tmpdir.rmdir() if not any(tmpdir.iterdir()) else None
 

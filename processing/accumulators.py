@@ -26,11 +26,17 @@ class SpikeCollector:
         self.threshold: list[float] = []
         self.seen = 0
 
-    def feed(self, phys, lowpassed, clipped, wa: int, c0: int, c1: int) -> None:
-        """phys, lowpassed: (n, 2) over the window starting at sample ``wa``; core [c0, c1)."""
-        res = kernels.residual(phys, lowpassed, ~clipped)
+    def feed(self, phys, lowpassed, clipped, wa: int, c0: int, c1: int, scratch=None) -> None:
+        """phys, lowpassed: (n, 2) over the window starting at sample ``wa``; core [c0, c1);
+        scratch: a reusable float array of >= n samples."""
+        scratch = np.empty(len(phys)) if scratch is None else scratch
+        distance = float(max(1, int(events.DEFAULT_REFRACTORY_S * self.fs)))
         for j, name in enumerate(("aE_t", "aE_n")):
-            pk, amp, thr = events.detect_spikes(res[:, j], lowpassed[:, j], self.fs, self.k_sigma)
+            # events.detect_spikes on the residual, compiled (tests/test_proc_kernels.py)
+            pk, amp, thr = kernels.spikes(phys, lowpassed, clipped, j, self.k_sigma, events.DEFAULT_FLOOR_FRACTION,
+                                          distance, scratch)
+            if not len(pk):
+                continue
             keep = (pk >= c0) & (pk < c1)
             self.seen += int(keep.sum())
             room = self.max_stored - len(self.index)
@@ -56,22 +62,27 @@ class SpikeCollector:
 
 
 class NormalCheck:
-    """rms(|omega2| - sqrt(aE_n/DE)) / max|omega2| over the motion samples: two independent axes."""
+    """rms(|omega2| - sqrt(aE_n/DE)) / max|omega2| over the motion samples: two independent axes.
+
+    ``sums`` (sum of squares, count, peak) is what kernels.core_outputs adds to in the pipeline;
+    ``feed`` is the same in numpy.
+    """
 
     def __init__(self):
-        self.sq, self.n, self.peak = 0.0, 0, 0.0
+        self.sums = np.zeros(3)
 
     def feed(self, omega2, absn, moving) -> None:
         mv = moving & np.isfinite(omega2)
         if mv.any():
             d = np.abs(omega2[mv]) - absn[mv]
-            self.sq += float(np.sum(d * d))
-            self.n += int(mv.sum())
-            self.peak = max(self.peak, float(np.max(np.abs(omega2[mv]))))
+            self.sums[0] += float(np.sum(d * d))
+            self.sums[1] += int(mv.sum())
+            self.sums[2] = max(self.sums[2], float(np.max(np.abs(omega2[mv]))))
 
     @property
     def value(self) -> float:
-        return math.sqrt(self.sq / self.n) / self.peak if self.n and self.peak > 0 else math.nan
+        sq, n, peak = self.sums
+        return math.sqrt(sq / n) / peak if n and peak > 0 else math.nan
 
 
 class ClipCounter:
@@ -86,10 +97,11 @@ class ClipCounter:
         self.events = recorder_events
         self.flagged = 0
 
-    def mask(self, volts, lo, hi, wa: int, wb: int) -> np.ndarray:
-        """Clip flags of a window's samples [wa, wb) (volts (n, nch), per-channel extremes lo, hi)."""
-        out = kernels.clip_mask(np.ascontiguousarray(volts), lo, hi, self.rail_v or 0.0, self.MIN_RUN,
-                                 self.min_drop_v)
+    def mask(self, block, cols, lo, hi, wa: int, wb: int, out=None) -> np.ndarray:
+        """Clip flags of a window's samples [wa, wb) (into ``out`` if given): columns ``cols`` of
+        ``block`` (volts, as read), per-channel extremes lo, hi of those columns."""
+        out = np.empty(wb - wa, dtype=np.bool_) if out is None else out
+        kernels.clip_mask(block, cols, lo, hi, self.rail_v or 0.0, self.MIN_RUN, self.min_drop_v, out)
         sel = self.events[(self.events >= wa) & (self.events < wb)]
         out[sel - wa] = True
         return out

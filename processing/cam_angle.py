@@ -11,9 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
+import scipy.fft as sfft
 
 from common.errors import InputError
+from processing import kernels
 
 TWO_PI = 2.0 * math.pi
 
@@ -78,6 +79,18 @@ class TachoEdges:
         return np.asarray(edges, dtype=float)
 
 
+class CompiledTachoEdges(TachoEdges):
+    """TachoEdges with ``feed`` compiled (kernels.tacho_edges; tests/test_proc_kernels.py checks
+    that both find the same edges over any split into blocks)."""
+
+    def __init__(self, min_range: float = 0.1):
+        super().__init__(min_range)
+        self._state = np.array([math.inf, -math.inf, 0.0, 0.0, 0.0])
+
+    def feed(self, start: int, x: np.ndarray) -> np.ndarray:
+        return kernels.tacho_edges(x, start, self._state, self.min_range)
+
+
 def template_aE_t(mech, program, n_per_rev: int) -> np.ndarray:
     """Ideal aE_t (m/s^2 at 1 rad/s cam speed, i.e. d2psi/dphi1^2 * DE) over one revolution, phi1 = 2 pi k / n."""
     phi1 = TWO_PI * np.arange(n_per_rev) / n_per_rev
@@ -109,7 +122,7 @@ def estimate_period(x: np.ndarray, fs: float, rpm_range=(20.0, 1500.0)) -> float
     best = float(seg.max())
     if best < 0.3:
         raise InputError("aE_t shows no periodic cam motion; cannot find the cam angle without a tacho")
-    peaks, _ = signal.find_peaks(seg, height=0.8 * best)
+    peaks = kernels.find_peaks(np.ascontiguousarray(seg), 0.8 * best, 1.0)
     k = int(peaks[0]) + lo if len(peaks) else int(np.argmax(seg)) + lo
     # parabolic refinement
     if 1 <= k < len(ac) - 1:
@@ -118,6 +131,16 @@ def estimate_period(x: np.ndarray, fs: float, rpm_range=(20.0, 1500.0)) -> float
         if den < 0:
             return k + 0.5 * (y0 - y2) / den
     return float(k)
+
+
+def correlate_valid(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """c[k] = sum_j x[k + j] t[j] for k = 0 .. len(x) - len(t): scipy.signal.correlate(x, t,
+    mode="valid", method="fft"), by one real FFT of a length >= len(x) (no circular wrap-around)."""
+    m = len(x) - len(t) + 1
+    if m <= 0:
+        return np.empty(0)
+    L = sfft.next_fast_len(len(x), real=True)
+    return sfft.irfft(sfft.rfft(x, L) * np.conj(sfft.rfft(t, L)), L)[:m]
 
 
 class CorrelationEdges:
@@ -138,13 +161,13 @@ class CorrelationEdges:
         if len(x) < self.n + 2:
             return np.empty(0)
         x = x - x.mean()
-        c = signal.correlate(x, self.template, mode="valid", method="fft")
+        c = correlate_valid(x, self.template)
         norm = float(np.sqrt(np.sum(self.template**2)))
         # energy of x over each template-long window, for a normalised correlation coefficient
         cs = np.concatenate([[0.0], np.cumsum(x**2)])
         energy = np.sqrt(np.maximum(cs[self.n:] - cs[:-self.n], 1e-300))[:len(c)]
         rho = c / (energy * norm)
-        peaks, _ = signal.find_peaks(rho, height=0.5, distance=max(1, int(0.7 * self.period)))
+        peaks = kernels.find_peaks(rho, 0.5, float(max(1, int(0.7 * self.period))))
         out = []
         for k in peaks:
             pos = float(k)

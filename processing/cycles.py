@@ -20,8 +20,11 @@ class CycleAccumulator:
     def __init__(self, names: list[str], n_grid: int = 720):
         self.grid = phi1_grid(n_grid)
         self.names = list(names)
-        self.sum = {k: np.zeros(n_grid) for k in names}
-        self.sumsq = {k: np.zeros(n_grid) for k in names}
+        # (n_names, n_grid) arrays (kernels.add_cycles adds to them), seen per name as views
+        self.sums = np.zeros((len(self.names), n_grid))
+        self.sumsqs = np.zeros((len(self.names), n_grid))
+        self.sum = {k: self.sums[i] for i, k in enumerate(self.names)}
+        self.sumsq = {k: self.sumsqs[i] for i, k in enumerate(self.names)}
         self.count = 0
         self.rejected = 0
 

@@ -12,7 +12,8 @@ reaction changes sign.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
+
+from processing import kernels
 
 DEFAULT_K_SIGMA = 8.0
 DEFAULT_FLOOR_FRACTION = 0.05
@@ -35,5 +36,5 @@ def detect_spikes(residual: np.ndarray, lowpassed: np.ndarray, fs: float, k_sigm
     mag = np.abs(r - med)
     if not (mag > thr).any():  # the usual case: nothing to look for
         return np.empty(0, dtype=np.int64), np.empty(0), float(thr)
-    peaks, _ = signal.find_peaks(mag, height=thr, distance=max(1, int(refractory_s * fs)))
-    return peaks.astype(np.int64), r[peaks], float(thr)
+    peaks = kernels.find_peaks(mag, float(thr), float(max(1, int(refractory_s * fs))))
+    return peaks, r[peaks], float(thr)

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-from scipy import signal
 
 from common import cf
 from common import history as H
@@ -42,9 +41,11 @@ from processing import cam_angle, cycles, events, filters, follower, kernels, sp
 from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
-from processing.writer import MeasuredWriter
+from processing.readers.base import check_finite
+from processing.workspace import Workspace
+from processing.writer import CoreBlock, MeasuredWriter
 
-CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]
+CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
 
 
 class ProcessingWarning(UserWarning):
@@ -174,7 +175,7 @@ def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
     hist.add(H.Epsilon2(DE_m=mech.DE))
     omega = hist.add(H.Omega2(dwell_margin_deg=opts.dwell_margin_deg,
                               dwell_margin_samples=max(1, int(round(opts.dwell_margin_deg / 360.0 * cam.period_samples)))))
-    return Chain(fs=fs, ka=ka, sos=sos, zi=signal.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
+    return Chain(fs=fs, ka=ka, sos=sos, zi=filters.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
                  tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau)
 
 
@@ -192,7 +193,7 @@ class PassState:
 def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState:
     """Every chunk of every segment through the chain; outputs written, accumulators fed."""
     fs = chain.fs
-    it, inn = rec.channel_index("aE_t"), rec.channel_index("aE_n")
+    cols = np.array([rec.channel_index("aE_t"), rec.channel_index("aE_n")], dtype=np.int64)
     adc = _float_attr(rec.attrs.get("adc_range_v"))
     bits = _float_attr(rec.attrs.get("adc_bits")) or 16
     # the ADC's rails, when the recording states its range (the simulated stand and the recorder do)
@@ -202,7 +203,11 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
                    cycles=cycles.CycleAccumulator(CYCLE_NAMES, opts.grid_points),
                    spikes=SpikeCollector(fs, opts.spike_k_sigma), normal=NormalCheck(),
                    clip=ClipCounter(rail, rec.clip_indices(), lsb), time=TimeAxis(rec, warn))
-    lo, hi = marks["vmin"][[it, inn]], marks["vmax"][[it, inn]]
+    lo, hi = marks["vmin"][cols], marks["vmax"][cols]
+    # samples checked finite by pass 1 (_scan): read as stored into the workspace, reused by every window
+    ws = Workspace(min(opts.chunk_samples + 2 * chain.margin, rec.n_samples), chain.padlen, rec.n_channels,
+                   rec.raw_dtype)
+    core = CoreBlock(min(opts.chunk_samples, rec.n_samples))
     rev_offset = 0
     for iseg, ((a_seg, b_seg), m, irregular) in enumerate(zip(segs, marks["by_segment"], cam.irregular_by_segment)):
         st.welch.reset_continuity()
@@ -212,46 +217,56 @@ def _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress) -> PassState
         for a in range(a_seg, b_seg, opts.chunk_samples):
             b = min(a + opts.chunk_samples, b_seg)
             wa, wb = max(a_seg, a - chain.margin), min(b_seg, b + chain.margin)
-            block = rec.read(wa, wb)
-            volts = np.ascontiguousarray(block[:, [it, inn]])
+            w = ws.window(wb - wa)
+            block = rec.read_unchecked(wa, wb, ws.block)
             c0, c1 = a - wa, b - wa
-            clipped = st.clip.mask(volts, lo, hi, wa, wb)
+            clipped = st.clip.mask(block, cols, lo, hi, wa, wb, w["clipped"])
             st.clip.count(clipped[c0:c1])
-            phys = volts * chain.ka[None, :]
-            st.welch.feed(phys[c0:c1], clipped[c0:c1])
-            res = None
+            kernels.scaled_columns(block, cols, chain.ka, w["phys"])
+            st.welch.feed(w["phys"][c0:c1], clipped[c0:c1])
+            t_first = float(a + st.time.lost_before(a))
             if len(m) >= 2:
-                res = _process_window(phys, clipped, wa, m, cam.period_samples, chain, irregular)
-                res["revolution"] = np.where(res["revolution"] >= 0, res["revolution"] + rev_offset, -1)
-                st.normal.feed(res["omega2"][c0:c1], res["omega2_abs_from_aE_n"][c0:c1], res["moving"][c0:c1])
-                st.spikes.feed(phys, res["lowpassed"], clipped, wa, c0, c1)
+                res = _process_window(w, ws.ext, wa, m, cam.period_samples, chain, irregular)
+                st.spikes.feed(w["phys"], res["lowpassed"], clipped, wa, c0, c1, w["mag"])
                 _add_cycles(st.cycles, res, clipped, m, a, b, wa, wb - wa)
-            core = {k: v[c0:c1] for k, v in res.items()} if res is not None else None
-            out.write_block(a, b, st.time.seconds(np.arange(a, b)), core, clipped[c0:c1])
+                kernels.core_outputs(res["acc"], res["epsilon2"], res["omega2"], res["phi1"], res["revolution"],
+                                     res["omega2_abs_from_aE_n"], res["moving"], clipped, c0, c1, rev_offset,
+                                     t_first, fs, core.floats, core.revolution, core.clipped, core.time,
+                                     st.normal.sums)
+            else:
+                core.unusable(b - a)
+                core.clipped[:b - a] = clipped[c0:c1]
+                core.time[:b - a] = (t_first + np.arange(b - a)) / fs
+            out.write_block(a, b, core.arrays(b - a))
             progress(b - a)
         rev_offset += len(m)
     return st
 
 
-def _process_window(phys, clipped, wa, marks, period, chain: Chain, irregular) -> dict:
-    """The chain on one window of one segment (samples wa.. of the recording), compiled kernels.
+def _process_window(w: dict, ext, wa, marks, period, chain: Chain, irregular) -> dict:
+    """The chain on one window of one segment (samples wa.. of the recording), compiled kernels
+    writing into the workspace's views ``w`` (phys and clipped filled; ext the filter's scratch).
 
     Defined by the pure functions it fuses: filters.zero_phase, cam_angle.phi1_from_marks,
     follower.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
     follower.omega2_from_normal (tests/test_proc_kernels.py checks the equality).
     """
-    lp = kernels.sosfiltfilt(chain.sos, chain.zi, phys, min(chain.padlen, len(phys) - 1))
+    phys, lp, n = w["phys"], w["lp"], len(w["phys"])
+    kernels.sosfiltfilt_into(chain.sos, chain.zi, phys, min(chain.padlen, n - 1), ext, lp)
     if chain.tau:
         # inverse of the first-order high-pass; the integration constant and the ramp an offset
         # makes are constant/linear, and the dwell reference below removes both
-        lp = lp + np.cumsum(lp - lp[0], axis=0) / (chain.fs * chain.tau)
-    phi1, rev = kernels.phi1_from_marks(wa, len(phys), marks, float(period))
+        lp += np.cumsum(lp - lp[0], axis=0) / (chain.fs * chain.tau)
+    kernels.phi1_from_marks_into(wa, n, marks, float(period), w["phi1"], w["rev"])
     t = chain.tables
-    acc, eps, omega, absn, moving = kernels.follower_chain(
-        lp, phi1, rev, irregular.astype(np.bool_), clipped, t.gravity, t.moving, chain.DE, chain.fs,
-        chain.dwell.middle_fraction, chain.dwell.min_dwell_samples, chain.omega.dwell_margin_samples)
-    return {"aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": eps, "omega2": omega, "omega2_abs_from_aE_n": absn,
-            "phi1": phi1, "revolution": rev, "moving": moving, "lowpassed": lp}
+    kernels.follower_chain_into(
+        lp, w["phi1"], w["rev"], irregular.astype(np.bool_), w["clipped"], t.gravity, t.moving, chain.DE, chain.fs,
+        chain.dwell.middle_fraction, chain.dwell.min_dwell_samples, chain.omega.dwell_margin_samples,
+        w["acc"], w["moving"], w["bad"], w["eps"], w["omega"], w["absn"], w["starts"], w["stops"])
+    acc = w["acc"]
+    return {"acc": acc, "aE_t": acc[:, 0], "aE_n": acc[:, 1], "epsilon2": w["eps"], "omega2": w["omega"],
+            "omega2_abs_from_aE_n": w["absn"], "phi1": w["phi1"], "revolution": w["rev"], "moving": w["moving"],
+            "lowpassed": lp}
 
 
 def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal, hist, out, warn) -> dict:
@@ -315,6 +330,10 @@ class TimeAxis:
             warn(f"{self.unknown} gap/overrun events do not say how many samples were lost; after them the time "
                  "axis runs on the sample clock (the segments still split there)")
 
+    def lost_before(self, row: int) -> int:
+        """Samples lost before ``row`` (at the gaps up to and including it): constant over a segment."""
+        return int(self.cum[np.searchsorted(self.rows, row, side="right")])
+
     def seconds(self, rows) -> np.ndarray:
         rows = np.asarray(rows, dtype=float)
         return (rows + self.cum[np.searchsorted(self.rows, rows, side="right")]) / self.fs
@@ -334,12 +353,14 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
             warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
                  f"{rpm_hint:g} rpm by more than 20 %; using the data")
     marks_by_seg = []
+    buf = np.empty((min(chunk, rec.n_samples), rec.n_channels), dtype=rec.raw_dtype)
     for a_seg, b_seg in segs:
         marks = []
         if method == "tacho":
-            det = cam_angle.TachoEdges()
-            for a, block in rec.chunks(chunk, a_seg, b_seg):
-                kernels.extremes(np.ascontiguousarray(block), vmin, vmax)
+            det = cam_angle.CompiledTachoEdges()
+            for a in range(a_seg, b_seg, chunk):
+                block = rec.read_unchecked(a, min(a + chunk, b_seg), buf)
+                _scan(rec, block, a, vmin, vmax)
                 marks.extend(det.feed(a, block[:, itacho]))
                 progress(len(block))
         else:
@@ -347,39 +368,33 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
             for a in range(a_seg, b_seg, chunk):
                 b = min(a + chunk, b_seg)
                 block = rec.read(a, min(b + corr.n + 2, b_seg))
-                kernels.extremes(np.ascontiguousarray(block[: b - a]), vmin, vmax)
+                _scan(rec, block[: b - a], a, vmin, vmax)
                 marks.extend(corr.feed(a, block[:, it] * ka_t, a, b))
                 progress(b - a)
         marks_by_seg.append(np.asarray(marks, dtype=float))
     return marks_by_seg, vmin, vmax, period_est
 
 
+def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
+    """Extremes of every channel; every sample checked finite (pass 2 reads unchecked after this)."""
+    if kernels.scan_block(block, vmin, vmax) >= 0:
+        check_finite(np.asarray(block, dtype=float), first, rec.channel_names, rec.source)
+
+
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
-    """Resample every complete revolution starting in [a, b) on the phi1 grid, all at once.
+    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.add_cycles).
 
     phi1 is linear in the sample index within a revolution, so linear interpolation in the sample
     index at m_k + (phi/2 pi)(m_{k+1} - m_k) is linear interpolation in phi1.
     """
     k = np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b))
-    m0, m1 = marks[k] - wa, marks[k + 1] - wa
-    inside = (m0 >= 0) & (np.floor(m1) + 1 < n)
-    m0, m1 = m0[inside], m1[inside]
-    if len(m0) == 0:
+    if len(k) == 0:
         return
-    bad = clipped.copy()
-    for name in cyc.names:
-        bad |= ~np.isfinite(res[name])
-    bc = np.concatenate([[0], np.cumsum(bad)])
-    lo, hi = np.floor(m0).astype(np.int64), np.floor(m1).astype(np.int64) + 2
-    good = (bc[hi] - bc[lo]) == 0
-    cyc.rejected += int((~good).sum())
-    m0, m1 = m0[good], m1[good]
-    if len(m0) == 0:
-        return
-    x = m0[:, None] + (cyc.grid / (2.0 * math.pi))[None, :] * (m1 - m0)[:, None]
-    i0 = np.floor(x).astype(np.int64)
-    w = x - i0
-    cyc.add_block({name: res[name][i0] * (1.0 - w) + res[name][i0 + 1] * w for name in cyc.names})
+    used, rejected = kernels.add_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
+                                        clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
+                                        cyc.sums, cyc.sumsqs)
+    cyc.count += used
+    cyc.rejected += rejected
 
 
 class KinematicTables:

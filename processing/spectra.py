@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+from processing import kernels
+
 
 def default_nperseg(fs: float, n_samples: int, seconds: float = 4.0) -> int:
     """Power of two nearest ``seconds`` of signal, at most the recording's length, at least 16."""
@@ -37,44 +39,64 @@ class WelchAccumulator:
         self.count = 0
         self.skipped = 0
         self._wfft32 = self._wfft.astype(np.complex64)
-        self._buf = np.empty((n_channels, 0), dtype=np.float32)
-        self._bad = np.empty(0, dtype=bool)
+        # the samples not yet in a full segment and the next block, channel-major float32 (the form
+        # the transforms use), and the windowed segments: reused from block to block (no allocation
+        # per block but the transform's output; see workspace.py for why that matters)
+        self._ring = np.empty((n_channels, 0), dtype=np.float32)
+        self._ring_bad = np.empty(0, dtype=bool)
+        self._nbuf = 0
+        self._win = np.empty((n_channels, 0, self.nperseg), dtype=np.float32)
 
     def reset_continuity(self) -> None:
         """Drop the carried-over samples (a gap: segments must not straddle it)."""
-        self._buf = np.empty((self.nch, 0), dtype=np.float32)
-        self._bad = np.empty(0, dtype=bool)
+        self._nbuf = 0
+
+    def _append(self, x: np.ndarray, bad: np.ndarray) -> int:
+        n = self._nbuf + len(x)
+        if self._ring.shape[1] < n:
+            ring = np.empty((self.nch, n), dtype=np.float32)
+            ring_bad = np.empty(n, dtype=bool)
+            ring[:, :self._nbuf], ring_bad[:self._nbuf] = self._ring[:, :self._nbuf], self._ring_bad[:self._nbuf]
+            self._ring, self._ring_bad = ring, ring_bad
+        self._ring[:, self._nbuf:n] = x.T
+        self._ring_bad[self._nbuf:n] = bad
+        return n
 
     def feed(self, x: np.ndarray, bad: np.ndarray | None = None) -> None:
         x = np.asarray(x).reshape(len(x), self.nch)
         bad = np.zeros(len(x), dtype=bool) if bad is None else np.asarray(bad, dtype=bool)
-        # the carried-over samples are kept channel-major in float32, the form the transforms use
-        buf = np.concatenate([self._buf, x.T.astype(np.float32)], axis=1)
-        badbuf = np.concatenate([self._bad, bad])
-        n = buf.shape[1]
+        n = self._append(x, bad)
+        buf, badbuf = self._ring[:, :n], self._ring_bad[:n]
         nseg = 0 if n < self.nperseg else 1 + (n - self.nperseg) // self.hop
         if nseg:
             starts = np.arange(nseg) * self.hop
-            badcum = np.concatenate([[0], np.cumsum(badbuf)])
-            ok = (badcum[starts + self.nperseg] - badcum[starts]) == 0
-            self.skipped += int((~ok).sum())
-            starts = starts[ok]
+            if badbuf.any():
+                badcum = np.concatenate([[0], np.cumsum(badbuf)])
+                ok = (badcum[starts + self.nperseg] - badcum[starts]) == 0
+                self.skipped += int((~ok).sum())
+                starts = starts[ok]
             # detrending by the segment mean commutes with the FFT: X((x - m) w) = X(x w) - m W;
             # float32 transforms of all the block's segments in one call (~4x faster than float64
             # one by one, and far more precise than needed)
             if len(starts):
-                segs = np.lib.stride_tricks.sliding_window_view(buf, self.nperseg, axis=1)[:, starts]
-                spec = sfft.rfft(segs * self._w32, axis=-1)
-                spec -= segs.mean(axis=-1)[:, :, None] * self._wfft32
-                mag = np.abs(spec)                               # (nch, nseg, nfreq) float32
-                self.sum_amp += mag.sum(axis=1, dtype=np.float64).T
-                self.sum_pow += np.square(mag).sum(axis=1, dtype=np.float64).T
+                view = np.lib.stride_tricks.sliding_window_view(buf, self.nperseg, axis=1)
+                # every segment: a strided view; some left out (clipped): a copy of the others
+                segs = view[:, ::self.hop][:, :nseg] if len(starts) == nseg else view[:, starts]
+                if self._win.shape[1] < len(starts):
+                    self._win = np.empty((self.nch, len(starts), self.nperseg), dtype=np.float32)
+                win = np.multiply(segs, self._w32, out=self._win[:, :len(starts)])
+                spec = sfft.rfft(win, axis=-1)
+                # |X - mean W| and its square summed over the segments (numpy: spec -= mean * W;
+                # mag = abs(spec); sum_amp += mag.sum(axis=1, dtype=float64).T, the same for mag**2)
+                kernels.welch_accumulate(spec, segs.mean(axis=-1), self._wfft32, self.sum_amp, self.sum_pow)
                 self.count += len(starts)
             keep_from = nseg * self.hop
         else:
             keep_from = 0
-        self._buf = buf[:, keep_from:].copy()
-        self._bad = badbuf[keep_from:].copy()
+        rest = n - keep_from
+        self._ring[:, :rest] = self._ring[:, keep_from:n].copy()
+        self._ring_bad[:rest] = self._ring_bad[keep_from:n].copy()
+        self._nbuf = rest
 
     @property
     def frequency(self) -> np.ndarray:

@@ -30,6 +30,27 @@ STRING = h5py.string_dtype()
 CHUNK = 1 << 17
 
 
+class CoreBlock:
+    """Reused buffers of one block of per-sample outputs, in the file's dtypes (kernels.core_outputs
+    fills them): ``floats`` (5, n) float32 in FLOAT_OUT's order, revolution, clipped, time."""
+
+    def __init__(self, n: int):
+        self.floats = np.empty((len(FLOAT_OUT), n), dtype=np.float32)
+        self.revolution = np.empty(n, dtype=np.int32)
+        self.clipped = np.empty(n, dtype=np.int8)
+        self.time = np.empty(n, dtype=np.float64)
+
+    def unusable(self, m: int) -> None:
+        """The first m samples as a segment with no cam angle: NaN, revolution -1 (time, clipped kept)."""
+        self.floats[:, :m] = np.nan
+        self.revolution[:m] = -1
+
+    def arrays(self, m: int) -> dict:
+        out = {name: self.floats[j, :m] for j, name in enumerate(FLOAT_OUT)}
+        out.update(revolution=self.revolution[:m], clipped=self.clipped[:m], time=self.time[:m])
+        return out
+
+
 class MeasuredWriter:
     """Write ``n`` samples starting at ``start_time_utc`` (ISO 8601, may be '') to ``path``.
 
@@ -68,20 +89,18 @@ class MeasuredWriter:
         v.attrs.update(attrs)
         return v
 
-    def write_block(self, a: int, b: int, time_s, values: dict | None, clipped) -> None:
-        """Samples [a, b): time (s from the start), the chain's outputs (None: NaN, an unusable
-        segment), the clip flags."""
-        self.v["time"][a:b] = time_s
-        self.v["clipped"][a:b] = clipped.astype(np.int8)
-        if values is None:
-            nan = np.full(b - a, np.nan, dtype=np.float32)
-            for name in FLOAT_OUT:
-                self.v[name][a:b] = nan
-            self.v["revolution"][a:b] = np.full(b - a, -1, dtype=np.int32)
-            return
-        for name in FLOAT_OUT:
-            self.v[name][a:b] = values[name].astype(np.float32)
-        self.v["revolution"][a:b] = values["revolution"].astype(np.int32)
+    def write_block(self, a: int, b: int, data: dict) -> None:
+        """Samples [a, b) of every per-sample variable: ``data[name]`` of the file's dtype
+        (CoreBlock.arrays). A block that is exactly one HDF5 chunk (the default chunking) goes in
+        as that chunk's bytes (H5Dwrite_chunk: no selection, no conversion, no copy in HDF5; the
+        datasets have no filters); any other through h5py's slicing."""
+        whole = a % self.chunk == 0 and b - a == self.chunk
+        for name, ds in self.v.items():
+            x = data[name]
+            if whole:
+                ds.id.write_direct_chunk((a,), np.ascontiguousarray(x))
+            else:
+                ds[a:b] = x
 
     def dimension(self, name: str, coord, units: str, long_name: str) -> None:
         """A dimension with its coordinate variable."""

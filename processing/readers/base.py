@@ -36,7 +36,10 @@ class Recording:
     ka_m_s2_per_v: per-channel calibration (m/s^2/V, NaN where none); channel_units: "V" (read()
     gives volts) or "m/s^2" (the file gave an acceleration, read() gives m/s^2); complete: False for a
     recording whose writer did not close cleanly; cam_speed_rpm: nominal, NaN when unknown.
-    ``read(start, stop)`` returns float64 of shape (stop - start, n_channels) in channel_units.
+    ``read(start, stop)`` returns float64 of shape (stop - start, n_channels) in channel_units,
+    checked for NaN/Inf. A reader that can fill a buffer straight from the file also gives
+    ``read_raw(start, stop, out)``: the samples as stored (``raw_dtype``), not checked (see
+    ``read_unchecked``).
     """
     source: str
     format: str
@@ -55,6 +58,8 @@ class Recording:
     channel_units: list[str] = dataclasses.field(default_factory=list)   # "V" or "m/s^2" per channel
     unit_sources: list[str] = dataclasses.field(default_factory=list)    # where each unit was read
     assumptions: list[str] = dataclasses.field(default_factory=list)     # what the reader assumed, in words
+    read_raw: Callable[[int, int, np.ndarray], np.ndarray] | None = None
+    raw_dtype: type = np.float64                                         # the dtype read_raw fills
 
     def __post_init__(self):
         n = len(self.channel_names)
@@ -107,6 +112,20 @@ class Recording:
         for a in range(start, stop, chunk_samples):
             b = min(a + chunk_samples, stop)
             yield a, self.read(a, b)
+
+    def read_unchecked(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Samples [start, stop) as the file stores them (``raw_dtype``), **not checked** for NaN/Inf.
+
+        For a caller that checks every sample itself (the pipeline's first pass, kernels.scan_block,
+        before any result is made); ``out`` a reusable buffer of (>= stop - start, n_channels) and
+        ``raw_dtype`` (no allocation, no conversion: the HDF5 reader fills it with read_direct).
+        Readers without ``read_raw`` give ``read()``'s float64 (checked anyway).
+        """
+        if self.read_raw is None:
+            return self.read(start, stop)
+        if out is None or out.shape[0] < stop - start:
+            out = np.empty((stop - start, self.n_channels), dtype=self.raw_dtype)
+        return self.read_raw(start, stop, out)
 
     def segments(self) -> list[tuple[int, int]]:
         """Contiguous sample ranges [a, b): gaps and overruns split the data, never interpolated."""

@@ -97,10 +97,22 @@ def _build(f: h5py.File, src: str) -> Recording:
         check_finite(block, start, names, src)
         return block
 
+    raw_dtype = np.dtype(sig.dtype).newbyteorder("=") if sig.dtype.itemsize in (4, 8) else np.dtype(np.float64)
+
+    def read_raw(start: int, stop: int, out: np.ndarray) -> np.ndarray:
+        """Fill out[:stop - start] from the file (HDF5 converts nothing when the dtypes agree)."""
+        dest = out[:stop - start]
+        try:
+            sig.read_direct(dest, np.s_[start:stop], np.s_[0:stop - start])
+        except (OSError, ValueError, RuntimeError, TypeError) as exc:
+            raise FileFormatError(f"{src}: cannot read samples {start}..{stop} (truncated or corrupt?): {exc}") from None
+        return dest
+
     extra = {k: _plain(v) for k, v in a.items() if k not in ("format", "format_version")}
     return Recording(source=src, format=f"{FORMAT} v{VERSION}", sample_rate_hz=fs, channel_names=names,
                      n_samples=int(n), read=read, ka_m_s2_per_v=ka, start_time_utc=as_text(a.get("start_time_utc", "")),
-                     complete=complete, cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns, close=f.close)
+                     complete=complete, cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns, close=f.close,
+                     read_raw=read_raw, raw_dtype=raw_dtype.type)
 
 
 def _written_rows(sig: h5py.Dataset, src: str, warns: list[str]) -> int:
