@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "labtool.commands.simulate",
     "labtool.commands.demo",
     "labtool.commands.report",
+    "labtool.commands.fit",
     "labtool.commands.doe",
     "labtool.commands.acquire",
     "labtool.commands.calibrate",
