@@ -1,15 +1,23 @@
 """The measuring chain of the stand as pure functions: truth -> sensor -> conditioner -> ADC.
 
-What the simulated stand records is the follower's true motion (models.mechanism.kinematics, cam as input,
-plus a motor speed ripple) seen through everything a real chain adds and the models do not:
+What the simulated stand records is the follower's true motion seen through everything a real
+chain adds and the models do not. The truth (``truth_model``) is by default the stand's **twin**
+(models.dynamics.twin: elastic contact with energy loss on both flanks, the backlash crossed, the
+follower's first bending mode as a degree of freedom, pivot friction, motor slip and drive ripple,
+gravity; docs/twin.md), or ``kinematic`` (the cam as input with a speed ripple), or one model's
+own equations (``rigid``, ``elastic``: its periodic steady state, for self-consistency checks).
+The chain:
 
 1. gravity: a piezoelectric accelerometer measures specific force, so a sensor riding on the
    follower at E also reads the component of -g along its axis; the axes turn with the follower
    (tangential t = (-sin phi2, cos phi2), normal n = -(cos phi2, sin phi2) towards D);
 2. a structural resonance of the follower (base-excited 1-DOF, f_r, zeta_r) excited by the motion
-   and by broadband mechanical noise (roller rolling in the groove);
+   and by broadband mechanical noise (roller rolling in the groove). With the twin truth the mode
+   is in the truth itself, so the chain applies it to the mechanical noise only (never twice);
 3. sensor noise (white, m/s^2 rms at the oversampled rate, i.e. before the anti-alias filter);
-4. sensitivity x conditioner gain = 1/Ka (V per m/s^2), Ka = 86.43 m/s^2/V by default (paper);
+4. sensitivity x conditioner gain = 1/Ka (V per m/s^2): the PCB 352A76's 1/(86.43 x 10) V per
+   m/s^2 and the 480C02 at gain x1 by default, Ka = 864.3 m/s^2/V, so that the twin's impacts fit
+   the ADC range (the paper's x10 chain, Ka = 86.43, clips them: docs/twin.md);
 5. the 480C02's AC coupling, a first-order high-pass (0.1 Hz default);
 6. the DAQ's anti-alias low-pass (Butterworth, order 8, 0.40 x the sample rate) at an
    oversampled rate, then decimation to the sample rate;
@@ -29,16 +37,25 @@ import numpy as np
 from scipy import signal
 
 from common.errors import InputError
+from models.dynamics.twin import TwinPhysics
 from models.mechanism.kinematics import follower_motion
 from models.mechanism import Mechanism
 from models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
-PAPER_KA = 86.43  # m/s^2 per V, paper sec. 2.4
+PAPER_KA = 86.43  # m/s^2 per V, paper sec. 2.4: the 480C02 at gain x10
+SENSOR_SENSITIVITY = 1.0 / (PAPER_KA * 10.0)  # V per m/s^2 of the PCB 352A76 (11.3 mV/g)
+DEFAULT_KA = 1.0 / SENSOR_SENSITIVITY  # 864.3 m/s^2 per V: the 480C02 at gain x1
 ACCEL_CHANNELS = ("aE_t", "aE_n")
 CHANNELS = ("aE_t", "aE_n", "tacho")
-TRUTH_MODELS = ("kinematic", "rigid", "elastic")
+TRUTH_MODELS = ("twin", "kinematic", "rigid", "elastic")
+MODEL_TRUTHS = ("rigid", "elastic")
+TRUTH_ACCURACIES = ("fast", "standard", "reference")
+MODEL_TRUTH_REVOLUTIONS = 8      # turns a model truth simulates by default (the last one repeats)
 MAX_MODEL_REVOLUTIONS = 200
+PERIODIC_EVENT_TOL = 1e-2        # rad: the last two turns' events at the same cam angles (the
+                                 # elastic model's dwell micro-bounces drift 0.2 deg a turn at 300 rpm)
+PERIODIC_OMEGA2_TOL = 5e-3       # of max |omega2|, away from events: the last two turns alike
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,9 +66,19 @@ class StandScene:
                     shaker (B&K 4291) giving cal_accel (m/s^2 peak) at cal_freq (Hz) along
                     channel cal_channel, the cam stands still.
     law, cam_speed_rpm, Fu (N), backlash (m), jt_factor: the operating point (paper's factors);
-                    Fu, backlash and jt_factor do not change the kinematic truth, they are stored.
-    ripple          relative amplitude of the motor speed ripple on omega1, once per cam turn:
-                    omega1(t) = Omega (1 + ripple sin(Omega t))
+                    they do not change the kinematic truth (then they are only stored).
+    ripple          relative amplitude of the drive's speed ripple, once per cam turn (kinematic:
+                    omega1 = Omega (1 + ripple sin(Omega t)); twin: on the motor's no-load speed)
+    truth_model     twin | kinematic | rigid | elastic (module doc)
+    truth_revolutions  rigid/elastic truth: cam turns simulated (0 = MODEL_TRUTH_REVOLUTIONS); the
+                    last one repeats when the model has reached its periodic steady state
+    restitution     Newton's k of the rigid truth's impacts
+    contact_damping Hunt-Crossley coefficient (s/m) of the twin's and the elastic truth's contact
+    contact_length  roller-groove contact length lw (m) of the twin's and the elastic truth's contact
+    kc_factor       multiplier of their contact stiffness Kc
+    truth_accuracy  solver preset of the twin and the model truths (fast | standard | reference)
+    twin            the twin's other physics (models.dynamics.twin.TwinPhysics; its ripple is
+                    this scene's ``ripple``)
     """
 
     mode: str = "run"
@@ -64,23 +91,35 @@ class StandScene:
     cal_accel: float = 9.81
     cal_freq: float = 79.6
     cal_channel: str = "aE_t"
-    truth_model: str = "kinematic"
+    truth_model: str = "twin"
     truth_revolutions: int = 0
+    restitution: float = 0.2
+    contact_damping: float = 40.0
+    contact_length: float = 6e-3
+    kc_factor: float = 1.0
+    truth_accuracy: str = "fast"
+    twin: TwinPhysics = dataclasses.field(default_factory=TwinPhysics)
     mechanism: Mechanism = dataclasses.field(default_factory=Mechanism.default, repr=False)
 
     def __post_init__(self):
-        model_truth = self.truth_model != "kinematic"
+        model_truth = self.truth_model in MODEL_TRUTHS
         checks = [
             (self.truth_model in TRUTH_MODELS, f"truth model must be one of {', '.join(TRUTH_MODELS)}, got '{self.truth_model}'"),
-            (not model_truth or 1 <= self.truth_revolutions <= MAX_MODEL_REVOLUTIONS,
-             f"the {self.truth_model} truth needs 1 to {MAX_MODEL_REVOLUTIONS} cam revolutions (a finite, shorter --duration)"),
-            (not model_truth or self.ripple == 0.0, "the motor speed ripple applies to the kinematic truth only (set it to 0)"),
+            (isinstance(self.truth_revolutions, int) and 0 <= self.truth_revolutions <= MAX_MODEL_REVOLUTIONS,
+             f"truth revolutions must be an integer in [0, {MAX_MODEL_REVOLUTIONS}], got {self.truth_revolutions}"),
+            (not model_truth or self.ripple == 0.0,
+             f"the {self.truth_model} truth turns the cam at constant speed: set the speed ripple to 0"),
             (self.mode in ("run", "calibration"), f"stand mode must be 'run' or 'calibration', got '{self.mode}'"),
             (math.isfinite(self.cam_speed_rpm) and 0 < self.cam_speed_rpm <= 2000, f"cam speed must lie in (0, 2000] rpm, got {self.cam_speed_rpm}"),
             (math.isfinite(self.Fu) and self.Fu >= 0, f"load Fu must be >= 0 N, got {self.Fu}"),
             (math.isfinite(self.backlash) and self.backlash >= 0, f"backlash must be >= 0 mm, got {self.backlash * 1e3:g}"),
             (math.isfinite(self.jt_factor) and self.jt_factor > 0, f"inertia factor Jt must be > 0, got {self.jt_factor}"),
             (math.isfinite(self.ripple) and 0 <= self.ripple < 0.5, f"speed ripple must lie in [0, 0.5), got {self.ripple}"),
+            (math.isfinite(self.restitution) and 0 <= self.restitution <= 1, f"restitution k must lie in [0, 1], got {self.restitution}"),
+            (math.isfinite(self.contact_damping) and self.contact_damping >= 0, f"contact damping must be >= 0 s/m, got {self.contact_damping}"),
+            (math.isfinite(self.contact_length) and self.contact_length > 0, f"contact length must be > 0 mm, got {self.contact_length * 1e3:g}"),
+            (math.isfinite(self.kc_factor) and self.kc_factor > 0, f"contact stiffness factor must be > 0, got {self.kc_factor}"),
+            (self.truth_accuracy in TRUTH_ACCURACIES, f"truth accuracy must be one of {', '.join(TRUTH_ACCURACIES)}, got '{self.truth_accuracy}'"),
             (math.isfinite(self.cal_accel) and self.cal_accel > 0, f"calibration acceleration must be > 0 m/s^2, got {self.cal_accel}"),
             (math.isfinite(self.cal_freq) and self.cal_freq > 0, f"calibration frequency must be > 0 Hz, got {self.cal_freq}"),
             (self.cal_channel in ACCEL_CHANNELS, f"calibration channel must be one of {', '.join(ACCEL_CHANNELS)}, got '{self.cal_channel}'"),
@@ -88,6 +127,8 @@ class StandScene:
         for ok, msg in checks:
             if not ok:
                 raise InputError(msg)
+        if self.twin.ripple != self.ripple:   # one ripple: the scene's
+            object.__setattr__(self, "twin", self.twin.replace(ripple=self.ripple))
         self.program  # unknown law -> InputError now, not mid-run
 
     @property
@@ -99,17 +140,53 @@ class StandScene:
     def program(self) -> CamProgram:
         return CamProgram.for_mechanism(self.mechanism, law=self.law)
 
+    @property
+    def model_revolutions(self) -> int:
+        """Cam turns a rigid/elastic truth simulates."""
+        return self.truth_revolutions or MODEL_TRUTH_REVOLUTIONS
+
+    def model_scene(self, revolutions: float | None = None):
+        """The models' Scene of this operating point and truth parameters (omega1 constant, the
+        whole cycle, the physical gap)."""
+        from models.dynamics.scene import Scene
+        return Scene(law=self.law, cam_speed_rpm=self.cam_speed_rpm, Fu=self.Fu, backlash=self.backlash,
+                     jt_factor=self.jt_factor, omega1_mode="const", restitution=self.restitution,
+                     contact_length=self.contact_length, kc_factor=self.kc_factor,
+                     contact_damping=self.contact_damping, elastic_gap="physical", accuracy=self.truth_accuracy,
+                     revolutions=float(revolutions if revolutions is not None else self.model_revolutions),
+                     rise_only=False, mechanism=self.mechanism)
+
+    def truth_description(self) -> str:
+        if self.truth_model == "kinematic":
+            return "kinematic (models.mechanism.kinematics.follower_motion)"
+        if self.truth_model == "twin":
+            return f"twin (models.dynamics.twin, accuracy {self.truth_accuracy}, docs/twin.md)"
+        return (f"{self.truth_model} (models.dynamics.simulate, omega1 const, accuracy {self.truth_accuracy}, "
+                f"{self.model_revolutions} revolutions, the last repeated once periodic)")
+
     def attrs(self) -> dict:
         """Scene parameters as recording attributes (SI, plus rpm and mm where named so)."""
+        twin = self.twin.attrs()
+        twin["truth_warmup_revolutions"] = int(twin["truth_warmup_revolutions"])
         return {
             "stand_mode": self.mode, "law": self.law, "cam_speed_rpm": float(self.cam_speed_rpm),
             "Fu_N": float(self.Fu), "backlash_mm": float(self.backlash * 1e3),
             "jt_factor": float(self.jt_factor),
-            "truth_model": "kinematic (models.mechanism.kinematics.follower_motion)" if self.truth_model == "kinematic" else
-            f"{self.truth_model} (models.dynamics.simulate, omega1 const, accuracy fast, {self.truth_revolutions} revolutions)",
+            "truth_model": self.truth_description(),
             "truth_revolutions": int(self.truth_revolutions),
             "truth_omega1_ripple": float(self.ripple),
-            "truth_omega1_ripple_form": "omega1 = Omega*(1 + ripple*sin(Omega*t)), phi1 = Omega*t + ripple*(1 - cos(Omega*t))",
+            "truth_omega1_ripple_form": (
+                "omega1 = Omega*(1 + ripple*sin(Omega*t)), phi1 = Omega*t + ripple*(1 - cos(Omega*t))"
+                if self.truth_model == "kinematic" or self.twin.drive == "input" else
+                "motor moment M1 = slope*(Omega*(1 + ripple*sin(phi1)) - omega1) (docs/twin.md)"),
+            "truth_restitution": float(self.restitution),
+            "truth_contact_damping_s_per_m": float(self.contact_damping),
+            "truth_contact_length_m": float(self.contact_length),
+            "truth_kc_factor": float(self.kc_factor),
+            "truth_accuracy": self.truth_accuracy,
+            **twin,
+            "chain_resonance_applies_to": "mechanical noise only (the twin truth carries the bending mode)"
+            if self.truth_model == "twin" else "motion and mechanical noise",
             "cal_accel_m_s2_peak": float(self.cal_accel), "cal_freq_hz": float(self.cal_freq),
             "cal_channel": self.cal_channel, "mechanism": self.mechanism.name,
             "DE_m": float(self.mechanism.DE),
@@ -120,8 +197,8 @@ class StandScene:
 class ChainParams:
     """The sensor / conditioner / DAQ chain (SI).
 
-    ka_m_s2_per_v   Ka per accelerometer channel (aE_t, aE_n), m/s^2 per V (volts = a / Ka)
-    conditioner_gain 480C02 gain (x1, x10 or x100); sensor sensitivity = 1/(Ka gain) V per m/s^2
+    ka_m_s2_per_v   Ka per accelerometer channel (aE_t, aE_n), m/s^2 per V (volts = a / Ka); the
+                    480C02's gain follows: Ka = 1 / (sensor sensitivity x gain)
     highpass_hz     AC coupling corner of the conditioner (first order), Hz
     resonance_hz, resonance_zeta  follower structural mode seen at E (base-excited 1-DOF)
     mech_noise_m_s2 broadband mechanical excitation of that mode, m/s^2 rms at the oversampled rate
@@ -132,8 +209,7 @@ class ChainParams:
     tacho_v, tacho_width_s  tacho pulse height (V) and width (s)
     """
 
-    ka_m_s2_per_v: tuple[float, float] = (PAPER_KA, PAPER_KA)
-    conditioner_gain: float = 10.0
+    ka_m_s2_per_v: tuple[float, float] = (DEFAULT_KA, DEFAULT_KA)
     highpass_hz: float = 0.1
     resonance_hz: float = 1200.0
     resonance_zeta: float = 0.04
@@ -157,6 +233,11 @@ class ChainParams:
             raise InputError("oversampling factor must be a positive integer")
 
     @property
+    def conditioner_gain(self) -> float:
+        """480C02 gain on aE_t that gives this Ka with the 352A76's sensitivity (1 at Ka 864.3, 10 at 86.43)."""
+        return 1.0 / (SENSOR_SENSITIVITY * self.ka_m_s2_per_v[0])
+
+    @property
     def lsb_v(self) -> float:
         return 2.0 * self.adc_range_v / 2**self.adc_bits
 
@@ -165,7 +246,8 @@ class ChainParams:
             "chain_ka_m_s2_per_v": np.asarray(self.ka_m_s2_per_v, float),
             "sensor": "PCB 352A76 (simulated)", "conditioner": "PCB 480C02 (simulated)",
             "conditioner_gain": float(self.conditioner_gain),
-            "sensor_sensitivity_v_per_m_s2": np.asarray([1.0 / (k * self.conditioner_gain) for k in self.ka_m_s2_per_v]),
+            "sensor_sensitivity_v_per_m_s2": np.full(2, SENSOR_SENSITIVITY),
+            "chain_range_m_s2": np.asarray([self.adc_range_v * k for k in self.ka_m_s2_per_v]),
             "highpass_hz": float(self.highpass_hz), "resonance_hz": float(self.resonance_hz),
             "resonance_zeta": float(self.resonance_zeta), "mech_noise_m_s2": float(self.mech_noise_m_s2),
             "noise_m_s2": float(self.noise_m_s2), "antialias": f"Butterworth order {self.antialias_order} at {self.antialias_frac:g} x rate",
@@ -190,14 +272,16 @@ def cam_angle(scene: StandScene, t):
     return phi1, omega1, epsilon1
 
 
-def truth(scene: StandScene, t, seed: int | None = None) -> dict:
+def truth(scene: StandScene, t, seed: int | None = None, interval: float | None = None) -> dict:
     """The noise-free truth at times t (s): what an ideal sensor at E would see, no gravity.
 
     Returns arrays phi1 (rad, unwrapped), omega1 (rad/s), epsilon1 (rad/s^2), phi2 (rad), psi (rad),
-    omega2 (rad/s), epsilon2 (rad/s^2), aE_t = epsilon2 DE, aE_n = omega2^2 DE (m/s^2). ``seed`` only
-    sets the noise of a run, never the truth; it is accepted so callers can pass a run's settings.
-    In calibration mode the follower stands still and aE along the calibrated axis is the shaker's
-    sine cal_accel sin(2 pi cal_freq t).
+    omega2 (rad/s), epsilon2 (rad/s^2), aE_t, aE_n = omega2^2 DE (m/s^2). aE_t is epsilon2 DE, or
+    for the twin the acceleration of the sensor on the bending follower; with ``interval`` (s) it
+    is the mean over [t - interval/2, t + interval/2] (clipped at t = 0), what a sampled sensor
+    integrates: impacts keep their whole velocity step. ``seed`` only sets the noise of a run, never
+    the truth; it is accepted so callers can pass a run's settings. In calibration mode the
+    follower stands still and aE along the calibrated axis is cal_accel sin(2 pi cal_freq t).
     """
     t = np.asarray(t, dtype=float)
     mech = scene.mechanism
@@ -208,8 +292,10 @@ def truth(scene: StandScene, t, seed: int | None = None) -> dict:
         return {"phi1": z, "omega1": z, "epsilon1": z, "phi2": phi2, "psi": z, "omega2": z, "epsilon2": z,
                 "aE_t": shaker if scene.cal_channel == "aE_t" else z,
                 "aE_n": shaker if scene.cal_channel == "aE_n" else z}
-    if scene.truth_model != "kinematic":
-        return _model_truth(scene, t)
+    if scene.truth_model == "twin":
+        return twin_truth(scene, t, interval)
+    if scene.truth_model in MODEL_TRUTHS:
+        return _model_truth(scene, t, interval)
     phi1, omega1, epsilon1 = cam_angle(scene, t)
     phi2, omega2, epsilon2, psi = follower_motion(scene.program, mech, phi1, omega1, epsilon1)
     return {"phi1": phi1, "omega1": omega1, "epsilon1": epsilon1, "phi2": phi2, "psi": psi,
@@ -217,77 +303,336 @@ def truth(scene: StandScene, t, seed: int | None = None) -> dict:
             "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
 
 
+# ---- the twin (models.dynamics.twin), streamed
+
+def new_twin_run(scene: StandScene, keep_events: bool = False):
+    """A fresh twin trajectory for the scene (its warm-up done; t = 0 at the start of a rise)."""
+    from models.dynamics.twin import TwinRun
+    return TwinRun(scene.model_scene(), scene.twin, keep_events=keep_events)
+
+
+_TWIN_RUNS: dict = {}
+
+
+def _cached_twin_run(scene: StandScene, t0: float):
+    """The process's twin run of this scene if it has not passed t0 yet, else a new one (one kept)."""
+    key = (repr(scene), repr(scene.mechanism))
+    run = _TWIN_RUNS.get(key)
+    if run is None or run.position > t0 + 1e-9:
+        _TWIN_RUNS.clear()
+        run = _TWIN_RUNS[key] = new_twin_run(scene)
+    return run
+
+
+def twin_truth(scene: StandScene, t, interval: float | None = None, run=None) -> dict:
+    """The twin's truth at times t (s; any order). ``run``: a stream to continue (the stand's own,
+    carried from block to block: its requests must move forward in time); default the process's
+    cached run of the scene, restarted when t goes back. With ``interval`` aE_t and epsilon2 are
+    interval means (from the sensor's speed vE and omega2 at the interval's edges), else point
+    values (epsilon2 of the follower's rigid part, aE_t of the sensor on the bending follower)."""
+    t = np.asarray(t, dtype=float)
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    n = ts.size
+    mech = scene.mechanism
+    if interval is None:
+        query = ts
+    elif n >= 2 and np.allclose(np.diff(ts), interval, rtol=1e-9, atol=0.0):
+        edges = np.concatenate([ts - 0.5 * interval, ts[-1:] + 0.5 * interval])   # shared edges
+        lo, hi = np.maximum(edges[:-1], 0.0), edges[1:]
+        query = np.concatenate([ts, np.maximum(edges, 0.0)])
+    else:
+        lo, hi = np.maximum(ts - 0.5 * interval, 0.0), ts + 0.5 * interval
+        query = np.concatenate([ts, lo, hi])
+    qo = np.argsort(query, kind="stable")
+    if run is None:
+        run = _cached_twin_run(scene, float(query.min()) if query.size else 0.0)
+    s = run.sample(np.maximum(query[qo], run.position), accelerations=interval is None)
+    got = {k: np.empty(query.size) for k in ("phi1", "omega1", "phi2", "omega2", "vE", "epsilon2", "aE_t")}
+    for k in got:
+        got[k][qo] = s[k]
+    c = {k: v[:n] for k, v in got.items()}
+    if interval is None:
+        aE_t, eps2 = c["aE_t"], c["epsilon2"]
+    else:
+        rest = {k: v[n:] for k, v in got.items()}
+        if rest["vE"].size == n + 1:
+            d_v, d_w = np.diff(rest["vE"]), np.diff(rest["omega2"])
+        else:
+            d_v, d_w = rest["vE"][n:] - rest["vE"][:n], rest["omega2"][n:] - rest["omega2"][:n]
+        width = np.maximum(hi - lo, 1e-300)
+        aE_t, eps2 = d_v / width, d_w / width
+    res = {}
+    for k, v in (("phi1", c["phi1"]), ("omega1", c["omega1"]), ("phi2", c["phi2"]), ("omega2", c["omega2"]),
+                 ("aE_t", aE_t), ("epsilon2", eps2)):
+        res[k] = np.empty_like(t)
+        res[k][order] = v
+    res["epsilon1"] = np.full_like(t, np.nan)   # not tabulated: the cam's speed varies with the load
+    res["psi"] = res["phi2"] - mech.phiD - mech.psi0
+    res["aE_n"] = res["omega2"] ** 2 * mech.DE
+    return res
+
+
+# ---- the model truths (rigid, elastic): the periodic steady state
+
 _MODEL_TABLES: dict = {}
 
 
 def model_table(scene: StandScene) -> dict:
-    """The dynamic model's run behind a rigid/elastic truth: time (s) and phi1, omega1, phi2, omega2,
-    epsilon2 over ``truth_revolutions`` cam turns at constant cam speed (models.dynamics.simulate, accuracy
-    fast). Cached per scene: the model runs once per run, not per block. Points at repeated times
-    (impacts of the rigid model) keep the later state, so omega2 steps across them.
+    """The dynamic model's run behind a rigid/elastic truth (models.dynamics.simulate, omega1
+    constant, ``model_revolutions`` turns): time (s), phi1, omega1, phi2, omega2, epsilon2, the
+    event record (EVENTS.md names, times in s of the run), ``period`` (s), and ``periodic``: the
+    last two turns have the same events (to PERIODIC_EVENT_TOL rad) and omega2 away from them (to
+    PERIODIC_OMEGA2_TOL of its maximum). Cached per scene: the model runs once per process and
+    scene. Points at repeated times (impacts of the rigid model) keep the later state.
     """
-    key = (scene.truth_model, scene.law, scene.cam_speed_rpm, scene.Fu, scene.backlash, scene.jt_factor,
-           scene.truth_revolutions, repr(scene.mechanism))
+    key = (repr(scene), repr(scene.mechanism))
     if key not in _MODEL_TABLES:
-        from models.dynamics.scene import Scene
         from models.dynamics.simulate import simulate
-        ms = Scene(law=scene.law, cam_speed_rpm=scene.cam_speed_rpm, Fu=scene.Fu, backlash=scene.backlash,
-                   jt_factor=scene.jt_factor, omega1_mode="const", revolutions=float(scene.truth_revolutions),
-                   rise_only=False, accuracy="fast", mechanism=scene.mechanism)
-        ds = simulate(ms, scene.truth_model).dataset
+        R = scene.model_revolutions
+        ds = simulate(scene.model_scene(R), scene.truth_model).dataset
         t = np.asarray(ds["time"].values, float)
         keep = np.append(np.diff(t) > 0, True)
+        tab = {name: np.asarray(ds[name].values, float)[keep]
+               for name in ("time", "phi1", "omega1", "phi2", "omega2", "epsilon2")}
+        tab["events"] = model_events(ds)
+        tab["period"] = TWO_PI / scene.omega1_nominal
+        tab["revolutions"] = R
+        tab["periodic"] = R >= 2 and _is_periodic(tab)
         _MODEL_TABLES.clear()  # one model run in memory at a time
-        _MODEL_TABLES[key] = {name: np.asarray(ds[name].values, float)[keep]
-                              for name in ("time", "phi1", "omega1", "phi2", "omega2", "epsilon2")}
+        _MODEL_TABLES[key] = tab
     return _MODEL_TABLES[key]
 
 
-def _model_truth(scene: StandScene, t) -> dict:
+def _is_periodic(tab: dict) -> bool:
+    T, R = tab["period"], tab["revolutions"]
+    te, ph = tab["events"]["event_time"], tab["events"]["event_phi1"]
+    last, prev = (te >= (R - 1) * T), (te >= (R - 2) * T) & (te < (R - 1) * T)
+    if last.sum() != prev.sum():
+        return False
+    if last.any() and np.max(np.abs((ph[last] - TWO_PI) - ph[prev])) > PERIODIC_EVENT_TOL:
+        return False
+    tt = np.linspace((R - 1) * T, R * T, 4001)[:-1]
+    a = np.interp(tt, tab["time"], tab["omega2"])
+    b = np.interp(tt - T, tab["time"], tab["omega2"])
+    away = np.ones(tt.size, bool)
+    for x in np.concatenate([te[last], te[prev] + T]):
+        away &= np.abs(tt - x) > 1e-3
+    scale = max(np.abs(tab["omega2"]).max(), 1e-12)
+    return bool(np.max(np.abs(a - b)[away], initial=0.0) <= PERIODIC_OMEGA2_TOL * scale)
+
+
+def model_events(ds) -> dict:
+    """A model dataset's contact events as EVENTS.md's arrays (times in s of the run).
+
+    Takes the dataset's own event record when it has one (``event_side``); else converts the
+    rigid model's (event_kind 1 lift-off, 2 rebound, 3 settle; event_flank +-1) and the elastic
+    model's (attrs event_times_s / event_kinds) formats."""
+    names = ("event_time", "event_phi1", "event_kind", "event_side", "event_v_rel", "event_domega2",
+             "event_percussion", "event_persistent")
+    if "event_side" in ds:
+        return {k: np.asarray(ds[k].values) for k in names}
+    if "event_flank" in ds:                     # rigid
+        kind = np.asarray(ds["event_kind"].values)
+        flank = np.asarray(ds["event_flank"].values)
+        side = np.where(flank > 0, "interior", "exterior").astype(object)
+        t = np.asarray(ds["event_time"].values, float)
+        rows = []
+        for i in range(t.size):
+            if kind[i] == 1:                        # lift-off: a persistent contact ends
+                rows.append((t[i], ds["event_phi1"].values[i], "separation", side[i], 0.0, np.nan, np.nan, True))
+                continue
+            v = abs(float(ds["event_v_before"].values[i]))
+            dw = float(ds["event_omega2_after"].values[i] - ds["event_omega2_before"].values[i])
+            P = float(ds["event_percussion"].values[i])
+            rows.append((t[i], ds["event_phi1"].values[i], "contact", side[i], v, dw, P, kind[i] == 3))
+            if kind[i] == 2:                        # a rebound: the contact ends at once
+                rows.append((t[i], ds["event_phi1"].values[i], "separation", side[i],
+                             abs(float(ds["event_v_after"].values[i])), np.nan, np.nan, False))
+        return _rows_to_events(rows, names)
+    t = np.atleast_1d(np.asarray(ds.attrs.get("event_times_s", []), float))   # elastic
+    kinds = [k for k in str(ds.attrs.get("event_kinds", "")).split(",") if k]
+    w1 = float(ds.attrs.get("omega1_rad_s", np.nan))
+    rows = [(ti, w1 * ti, "separation" if k.startswith("leave") else "contact",
+             "interior" if k.endswith("interior") else "exterior", np.nan, np.nan, np.nan, False)
+            for ti, k in zip(t, kinds)]
+    return _rows_to_events(rows, names)
+
+
+def _rows_to_events(rows, names) -> dict:
+    cols = list(zip(*rows)) if rows else [[] for _ in names]
+    out = {}
+    for name, col in zip(names, cols):
+        if name in ("event_kind", "event_side"):
+            out[name] = np.asarray(col, dtype=object)
+        elif name == "event_persistent":
+            out[name] = np.asarray(col, dtype=bool)
+        else:
+            out[name] = np.asarray(col, dtype=float)
+    return out
+
+
+def model_truth_span(scene: StandScene) -> float:
+    """Seconds of recording a rigid/elastic truth can serve: unlimited once periodic, else its run
+    (less a margin for the sensor's interval)."""
     tab = model_table(scene)
+    return math.inf if tab["periodic"] else float(tab["time"][-1]) - 1e-3
+
+
+def _model_time(scene: StandScene, t):
+    """Times of the model's run that stand for recording times t: the last (steady) turn
+    repeated when the run is periodic, the run itself otherwise (InputError beyond it)."""
+    tab = model_table(scene)
+    t = np.asarray(t, dtype=float)
+    if tab["periodic"]:
+        T = tab["period"]
+        return (tab["revolutions"] - 1) * T + np.mod(t, T), tab
     if t.size and (t.min() < tab["time"][0] - 1e-12 or t.max() > tab["time"][-1] + 1e-9):
-        raise InputError(f"the {scene.truth_model} truth covers 0 to {tab['time'][-1]:.3f} s only")
+        raise InputError(f"the {scene.truth_model} truth is not periodic after {tab['revolutions']} turns and covers "
+                         f"0 to {tab['time'][-1]:.3f} s only: give energy loss (restitution < 1, contact damping > 0), "
+                         "more truth revolutions, or a shorter duration")
+    return t, tab
+
+
+def _model_truth(scene: StandScene, t, interval: float | None = None) -> dict:
+    tm, tab = _model_time(scene, t)
     mech = scene.mechanism
-    out = {k: np.interp(t, tab["time"], tab[k]) for k in ("phi1", "omega1", "phi2", "omega2", "epsilon2")}
-    out["epsilon1"] = np.zeros_like(t)
+    out = {k: np.interp(tm, tab["time"], tab[k]) for k in ("omega1", "phi2", "omega2", "epsilon2")}
+    out["phi1"] = scene.omega1_nominal * np.asarray(t, dtype=float)
+    out["epsilon1"] = np.zeros_like(out["omega1"])
     out["psi"] = out["phi2"] - mech.phiD - mech.psi0
     out["aE_t"] = out["epsilon2"] * mech.DE
+    if interval is not None:
+        out["aE_t"] = boxcar_epsilon2(scene, t, interval) * mech.DE
     out["aE_n"] = out["omega2"] ** 2 * mech.DE
     return out
 
 
 def boxcar_epsilon2(scene: StandScene, t, dt: float):
-    """Mean epsilon2 over [t - dt/2, t + dt/2] (rad/s^2) = the change of omega2 over the interval / dt.
+    """Mean epsilon2 over [t - dt/2, t + dt/2] (rad/s^2) = the change of the truth's omega2 over the
+    interval / dt.
 
     What a sampled sensor integrates over one (oversampled) interval: it keeps the whole velocity
     step of an impact (the rigid model's omega2 jumps) and never misses a contact spike narrower
-    than dt, unlike sampling epsilon2 at points.
+    than dt, unlike sampling epsilon2 at points. Intervals are clipped at t = 0 (and, for a run that
+    is not periodic, at its end). Summed, the means give back the truth's omega2 exactly.
     """
+    t = np.asarray(t, dtype=float)
+    lo_t = np.maximum(t - 0.5 * dt, 0.0)
+    hi_t = t + 0.5 * dt
     tab = model_table(scene)
-    lo = np.clip(t - 0.5 * dt, tab["time"][0], tab["time"][-1])
-    hi = np.clip(t + 0.5 * dt, tab["time"][0], tab["time"][-1])
-    return (np.interp(hi, tab["time"], tab["omega2"]) - np.interp(lo, tab["time"], tab["omega2"])) / dt
+    if not tab["periodic"]:
+        hi_t = np.minimum(hi_t, tab["time"][-1])
+    w_lo = np.interp(_model_time(scene, lo_t)[0], tab["time"], tab["omega2"])
+    w_hi = np.interp(_model_time(scene, hi_t)[0], tab["time"], tab["omega2"])
+    return (w_hi - w_lo) / np.maximum(hi_t - lo_t, 1e-300)
+
+
+def truth_events(scene: StandScene, duration: float) -> dict:
+    """The truth's event record (EVENTS.md arrays) over [0, duration] s of a recording: the twin
+    integrated again from its attributes, or a model truth's events (its steady turn repeated).
+    The kinematic truth has none."""
+    names = ("event_time", "event_phi1", "event_kind", "event_side", "event_v_rel", "event_domega2",
+             "event_percussion", "event_persistent")
+    if scene.mode != "run" or scene.truth_model == "kinematic":
+        return _rows_to_events([], names)
+    if scene.truth_model == "twin":
+        run = new_twin_run(scene, keep_events=True)
+        step = 0.05
+        for k in range(int(math.ceil(duration / step))):
+            run.sample(np.array([min((k + 1) * step, duration)]))
+        ev = run.take_events(final=True)
+        keep = ev["event_time"] <= duration
+        return {k: v[keep] for k, v in ev.items()}
+    tab = model_table(scene)
+    ev = tab["events"]
+    if not tab["periodic"]:
+        keep = ev["event_time"] <= duration
+        return {k: v[keep] for k, v in ev.items()}
+    T, R = tab["period"], tab["revolutions"]
+    last = ev["event_time"] >= (R - 1) * T
+    base = {k: v[last] for k, v in ev.items()}
+    n_rev = int(math.ceil(duration / T)) + 1
+    out = {k: np.concatenate([v] * n_rev) if len(v) else v for k, v in base.items()}
+    shift = np.repeat(np.arange(n_rev), last.sum())
+    out["event_time"] = out["event_time"] - (R - 1) * T + shift * T
+    out["event_phi1"] = out["event_phi1"] - (R - 1) * TWO_PI + shift * TWO_PI
+    keep = out["event_time"] <= duration
+    return {k: v[keep] for k, v in out.items()}
+
+
+# keys of a scene file's [truth] table -> (StandScene field or "twin.<TwinPhysics field>", scale to SI)
+TRUTH_TABLE_KEYS = {
+    "model": ("truth_model", None), "revolutions": ("truth_revolutions", None), "accuracy": ("truth_accuracy", None),
+    "restitution": ("restitution", 1.0), "contact_damping_s_per_m": ("contact_damping", 1.0),
+    "contact_length_mm": ("contact_length", 1e-3), "kc_factor": ("kc_factor", 1.0),
+    "drive": ("twin.drive", None), "mode_hz": ("twin.mode_hz", 1.0), "mode_zeta": ("twin.mode_zeta", 1.0),
+    "mode_mass_share": ("twin.mode_mass_share", 1.0), "friction_torque_Nm": ("twin.friction_torque", 1.0),
+    "friction_radius_mm": ("twin.friction_radius", 1e-3), "friction_speed_rad_s": ("twin.friction_speed", 1.0),
+    "persistence_ms": ("twin.persistence_s", 1e-3), "warmup_revolutions": ("twin.warmup_revolutions", None),
+}
+
+
+def truth_settings(table: dict, source: str = "scene file") -> dict:
+    """StandScene keyword arguments from a scene file's [truth] table (edge units: mm, ms; the
+    twin's fields gathered into ``twin``). InputError on unknown keys or wrong types."""
+    unknown = set(table) - set(TRUTH_TABLE_KEYS)
+    if unknown:
+        raise InputError(f"{source}: unknown [truth] keys {', '.join(sorted(unknown))}; known: {', '.join(TRUTH_TABLE_KEYS)}")
+    out, twin = {}, {}
+    for key, value in table.items():
+        field, scale = TRUTH_TABLE_KEYS[key]
+        if scale is None:
+            if field in ("truth_revolutions", "twin.warmup_revolutions"):
+                if isinstance(value, bool) or not isinstance(value, int):
+                    raise InputError(f"{source}: [truth] {key} must be an integer, got {value!r}")
+            elif not isinstance(value, str):
+                raise InputError(f"{source}: [truth] {key} must be a string, got {value!r}")
+        else:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"{source}: [truth] {key} must be a number, got {value!r}")
+            value = float(value) * scale
+        if field.startswith("twin."):
+            twin[field[5:]] = value
+        else:
+            out[field] = value
+    if twin:
+        out["twin"] = TwinPhysics(**twin)
+    return out
 
 
 def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandScene:
     """The StandScene a simulated recording was made with, from its root attributes.
 
     ``truth(scene_from_attrs(read_recording(p)["attrs"]), t)`` is the noise-free truth behind
-    recording p (t = row / sample_rate_hz when there are no gaps). InputError if the recording does
-    not come from the simulated stand. The mechanism is the default one unless given.
+    recording p (t = row / sample_rate_hz when there are no gaps), exactly: every truth parameter
+    is an attribute. InputError if the recording does not come from the simulated stand. The
+    mechanism is the default one unless given. Recordings made before the twin (no truth_model
+    attribute) had the kinematic truth.
     """
     def text(v):
         return v.decode() if isinstance(v, bytes) else str(v)
+
+    def num(key, default):
+        return float(attrs[key]) if key in attrs else default
+
     if text(attrs.get("device", "")) != "sim" or "stand_mode" not in attrs:
         raise InputError("this recording does not come from the simulated stand: it has no known truth")
+    d = StandScene.__dataclass_fields__
     return StandScene(
-        mode=text(attrs["stand_mode"]), law=text(attrs["law"]), cam_speed_rpm=float(attrs["cam_speed_rpm"])
-        if "cam_speed_rpm" in attrs else 180.0, Fu=float(attrs["Fu_N"]), backlash=float(attrs["backlash_mm"]) * 1e-3,
+        mode=text(attrs["stand_mode"]), law=text(attrs["law"]), cam_speed_rpm=num("cam_speed_rpm", 180.0),
+        Fu=float(attrs["Fu_N"]), backlash=float(attrs["backlash_mm"]) * 1e-3,
         jt_factor=float(attrs["jt_factor"]), ripple=float(attrs["truth_omega1_ripple"]),
         cal_accel=float(attrs["cal_accel_m_s2_peak"]), cal_freq=float(attrs["cal_freq_hz"]),
         cal_channel=text(attrs["cal_channel"]), mechanism=mechanism or Mechanism.default(),
         truth_model=text(attrs.get("truth_model", "kinematic")).split()[0],
-        truth_revolutions=int(attrs.get("truth_revolutions", 0)))
+        truth_revolutions=int(attrs.get("truth_revolutions", 0)),
+        restitution=num("truth_restitution", d["restitution"].default),
+        contact_damping=num("truth_contact_damping_s_per_m", d["contact_damping"].default),
+        contact_length=num("truth_contact_length_m", d["contact_length"].default),
+        kc_factor=num("truth_kc_factor", d["kc_factor"].default),
+        truth_accuracy=text(attrs.get("truth_accuracy", d["truth_accuracy"].default)),
+        twin=TwinPhysics.from_attrs(attrs))
 
 
 def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
@@ -304,12 +649,15 @@ def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
     return np.column_stack([tr["aE_t"] + g * np.cos(tr["phi2"]), tr["aE_n"] - g * np.sin(tr["phi2"])])
 
 
+TACHO_ANGLE_TOL = 1e-9   # rad: a phi1 this far below 2 pi k (rounding of an integrated angle) is at it
+
+
 def tacho(scene: StandScene, phi1, params: ChainParams) -> np.ndarray:
     """Tacho volts: tacho_v from each phi1 = 2 pi k (k >= 0) for tacho_width_s, else 0."""
     if scene.mode == "calibration":
         return np.zeros_like(np.asarray(phi1, float))
     width = scene.omega1_nominal * params.tacho_width_s  # rad
-    return np.where(np.mod(phi1, TWO_PI) < width, params.tacho_v, 0.0)
+    return np.where(np.mod(np.asarray(phi1) + TACHO_ANGLE_TOL, TWO_PI) < width + TACHO_ANGLE_TOL, params.tacho_v, 0.0)
 
 
 # --------------------------------------------------------------------------- filters
@@ -334,6 +682,7 @@ class ChainState:
     zi_hp: np.ndarray | None = None
     zi_aa: np.ndarray | None = None
     hp_level: np.ndarray | None = None  # mean input (V) of the AC coupling over one cam turn
+    truth_run: object | None = None     # the twin's trajectory, continued block after block
 
 
 def new_chain_state(params: ChainParams, rate_hz: float) -> ChainState:
@@ -364,19 +713,30 @@ def chain_block(scene: StandScene, params: ChainParams, state: ChainState, t_os,
                 resonant: bool = True, extra_m_s2=None):
     """Volts before the ADC at the oversampled times t_os (s), shape (n_os, 3), and the new state.
 
-    ``extra_m_s2`` (n_os, 2) is added to the sensed acceleration (fault injection: impacts).
+    The sensor integrates over each oversampled interval (dynamic truths): impacts keep their full
+    velocity step. With the twin truth the bending mode is the truth's own degree of freedom, so
+    the chain's resonance shapes the broadband mechanical noise only (never the motion a second
+    time). ``extra_m_s2`` (n_os, 2) is added to the sensed acceleration (fault injection: impacts).
     """
-    tr = truth(scene, t_os)
-    if scene.truth_model != "kinematic" and scene.mode == "run" and t_os.size > 1:
-        # the sensor integrates over each interval: impacts keep their full velocity step
-        tr["aE_t"] = boxcar_epsilon2(scene, t_os, t_os[1] - t_os[0]) * scene.mechanism.DE
+    run = scene.mode == "run"
+    dt = float(t_os[1] - t_os[0]) if t_os.size > 1 else None
+    if run and scene.truth_model == "twin":
+        if state.truth_run is None:
+            state.truth_run = new_twin_run(scene)
+        tr = twin_truth(scene, t_os, interval=dt, run=state.truth_run)
+    else:
+        tr = truth(scene, t_os, interval=dt if run and scene.truth_model in MODEL_TRUTHS else None)
     acc = sensed_acceleration(scene, tr)
     if extra_m_s2 is not None:
         acc = acc + extra_m_s2
     n = acc.shape[0]
-    if resonant and scene.mode == "run":
-        acc = acc + params.mech_noise_m_s2 * rng.standard_normal((n, 2))
-        acc, state.zi_res = _run(state.sos_res, acc, state.zi_res)
+    if resonant and run:
+        noise = params.mech_noise_m_s2 * rng.standard_normal((n, 2))
+        if scene.truth_model == "twin":
+            shaped, state.zi_res = _run(state.sos_res, noise, state.zi_res, level=np.zeros(2))
+            acc = acc + shaped
+        else:
+            acc, state.zi_res = _run(state.sos_res, acc + noise, state.zi_res)
     acc = acc + params.noise_m_s2 * rng.standard_normal((n, 2))
     volts = acc / np.asarray(params.ka_m_s2_per_v)[None, :]
     volts, state.zi_hp = _run(state.sos_hp, volts, state.zi_hp, state.hp_level)

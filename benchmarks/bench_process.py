@@ -1,17 +1,28 @@
-"""Benchmark of ``labtool process``: end-to-end throughput and peak memory (prints, no asserts).
+"""Benchmark of ``labtool process`` against a plain chunked numpy/scipy chain doing the same work.
 
-Writes a 3-channel 10 kHz float32 recording of ``--minutes`` (default 60) chunk-wise into /tmp
-(10 s of the synthetic stand, 30 cam revolutions at 180 rpm, tiled: the phase stays continuous),
-processes it in a single-threaded child process (OMP/MKL/OpenBLAS/numba threads = 1), reports samples/s (samples x channels / wall time) and the child's peak resident
-memory, and deletes the files.
+Writes a 3-channel 10 kHz float32 recording of ``--minutes`` (default 60) into /tmp (10 s of the
+simulated stand, acquisition/sim_stand.py, 30 cam revolutions at 180 rpm, tiled: the phase stays
+continuous). Then, interleaved ``--repeats`` times, each in a fresh single-threaded child process
+(OMP/MKL/OpenBLAS/numba threads = 1):
 
-    .venv/bin/python benchmarks/bench_process.py [--minutes 60] [--keep]
+- **labtool**: ``labtool process`` as the CLI runs it (processing.pipeline.process_recording);
+- **plain**: the chain a skilled user writes with numpy/scipy (``plain_chain`` below), at its best
+  chunk size (2^19 samples: 2^17 costs it 1.5x, 2^18 1.3x, 2^20 1.3x on this machine): the same two
+  passes and chunk overlap, Ka, scipy.signal.sosfiltfilt, cam angle from the tacho, gravity and
+  dwell reference, epsilon2, omega2 by a cumulative trapezoid with the same drift ramp, the normal
+  check, spikes (median/MAD + find_peaks), clipping runs, Welch spectra, cycle averages, and the
+  same seven per-sample outputs plus time written with h5py in the same HDF5 layout (2^17-sample chunks).
+
+Prints wall and CPU time per run, the medians, the ratio labtool / plain (throughput), and each
+child's peak resident memory (ru_maxrss). No asserts: a benchmark reports.
+
+    .venv/bin/python benchmarks/bench_process.py [--minutes 60] [--repeats 2] [--keep]
 """
 from __future__ import annotations
 
 import argparse
 import os
-import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -20,36 +31,25 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-
-def _rss_mb(pid: int) -> float:
-    try:
-        with open(f"/proc/{pid}/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return 0.0
+sys.path.insert(0, str(ROOT / "tests"))
 
 
 def make_file(path: Path, minutes: float) -> int:
     import h5py
     import numpy as np
 
-    from processing.synthetic import SynthSpec, make_signals
+    from stand_data import stand_volts
 
-    spec = SynthSpec(rpm=180.0, duration_s=10.0, tacho=True)
-    block, names, _ = make_signals(spec)  # 100000 x 3, exactly 30 revolutions
+    block, _, _, fs = stand_volts(10.0, 180.0, seed=1)  # 100000 x 3, exactly 30 revolutions
     block = block.astype(np.float32)
     n_blocks = int(round(minutes * 60 / 10.0))
     n = n_blocks * len(block)
     with h5py.File(path, "w") as f:
-        f.attrs.update({"format": "labtool.recording", "format_version": 1, "sample_rate_hz": 10000.0,
+        f.attrs.update({"format": "labtool.recording", "format_version": 1, "sample_rate_hz": fs,
                         "start_time_utc": "2026-11-22T00:00:00Z", "complete": True, "cam_speed_rpm": 180.0})
         d = f.create_dataset("signals", shape=(n, 3), dtype="f4", chunks=(65536, 3), maxshape=(None, 3))
-        d.attrs["channel_names"] = np.array(names, dtype=h5py.string_dtype())
-        d.attrs["ka_m_s2_per_v"] = np.full(3, np.nan)
+        d.attrs["channel_names"] = np.array(["aE_t", "aE_n", "tacho"], dtype=h5py.string_dtype())
+        d.attrs["ka_m_s2_per_v"] = np.full(3, 86.43)
         for k in range(n_blocks):
             d[k * len(block):(k + 1) * len(block)] = block
         ev = np.dtype([("index", "<i8"), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
@@ -57,65 +57,226 @@ def make_file(path: Path, minutes: float) -> int:
     return n
 
 
-CHILD = r"""
+LABTOOL = r"""
 import sys, time
-sys.path.insert(0, {root!r})
+t0 = time.perf_counter()
 from processing.readers import open_recording
 from processing.pipeline import process_recording
+with open_recording(sys.argv[1]) as rec:
+    s = process_recording(rec, sys.argv[2], warn=lambda m: None)
+print("WALL", time.perf_counter() - t0)
+print("INFO", s["cam_speed_rpm"], s["revolutions_averaged"], s["normal_check_rel_rms"])
+"""
+
+PLAIN = r"""
+import sys, time
 t0 = time.perf_counter()
-with open_recording({src!r}) as rec:
-    s = process_recording(rec, {out!r}, warn=lambda m: None)
+sys.path.insert(0, {bench!r})
+from bench_process import plain_chain
+s = plain_chain(sys.argv[1], sys.argv[2])
 print("WALL", time.perf_counter() - t0)
 print("INFO", s["cam_speed_rpm"], s["revolutions_averaged"], s["normal_check_rel_rms"])
 """
 
 
+def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
+    """The plain chunked numpy/scipy chain (the peer); same inputs, same work, same outputs."""
+    import math
+
+    import h5py
+    import numpy as np
+    from scipy import signal
+
+    from models.mechanism import Mechanism
+    from models.mechanism.motion_laws import CamProgram
+
+    f = h5py.File(src, "r")
+    sig = f["signals"]
+    fs = float(f.attrs["sample_rate_hz"])
+    ka = np.asarray(sig.attrs["ka_m_s2_per_v"])[:2]
+    ka = np.where(np.isfinite(ka), ka, 86.43)
+    n = sig.shape[0]
+    mech = Mechanism.default()
+    prog = CamProgram.for_mechanism(mech)
+    # pass 1: tacho edges (sub-sample, at mid level) and channel extremes
+    marks, vmin, vmax = [], np.full(3, np.inf), np.full(3, -np.inf)
+    prev = None
+    for a in range(0, n, chunk):
+        x = sig[a:a + chunk].astype(np.float64)
+        vmin, vmax = np.minimum(vmin, x.min(axis=0)), np.maximum(vmax, x.max(axis=0))
+        t = x[:, 2] if prev is None else np.concatenate([[prev], x[:, 2]])
+        i = np.flatnonzero((t[1:] >= 2.5) & (t[:-1] < 2.5))
+        marks.extend((a - (prev is not None) + i + (2.5 - t[i]) / (t[i + 1] - t[i])).tolist())
+        prev = x[-1, 2]
+    marks = np.asarray(marks)
+    period = float(np.median(np.diff(marks)))
+    rpm = 60 * fs / float(np.mean(np.diff(marks)))
+    sos = signal.butter(4, min(100 * rpm / 60, 0.4 * fs), fs=fs, output="sos")
+    margin = int(1.3 * 1.25 * period) + 400
+    N = 1 << 16
+    grid = 2 * np.pi * np.arange(N) / N
+    psi = prog(grid)[0]
+    phi2 = mech.phiD + mech.psi0 + psi
+    grav = np.column_stack([mech.g * np.cos(phi2), -mech.g * np.sin(phi2)])
+    moving_tab = prog.direction(grid) != 0
+    dm = max(1, int(round(10 / 360 * period)))
+    g = h5py.File(out, "w")
+    outs = {k: g.create_dataset(k, (n,), dt, chunks=(1 << 17,)) for k, dt in
+            [("time", "f8"), ("aE_t", "f4"), ("aE_n", "f4"), ("epsilon2", "f4"), ("omega2", "f4"), ("phi1", "f4"),
+             ("revolution", "i4"), ("clipped", "i1")]}
+    nper = 32768
+    psd_sum, nseg = 0.0, 0
+    cyc_sum, cyc_n = np.zeros((5, 720)), 0
+    chk_sq, chk_n, chk_pk = 0.0, 0, 0.0
+    n_spikes = 0
+    for a in range(0, n, chunk):
+        b = min(a + chunk, n)
+        wa, wb = max(0, a - margin), min(n, b + margin)
+        v = sig[wa:wb, :2].astype(np.float64)
+        c0, c1 = a - wa, b - wa
+        at = (v == vmin[:2]) | (v == vmax[:2])
+        clipped = np.zeros(len(v), bool)
+        for j in range(2):
+            d = np.diff(np.concatenate([[0], at[:, j].astype(np.int8), [0]]))
+            s0, s1 = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+            for p, q in zip(s0[s1 - s0 >= 3], s1[s1 - s0 >= 3]):
+                clipped[p:q] = True
+        phys = v * ka
+        lp = signal.sosfiltfilt(sos, phys, axis=0, padlen=27)
+        idx = np.arange(wa, wb, dtype=float)
+        k = np.clip(np.searchsorted(marks, idx, side="right") - 1, 0, len(marks) - 2)
+        phi1 = np.mod(2 * np.pi * (idx - marks[k]) / (marks[k + 1] - marks[k]), 2 * np.pi)
+        ti = (phi1 * (N / (2 * np.pi)) + 0.5).astype(np.int64) & (N - 1)
+        acc = lp - grav[ti]
+        moving = moving_tab[ti]
+        # dwell reference: mean of the middle 60 % of each dwell, interpolated between dwells
+        d = np.diff(np.concatenate([[0], (~moving).astype(np.int8), [0]]))
+        s0, s1 = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        full = (s0 > 0) & (s1 < len(v)) & (s1 - s0 >= 8)
+        s0, s1 = s0[full], s1[full]
+        cut = ((s1 - s0) * 0.2).astype(int)
+        cs = np.vstack([np.zeros((1, 2)), np.cumsum(acc, axis=0)])
+        lev = (cs[s1 - cut] - cs[s0 + cut]) / (s1 - s0 - 2 * cut)[:, None]
+        cen = 0.5 * (s0 + s1 - 1)
+        pos = np.arange(len(v))
+        acc -= np.column_stack([np.interp(pos, cen, lev[:, 0]), np.interp(pos, cen, lev[:, 1])])
+        acc[clipped] = np.nan
+        eps = acc[:, 0] / mech.DE
+        # omega2: trapezoid over each motion run widened by dm, linear ramp to 0 at its end
+        d = np.diff(np.concatenate([[0], moving.astype(np.int8), [0]]))
+        r0, r1 = np.flatnonzero(d == 1) - dm, np.flatnonzero(d == -1) + dm
+        ok = (r0 > 0) & (r1 < len(v))
+        c = np.concatenate([[0], np.cumsum(0.5 * (np.nan_to_num(eps)[1:] + np.nan_to_num(eps)[:-1]) / fs)])
+        om = np.zeros(len(v))
+        for p, q, good in zip(r0, r1, ok):
+            p, q = max(p, 0), min(q, len(v))
+            w = c[p:q] - c[p]
+            om[p:q] = w - np.linspace(0, 1, q - p) * w[-1] if good else np.nan
+        om[clipped] = np.nan
+        absn = np.sqrt(np.maximum(np.nan_to_num(acc[:, 1]), 0) / mech.DE)
+        mv = moving[c0:c1] & np.isfinite(om[c0:c1])
+        dd = np.abs(om[c0:c1][mv]) - absn[c0:c1][mv]
+        chk_sq, chk_n = chk_sq + float(dd @ dd), chk_n + int(mv.sum())
+        chk_pk = max(chk_pk, float(np.abs(om[c0:c1][mv]).max()) if mv.any() else 0.0)
+        for j in range(2):  # spikes: robust scale of the residual, peaks above k sigma
+            r = phys[:, j] - lp[:, j]
+            med = np.median(r[::8])
+            thr = max(8 * 1.4826 * np.median(np.abs(r[::8] - med)), 0.05 * np.abs(lp[:, j]).max())
+            if (np.abs(r - med) > thr).any():
+                pk, _ = signal.find_peaks(np.abs(r - med), height=thr, distance=20)
+                n_spikes += int(((pk >= c0) & (pk < c1)).sum())
+        if c1 - c0 >= nper:
+            fr, p = signal.welch(phys[c0:c1], fs, nperseg=nper, axis=0)
+            psd_sum, nseg = psd_sum + p, nseg + 1
+        rev = np.searchsorted(marks, idx, side="right") - 1
+        gi = np.minimum((phi1 * (720 / (2 * np.pi))).astype(np.int64), 719)
+        core = slice(c0, c1)
+        full_rev = (rev[core] >= 0) & (rev[core] < len(marks) - 1) & np.isfinite(om[core])
+        for q, y in enumerate((acc[core, 0], acc[core, 1], eps[core], om[core], absn[core])):
+            cyc_sum[q] += np.bincount(gi[core][full_rev], weights=y[full_rev], minlength=720)
+        cyc_n += int(full_rev.sum())
+        outs["time"][a:b] = idx[core] / fs
+        for name, y in (("aE_t", acc[core, 0]), ("aE_n", acc[core, 1]), ("epsilon2", eps[core]),
+                        ("omega2", om[core]), ("phi1", phi1[core])):
+            outs[name][a:b] = y.astype(np.float32)
+        outs["revolution"][a:b] = rev[core].astype(np.int32)
+        outs["clipped"][a:b] = clipped[core].astype(np.int8)
+    g.create_dataset("psd", data=psd_sum / max(nseg, 1))
+    g.create_dataset("cycle_sum", data=cyc_sum)
+    g.close()
+    f.close()
+    return {"cam_speed_rpm": rpm, "revolutions_averaged": len(marks) - 1,
+            "normal_check_rel_rms": math.sqrt(chk_sq / chk_n) / chk_pk, "spikes": n_spikes}
+
+
+def _child(code: str, src: Path, out: Path, root: Path = ROOT) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
+               NUMBA_NUM_THREADS="1", MPLBACKEND="Agg", PYTHONPATH=str(root))
+    before = os.times()
+    proc = subprocess.run([sys.executable, "-c", code, str(src), str(out)], env=env, capture_output=True, text=True)
+    after = os.times()
+    if proc.returncode != 0:
+        print(proc.stderr)
+        raise SystemExit(1)
+    lines = proc.stdout.splitlines()
+    wall = float(next(x.split()[1] for x in lines if x.startswith("WALL")))
+    info = next(x for x in lines if x.startswith("INFO")).split()[1:]
+    out.unlink(missing_ok=True)
+    return {"wall": wall, "cpu": (after.children_user - before.children_user) + (after.children_system - before.children_system),
+            "info": info}
+
+
+def _peak_rss_mb(code: str, src: Path, out: Path) -> float:
+    """Peak RSS of one more child, by GNU time's maximum resident set size if present, else ru_maxrss."""
+    import resource
+    env = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", "import resource, runpy, sys\n" + code +
+                        "\nprint('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)", str(src), str(out)],
+                       env=env, capture_output=True, text=True)
+    out.unlink(missing_ok=True)
+    line = next((x for x in r.stdout.splitlines() if x.startswith("RSS")), None)
+    return int(line.split()[1]) / 1024.0 if line else resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--keep", action="store_true")
+    ap.add_argument("--main", type=Path, default=None,
+                    help="a checkout of main (git worktree add /tmp/main-check main): its labtool runs too")
     args = ap.parse_args()
     tmpdir = Path(tempfile.mkdtemp(prefix="bench_process_", dir="/tmp"))
-    src, out = tmpdir / "rec.h5", tmpdir / "measured.nc"
+    src, out = tmpdir / "rec.h5", tmpdir / "out.nc"
+    plain = PLAIN.format(bench=str(ROOT / "benchmarks"))
     try:
         t0 = time.perf_counter()
         n = make_file(src, args.minutes)
         print(f"recording: {n} samples x 3 channels ({args.minutes:g} min at 10 kHz), "
               f"{src.stat().st_size / 1e6:.0f} MB float32, written in {time.perf_counter() - t0:.1f} s")
-        env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-                   NUMBA_NUM_THREADS="1", MPLBACKEND="Agg")
-        cmd = [sys.executable, "-c", CHILD.format(root=str(ROOT), src=str(src), out=str(out))]
-        # single-threaded (the env above); not pinned with taskset: on a shared machine a pinned
-        # process waits for whatever else runs on that CPU
-        t1 = time.perf_counter()
-        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        rss = []  # (s, MB) of the child while it runs: is memory bounded, or does it grow?
-        while proc.poll() is None:
-            rss.append((time.perf_counter() - t1, _rss_mb(proc.pid)))
-            time.sleep(0.25)
-        stdout, stderr = proc.communicate()
-        wall_outer = time.perf_counter() - t1
-        if proc.returncode != 0:
-            print(stderr)
-            raise SystemExit(1)
-        wall = float(next(line.split()[1] for line in stdout.splitlines() if line.startswith("WALL")))
-        info = next(line for line in stdout.splitlines() if line.startswith("INFO")).split()[1:]
-        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-        peak_mb = ru.ru_maxrss / 1024.0
-        cpu = ru.ru_utime + ru.ru_stime  # the child's CPU time, less sensitive to a shared machine's load
-        print(f"processing wall time: {wall:.1f} s (process incl. start-up {wall_outer:.1f} s)")
-        print(f"throughput: {3 * n / wall / 1e6:.2f} M samples/s (samples x channels), "
-              f"{n / wall / 1e6:.2f} M time steps/s, one core")
-        print(f"CPU time of the processing process (incl. ~1.5 s start-up and imports): {cpu:.1f} s "
-              f"-> {3 * n / cpu / 1e6:.2f} M samples/s of CPU")
-        print(f"peak memory (max RSS of the processing process): {peak_mb:.0f} MB")
-        rss = [(t, m) for t, m in rss if m > 0]
-        if rss:
-            marks = [rss[int(f * (len(rss) - 1))] for f in (0.2, 0.4, 0.6, 0.8, 1.0)]
-            print("resident memory while running: " + ", ".join(f"{m:.0f} MB at {t:.0f} s" for t, m in marks))
-        print(f"output: {out.stat().st_size / 1e6:.0f} MB; cam {float(info[0]):.2f} rpm, {info[1]} revolutions averaged, "
-              f"normal check {100 * float(info[2]):.2f} %")
-        print("goal: >= 10 M samples/s and < 500 MB peak memory")
+        _child(LABTOOL, src, out)  # warm-up: numba's cache, the page cache
+        peers = [("labtool", LABTOOL, ROOT), ("plain", plain, ROOT)]
+        if args.main is not None:
+            peers.append(("main", LABTOOL, args.main.resolve()))
+        runs = {name: [] for name, _, _ in peers}
+        for k in range(args.repeats):
+            for name, code, root in peers:
+                r = _child(code, src, out, root)
+                runs[name].append(r)
+                print(f"  run {k + 1} {name:8s} wall {r['wall']:6.1f} s  cpu {r['cpu']:6.1f} s  "
+                      f"({3 * n / r['wall'] / 1e6:.1f} M samples/s)  rpm {float(r['info'][0]):.2f}")
+        med = {name: statistics.median(r["wall"] for r in rs) for name, rs in runs.items()}
+        cpu = {name: statistics.median(r["cpu"] for r in rs) for name, rs in runs.items()}
+        print(f"median wall: labtool {med['labtool']:.1f} s, plain {med['plain']:.1f} s -> "
+              f"labtool is {med['plain'] / med['labtool']:.2f}x the plain chain's throughput "
+              f"(CPU time: {cpu['plain'] / cpu['labtool']:.2f}x)")
+        if "main" in med:
+            print(f"main's labtool: {med['main']:.1f} s wall -> labtool is {med['main'] / med['labtool']:.2f}x main "
+                  f"(CPU {cpu['main'] / cpu['labtool']:.2f}x); plain is {med['main'] / med['plain']:.2f}x main")
+        print(f"labtool: {3 * n / med['labtool'] / 1e6:.1f} M samples/s (samples x channels, incl. start-up)")
+        for name, code in (("labtool", LABTOOL), ("plain", plain)):
+            print(f"peak RSS {name}: {_peak_rss_mb(code, src, out):.0f} MB")
+        print("goal (issue 17): >= 2x the plain chain, peak RSS <= 300 MB")
     finally:
         if not args.keep:
             for p in (src, out):

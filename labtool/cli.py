@@ -37,6 +37,7 @@ COMMAND_MODULES = (
     "labtool.commands.acquire",
     "labtool.commands.calibrate",
     "labtool.commands.process",
+    "labtool.commands.export",
     "labtool.commands.bench",
 )
 

@@ -50,14 +50,19 @@ def settle_samples(sos: np.ndarray, tol: float = 1e-9) -> int:
     return int(math.ceil(math.log(tol) / math.log(r))) + 3 * len(sos)
 
 
+def padlen(sos: np.ndarray) -> int:
+    """Odd-extension length at each end of a zero-phase pass (scipy's filtfilt default)."""
+    return 3 * (2 * len(sos) + 1)
+
+
 def zero_phase(sos: np.ndarray, x: np.ndarray, axis: int = 0) -> np.ndarray:
     """Forward-backward SOS filtering (zero phase, squared magnitude), odd padding at the ends."""
     x = np.asarray(x, dtype=float)
     n = x.shape[axis]
-    padlen = min(3 * (2 * len(sos) + 1), n - 1)
+    pad = min(padlen(sos), n - 1)
     if n < 2:
         return x.copy()
-    return signal.sosfiltfilt(sos, x, axis=axis, padlen=max(padlen, 0))
+    return signal.sosfiltfilt(sos, x, axis=axis, padlen=max(pad, 0))
 
 
 class StreamingSOS:

@@ -12,7 +12,7 @@ These terms change by about 2.5 and 0.25 m/s^2 over the 15 deg stroke (2-3 % of 
 
 Offset and drift: the sensor chain is AC-coupled and the conditioner has an offset, so the zero of
 the acceleration is unknown. The follower rests in the dwells (omega2 = 0, epsilon2 = 0, aE_n = 0
-there), so each channel is referenced to the mean of the middle 60 % of every dwell, interpolated
+there), so each channel is referenced to the mean of the middle DWELL_MIDDLE (60 %) of every dwell, interpolated
 linearly between dwells. omega2 is the integral of epsilon2 over each motion interval (rise or
 return, plus a margin into the dwells), started at 0 and corrected by a linear ramp so that it
 ends at 0 in the next dwell: the integration drift cannot accumulate beyond one motion interval.
@@ -20,6 +20,9 @@ ends at 0 in the next dwell: the integration drift cannot accumulate beyond one 
 from __future__ import annotations
 
 import numpy as np
+
+DWELL_MIDDLE = 0.6    # fraction of each dwell, centred, whose mean is the reference
+DWELL_MIN_LEN = 8     # samples: shorter dwells are not used as a reference
 
 
 def gravity_reading(phi2: np.ndarray, g: float):
@@ -34,7 +37,7 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(d[0::2].tolist(), d[1::2].tolist()))
 
 
-def dwell_baseline(x: np.ndarray, dwell: np.ndarray, middle: float = 0.6, min_len: int = 8) -> np.ndarray:
+def dwell_baseline(x: np.ndarray, dwell: np.ndarray, middle: float = DWELL_MIDDLE, min_len: int = DWELL_MIN_LEN) -> np.ndarray:
     """Baseline (same unit as x) through the mean of the middle part of every complete dwell.
 
     x: (n,) or (n, nch); dwell: (n,) bool. The middle ``middle`` fraction keeps the impacts and the

@@ -36,20 +36,23 @@ class WelchAccumulator:
         self.sum_pow = np.zeros_like(self.sum_amp)
         self.count = 0
         self.skipped = 0
-        self._buf = np.empty((0, n_channels))
+        self._wfft32 = self._wfft.astype(np.complex64)
+        self._buf = np.empty((n_channels, 0), dtype=np.float32)
         self._bad = np.empty(0, dtype=bool)
 
     def reset_continuity(self) -> None:
         """Drop the carried-over samples (a gap: segments must not straddle it)."""
-        self._buf = np.empty((0, self.nch))
+        self._buf = np.empty((self.nch, 0), dtype=np.float32)
         self._bad = np.empty(0, dtype=bool)
 
     def feed(self, x: np.ndarray, bad: np.ndarray | None = None) -> None:
-        x = np.asarray(x, dtype=float).reshape(len(x), self.nch)
+        x = np.asarray(x).reshape(len(x), self.nch)
         bad = np.zeros(len(x), dtype=bool) if bad is None else np.asarray(bad, dtype=bool)
-        buf = np.concatenate([self._buf, x])
+        # the carried-over samples are kept channel-major in float32, the form the transforms use
+        buf = np.concatenate([self._buf, x.T.astype(np.float32)], axis=1)
         badbuf = np.concatenate([self._bad, bad])
-        nseg = 0 if len(buf) < self.nperseg else 1 + (len(buf) - self.nperseg) // self.hop
+        n = buf.shape[1]
+        nseg = 0 if n < self.nperseg else 1 + (n - self.nperseg) // self.hop
         if nseg:
             starts = np.arange(nseg) * self.hop
             badcum = np.concatenate([[0], np.cumsum(badbuf)])
@@ -57,20 +60,20 @@ class WelchAccumulator:
             self.skipped += int((~ok).sum())
             starts = starts[ok]
             # detrending by the segment mean commutes with the FFT: X((x - m) w) = X(x w) - m W;
-            # channel-major float32 transforms are ~4x faster and far more precise than needed
-            bt = np.ascontiguousarray(buf.T)
-            for st in starts:
-                seg = bt[:, st:st + self.nperseg]
-                spec = sfft.rfft((seg * self._w32).astype(np.float32), axis=1)
-                spec -= seg.mean(axis=1)[:, None] * self._wfft[None, :]
-                mag = np.abs(spec).astype(np.float64)
-                self.sum_amp += mag.T
-                self.sum_pow += (mag * mag).T
-                self.count += 1
+            # float32 transforms of all the block's segments in one call (~4x faster than float64
+            # one by one, and far more precise than needed)
+            if len(starts):
+                segs = np.lib.stride_tricks.sliding_window_view(buf, self.nperseg, axis=1)[:, starts]
+                spec = sfft.rfft(segs * self._w32, axis=-1)
+                spec -= segs.mean(axis=-1)[:, :, None] * self._wfft32
+                mag = np.abs(spec)                               # (nch, nseg, nfreq) float32
+                self.sum_amp += mag.sum(axis=1, dtype=np.float64).T
+                self.sum_pow += np.square(mag).sum(axis=1, dtype=np.float64).T
+                self.count += len(starts)
             keep_from = nseg * self.hop
         else:
             keep_from = 0
-        self._buf = buf[keep_from:].copy()
+        self._buf = buf[:, keep_from:].copy()
         self._bad = badbuf[keep_from:].copy()
 
     @property

@@ -26,6 +26,7 @@ import numpy as np
 import xarray as xr
 
 from common.errors import InputError
+from common.history import History, Lowpass
 from processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
@@ -90,20 +91,14 @@ class TimeFilter:
 def processing_filter(ds: xr.Dataset) -> TimeFilter | None:
     """The low-pass recorded in the measured file's processing history (``lowpass`` step), else its
     ``lowpass_hz`` attribute (order 4); None when the file records none or processing is absent."""
-    import json
     fs = ds.attrs.get("sample_rate_hz")
     cutoff, order = ds.attrs.get("lowpass_hz"), 4
-    try:
-        steps = json.loads(ds.attrs.get("processing_history", "[]"))
-        for st in steps if isinstance(steps, list) else []:
-            if isinstance(st, dict) and st.get("step") == "lowpass":
-                par = st.get("parameters", {})
-                cutoff = par.get("cutoff_hz", cutoff)
-                order = int(par.get("order", order))
-                if par.get("zero_phase") is False or par.get("kind", "butterworth") != "butterworth":
-                    return None   # not a filter this re-implementation reproduces
-    except (TypeError, ValueError):
-        pass
+    lp = History.parse(ds.attrs.get("processing_history", "[]")).find(Lowpass)
+    if lp is not None:
+        if lp.zero_phase is False or (lp.kind or "butterworth") != "butterworth":
+            return None   # not a filter this re-implementation reproduces
+        cutoff = lp.cutoff_hz if lp.cutoff_hz is not None else cutoff
+        order = int(lp.order) if lp.order is not None else order
     try:
         fs, cutoff = float(fs), float(cutoff)
     except (TypeError, ValueError):

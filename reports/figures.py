@@ -17,6 +17,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from common.cf import elapsed_seconds
+
 COLORS = {"const": "tab:blue", "var": "tab:red"}
 SIGNAL_LABEL = {"omega2": ("ω2", "rad/s"), "epsilon2": ("ε2", "rad/s²")}
 
@@ -136,7 +138,7 @@ def fig_spectra(ds, max_time_s: float = 1.0) -> tuple[str, Figure] | None:
         ax.grid(True, alpha=0.3)
     if spectra:
         axes[len(spectra) - 1, 0].set_xlabel("frequency [Hz]")
-    t = np.asarray(ds["time"].values, dtype=float) if series else None
+    t = elapsed_seconds(ds["time"].values) if series else None  # CF time may decode to datetime64
     sel = slice(0, int(np.searchsorted(t, t[0] + max_time_s, side="right"))) if series else None
     for i, n in enumerate(series):
         ax = axes[i, 1]

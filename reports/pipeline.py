@@ -91,8 +91,9 @@ def load_measured(path: Path) -> xr.Dataset:
     if not path.is_file():
         raise InputError(f"measured file {path} not found")
     try:
-        # lazily: the report reads only the revolutions it uses (align.read_measured)
-        ds = xr.open_dataset(path, engine="h5netcdf")
+        # lazily: the report reads only the revolutions it uses (align.read_measured); the CF time
+        # ('seconds since <start>') kept in seconds, as revolution_start_time and spike_time are
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
     except Exception as exc:   # h5py/xarray raise many types for a file that is not NetCDF4
         raise FileFormatError(f"{path} is not a NetCDF4 file written by 'labtool process' "
                               f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None

@@ -21,7 +21,8 @@ def test_must_show_sim_180_rpm_10_s_fast_writes_a_valid_v1_file(tmp_path, capsys
     assert a["format"] == "labtool.recording" and a["format_version"] == 1 and a["complete"]
     assert a["sample_rate_hz"] == 10000.0 and a["cam_speed_rpm"] == 180.0
     assert rec["signals"].shape == (100000, 3) and rec["channel_names"] == ["aE_t", "aE_n", "tacho"]
-    assert rec["ka_m_s2_per_v"][0] == 86.43 and math.isnan(rec["ka_m_s2_per_v"][2])
+    assert rec["ka_m_s2_per_v"][0] == 864.3 and math.isnan(rec["ka_m_s2_per_v"][2])  # the 480C02 at gain x1
+    assert a["truth_model"].startswith("twin") and a["conditioner_gain"] == pytest.approx(1.0)
     assert a["law"] == "sine" and a["Fu_N"] == 0.0 and a["backlash_mm"] == 0.128 and a["seed"] == 0
     assert [k for _, k, _ in rec["events"]] == ["start", "stop"]
 
@@ -33,7 +34,7 @@ def test_recovered_omega2_matches_the_truth(tmp_path):
     rec = read_recording(out)
     fs = rec["attrs"]["sample_rate_hz"]
     v = rec["signals"]
-    scene = sc.StandScene(cam_speed_rpm=300)
+    scene = sc.scene_from_attrs(rec["attrs"])      # the twin behind the recording
     DE = scene.mechanism.DE
     eps = signal.sosfiltfilt(signal.butter(4, 400, fs=fs, output="sos"), v[:, 0] * rec["ka_m_s2_per_v"][0]) / DE
     rises = np.flatnonzero((v[1:, 2] > 2.5) & (v[:-1, 2] <= 2.5)) + 1
@@ -89,6 +90,9 @@ def test_bad_input_one_line_exit_2(tmp_path, capsys):
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fault", "drop@1", "-o", o],
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "--fast", "-o", o],
         ["acquire", "--device", "nidaqmx:Dev1/ai0:2", "-o", o],  # no NI-DAQmx runtime here
+        ["acquire", "--fast", "--fu", "500000", "-o", o],          # the twin's motor stalls: a solver error
+        ["acquire", "--fast", "--truth", "rigid", "--restitution", "1.5", "-o", o],
+        ["acquire", "--fast", "--contact-damping", "nan", "-o", o],
     ]
     for argv in cases:
         assert main(argv) == 2, argv
@@ -126,9 +130,10 @@ def test_sample_data_is_what_its_scene_makes(tmp_path, name):
     assert (SAMPLE / f"{name}.h5").stat().st_size < 1_000_000
 
 
-def test_sample_calibration_gives_the_papers_ka():
+def test_sample_calibration_gives_the_chains_ka():
+    """The sample recordings use the 480C02 at gain x1 (Ka = 864.3 m/s^2/V), calibration included."""
     from acquisition.calibration import load_calibration
-    assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(86.43, rel=0.005)
+    assert load_calibration(SAMPLE / "calibration.toml")["aE_t"]["ka_m_s2_per_v"] == pytest.approx(864.3, rel=0.005)
 
 
 def test_truth_from_a_recordings_attributes(tmp_path):
@@ -148,9 +153,10 @@ def test_elastic_truth_run_records_the_models_motion(tmp_path):
     assert main(["acquire", "--truth", "elastic", "--rpm", "300", "--duration", "0.6", "--fast", "--ka", "864.3",
                  "-o", str(out)]) == 0
     rec = read_recording(out)
-    assert rec["attrs"]["truth_model"].startswith("elastic") and rec["attrs"]["truth_revolutions"] == 5  # ceil((0.6 + 0.2) s x 5 turns/s) + 1
+    assert rec["attrs"]["truth_model"].startswith("elastic") and rec["attrs"]["truth_revolutions"] == 0  # the default 8, periodic
     scene = sc.scene_from_attrs(rec["attrs"])
-    assert scene.truth_model == "elastic" and scene.ripple == 0.0
+    assert scene.truth_model == "elastic" and scene.ripple == 0.0 and scene.contact_damping == 40.0
+    assert sc.model_table(scene)["periodic"]
     fs = rec["attrs"]["sample_rate_hz"]
     t = np.arange(rec["signals"].shape[0]) / fs
     truth = sc.truth(scene, t)
@@ -160,6 +166,30 @@ def test_elastic_truth_run_records_the_models_motion(tmp_path):
     ref = signal.sosfiltfilt(sos, truth["aE_n"] - scene.mechanism.g * np.sin(truth["phi2"]))
     meas, ref = meas - meas.mean(), ref - ref.mean()
     assert np.sqrt(np.mean((meas - ref) ** 2)) < 0.1 * np.abs(ref).max()
-    for argv in (["--ripple", "0.01"], ["--duration", "inf"], ["--truth", "fem"]):
+    for argv in (["--ripple", "0.01"], ["--truth", "fem"], ["--contact-damping", "0", "--duration", "100"],
+                 ["--contact-damping", "-1"]):
         base = ["acquire", "--truth", "elastic", "--fast", "--duration", "0.5", "-o", str(tmp_path / "x.h5")]
         assert main(base + argv) == 2
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_scene_file_truth_table(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text('[stand]\ncam_speed_rpm = 300\nduration_s = 0.3\n\n[truth]\ncontact_damping_s_per_m = 25.0\n'
+                     'mode_hz = 1500\nfriction_radius_mm = 0.02\npersistence_ms = 3\n')
+    out = tmp_path / "r.h5"
+    assert main(["acquire", "--scene", str(scene), "--fast", "--restitution", "0.4", "-o", str(out)]) == 0
+    a = read_recording(out)["attrs"]
+    assert a["truth_contact_damping_s_per_m"] == 25.0 and a["truth_mode_hz"] == 1500.0 and a["resonance_hz"] == 1500.0
+    assert a["truth_friction_radius_m"] == pytest.approx(2e-5) and a["truth_persistence_s"] == pytest.approx(3e-3)
+    assert a["truth_restitution"] == 0.4
+    o = str(tmp_path / "o.h5")
+    for body in ('[truth]\nmode_hz = "fast"\n', '[truth]\nfrction_torque_Nm = 1\n', '[truth]\ndrive = "belt"\n',
+                 '[truth]\nmodel = "fem"\n', 'truth = 3\n', '[truth]\nrevolutions = 1.5\n'):
+        bad = tmp_path / "bad.toml"
+        bad.write_text("[stand]\nduration_s = 0.2\n" + body if body.startswith("[") else body + "[stand]\n")
+        capsys.readouterr()
+        assert main(["acquire", "--scene", str(bad), "--fast", "-o", o]) == 2, body
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("labtool: error: "), (body, err)
+    assert not (tmp_path / "o.h5").exists()

@@ -93,7 +93,10 @@ def test_any_isolated_step_is_found_where_and_as_large_as_it_is(i, d, sign, seed
     r = _record({i: sign * d}, seed=seed)
     t, dd, _ = impacts.detect_impacts(r, DET, impacts.threshold_step(impacts.prepare(r, DET), 500.0, DET))
     assert t.size == 1
-    assert abs(t[0] - i / FS) < 0.2e-3 and dd[0] == pytest.approx(sign * d, rel=0.1)
+    # the size has a noise floor: 0.0097 rad/s rms at this noise (200 seeds, d = 0.25); below
+    # 0.5 rad/s a 10 % bound is within 2.6 sigma of it and fails ~1 % of draws, so the bound is
+    # 10 % or 5 sigma, whichever is larger
+    assert abs(t[0] - i / FS) < 0.2e-3 and abs(dd[0] - sign * d) <= max(0.1 * d, 0.05)
 
 
 def test_normal_channel_confirms_a_real_step():

@@ -181,7 +181,23 @@ def test_calibration_file(tmp_path):
 
 
 def test_history_is_json_with_parameters():
+    """Steps record typed parameters; numpy scalars become numbers, NaN null; the schema reads back."""
+    from common.history import CheckNormal, Lowpass
+
     h = History()
-    h.add("lowpass", cutoff_hz=np.float64(300.0), order=np.int64(4), missing=float("nan"), arr=np.arange(2))
+    h.add(Lowpass(kind="butterworth", order=np.int64(4), cutoff_hz=np.float64(300.0), zero_phase=True, rule="given",
+                  chunk_samples=1024, overlap_samples=np.int64(50)))
+    h.add(CheckNormal(value=float("nan")))
     steps = json.loads(h.to_json())
-    assert steps == [{"step": "lowpass", "parameters": {"cutoff_hz": 300.0, "order": 4, "missing": None, "arr": [0, 1]}}]
+    assert steps[0] == {"step": "lowpass", "parameters": {"kind": "butterworth", "order": 4, "cutoff_hz": 300.0,
+                                                          "zero_phase": True, "rule": "given", "chunk_samples": 1024,
+                                                          "overlap_samples": 50}}
+    assert steps[1]["parameters"]["value"] is None
+    back = History.parse(h.to_json())
+    assert back.find(Lowpass).cutoff_hz == 300.0 and back.find(Lowpass).order == 4
+    # a step of another writer is kept as read; garbage gives an empty history, not an error
+    other = History.parse(json.dumps(steps + [{"step": "custom", "parameters": {"x": 1}}]))
+    assert other.to_list()[-1] == {"step": "custom", "parameters": {"x": 1}}
+    assert History.parse("not json").to_list() == [] and History.parse("[1, 2]").find(Lowpass) is None
+    with pytest.raises(TypeError):
+        h.add("lowpass")

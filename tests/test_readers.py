@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing.readers import open_recording, sniff
-from processing.synthetic import write_v1
+from stand_data import write_v1
 
 NAMES = ["aE_t", "aE_n", "tacho"]
 
@@ -144,7 +144,7 @@ def test_tdms_reader(tmp_path):
             ChannelObject("Untitled", n, v[:, j], properties={"wf_increment": 0.001, "ka_m_s2_per_v": 86.43})
             for j, n in enumerate(NAMES)])
     rec = open_recording(p)
-    assert rec.format == "tdms" and rec.sample_rate_hz == pytest.approx(1000.0) and rec.channel_names == NAMES
+    assert rec.format == "tdms (group 'Untitled')" and rec.sample_rate_hz == pytest.approx(1000.0) and rec.channel_names == NAMES
     assert rec.cam_speed_rpm == 180.0 and rec.ka_m_s2_per_v[0] == 86.43
     np.testing.assert_allclose(rec.read(100, 900), v[100:900])
     q = tmp_path / "norate.tdms"

@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def sim(seed=1, duration=2.0, realtime=False, faults=()):
-    return SimStand(sc.StandScene(), seed=seed, duration_s=duration, realtime=realtime, faults=faults)
+    # the kinematic truth: these tests pin exact sample indices of the recorder, not the physics
+    return SimStand(sc.StandScene(truth_model="kinematic"), seed=seed, duration_s=duration, realtime=realtime, faults=faults)
 
 
 def reference_data(seed, duration):
@@ -94,7 +95,7 @@ WRITER = r"""
 import sys
 from acquisition import session, signal_chain as sc
 from acquisition.sim_stand import SimStand
-dev = SimStand(sc.StandScene(), seed=11, duration_s=60.0, realtime=True)
+dev = SimStand(sc.StandScene(truth_model="kinematic"), seed=11, duration_s=60.0, realtime=True)
 def flushed(n):
     print(n, flush=True)
 session.run(dev, sys.argv[1], 10000, 60.0, flush_interval_s=0.3, on_flush=flushed)

@@ -21,8 +21,8 @@ SCENE_KEYS = {
 }
 DEFAULTS = {"mode": "run", "law": "sine", "rpm": 180.0, "fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0,
             "ripple": 0.005, "cal_accel": 9.81, "cal_freq": 79.6, "cal_channel": "aE_t", "seed": 0,
-            "duration": 10.0, "rate": 10000.0, "ka": 86.43,
-            "truth": "kinematic"}
+            "duration": 10.0, "rate": 10000.0, "ka": 864.3,
+            "truth": "twin"}
 
 
 def register(app: typer.Typer) -> None:
@@ -30,7 +30,9 @@ def register(app: typer.Typer) -> None:
 
 
 def load_scene(path: Path) -> dict:
-    """Option values from a scene file's [stand] table (keys in SCENE_KEYS); InputError if bad."""
+    """Option values from a scene file's [stand] table (keys in SCENE_KEYS), and under "_truth"
+    the StandScene arguments of its optional [truth] table (acquisition.signal_chain.TRUTH_TABLE_KEYS);
+    InputError if bad."""
     try:
         doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -43,7 +45,17 @@ def load_scene(path: Path) -> dict:
     unknown = set(stand) - set(SCENE_KEYS)
     if unknown:
         raise InputError(f"scene file {path}: unknown keys {', '.join(sorted(unknown))}; known: {', '.join(SCENE_KEYS)}")
-    return {SCENE_KEYS[k]: v for k, v in stand.items()}
+    out = {SCENE_KEYS[k]: v for k, v in stand.items()}
+    table = doc.get("truth")
+    if table is not None:
+        from acquisition.signal_chain import truth_settings
+        if not isinstance(table, dict):
+            raise InputError(f"scene file {path}: [truth] must be a table")
+        settings = truth_settings(table, f"scene file {path}")
+        if "truth_model" in settings:
+            out["truth"] = settings.pop("truth_model")
+        out["_truth"] = settings
+    return out
 
 
 def acquire(
@@ -59,14 +71,17 @@ def acquire(
     backlash_mm: Optional[float] = typer.Option(None, help="groove backlash j (mm) (sim, stored) (default 0.128)"),
     jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt (sim, stored) (default 1)"),
     ripple: Optional[float] = typer.Option(None, help="motor speed ripple on omega1, relative (sim) (default 0.005)"),
-    ka: Optional[float] = typer.Option(None, help="Ka (m/s^2/V): the simulated chain's, or the calibration to store for nidaqmx (default 86.43 sim, none nidaqmx)"),
+    ka: Optional[float] = typer.Option(None, help="Ka (m/s^2/V): the simulated chain's, or the calibration to store for nidaqmx "
+                                       "(default 864.3 sim = the 480C02 at gain x1; 86.43 = gain x10, the impacts clip; none nidaqmx)"),
     mode: Optional[str] = typer.Option(None, help="sim: run (cam drives the follower) | calibration (shaker sine) (default run)"),
     cal_freq: Optional[float] = typer.Option(None, help="calibration mode: shaker frequency (Hz) (default 79.6)"),
     cal_accel: Optional[float] = typer.Option(None, help="calibration mode: shaker amplitude (m/s^2 peak) (default 9.81)"),
     cal_channel: Optional[str] = typer.Option(None, help="calibration mode: channel on the shaker (default aE_t)"),
-    truth: Optional[str] = typer.Option(None, help="sim: what moves the follower: kinematic (cam as input, default), "
-                                        "or the rigid / elastic dynamic model (finite --duration; impacts may clip: "
-                                        "consider --ka 864.3, the 480C02 at gain x1)"),
+    truth: Optional[str] = typer.Option(None, help="sim: what moves the follower: twin (the stand's model richer than "
+                                        "both models, default; docs/twin.md), kinematic (cam as input), or the rigid / "
+                                        "elastic model's own equations (their periodic steady state)"),
+    restitution: Optional[float] = typer.Option(None, help="sim, rigid truth: Newton's restitution k of the impacts (default 0.2)"),
+    contact_damping: Optional[float] = typer.Option(None, help="sim, twin and elastic truths: Hunt-Crossley contact damping (s/m) (default 40)"),
     scene: Optional[Path] = typer.Option(None, help="TOML scene file with a (stand) table; options given here override it"),
     fault: Optional[List[str]] = typer.Option(None, help="sim fault injection kind@seconds (overrun, drop, disconnect, clip); repeatable"),
     iepe_excitation: bool = typer.Option(False, help="nidaqmx: the DAQ powers the IEPE sensor (no 480C02)"),
@@ -81,9 +96,13 @@ def acquire(
                                      truth=truth).items()
              if v is not None}
     opts = dict(DEFAULTS)
+    opts["_truth"] = {}
     if scene is not None:
         opts.update(load_scene(scene))
     opts.update(given)
+    for name, value in (("restitution", restitution), ("contact_damping", contact_damping)):
+        if value is not None:
+            opts["_truth"] = {**opts["_truth"], name: float(value)}
     if "ripple" in given or (scene is not None and "ripple" in load_scene(scene)):
         opts["_ripple_given"] = True
     kind, arg = parse_device(device)
@@ -123,21 +142,17 @@ def _sim_device(opts, realtime, faults, dur):
     from acquisition.sim_stand import SimStand, parse_fault
 
     model = str(opts["truth"])
-    revs = 0
-    if model != "kinematic":
-        if math.isinf(dur):
-            raise InputError(f"the {model} truth needs a finite --duration")
-        # one turn of margin past the last (whole, 0.1 s) block
-        revs = int(math.ceil((dur + 0.2) * float(opts["rpm"]) / 60.0)) + 1
-        if opts.get("_ripple_given") is None:
-            opts["ripple"] = 0.0  # the model's cam runs at constant speed
-    scene = sc.StandScene(truth_model=model, truth_revolutions=revs,mode=str(opts["mode"]), law=str(opts["law"]), cam_speed_rpm=float(opts["rpm"]),
+    if model in sc.MODEL_TRUTHS and opts.get("_ripple_given") is None:
+        opts["ripple"] = 0.0  # the model's cam runs at constant speed
+    scene = sc.StandScene(truth_model=model, mode=str(opts["mode"]), law=str(opts["law"]), cam_speed_rpm=float(opts["rpm"]),
                           Fu=float(opts["fu"]), backlash=float(opts["backlash_mm"]) * 1e-3,
                           jt_factor=float(opts["jt_factor"]), ripple=float(opts["ripple"]),
                           cal_accel=float(opts["cal_accel"]), cal_freq=float(opts["cal_freq"]),
-                          cal_channel=str(opts["cal_channel"]))
+                          cal_channel=str(opts["cal_channel"]), **opts["_truth"])
+    if model in sc.MODEL_TRUTHS and scene.mode == "run":
+        scene = _model_truth_for(scene, dur)
     k = float(opts["ka"])
-    params = sc.ChainParams(ka_m_s2_per_v=(k, k))
+    params = sc.ChainParams(ka_m_s2_per_v=(k, k), resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
     dev = SimStand(scene, params, seed=int(opts["seed"]), duration_s=None if math.isinf(dur) else dur,
                    realtime=realtime, faults=[parse_fault(f) for f in faults])
     attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k,
@@ -145,6 +160,26 @@ def _sim_device(opts, realtime, faults, dur):
     if scene.mode == "run":
         attrs["cam_speed_rpm"] = float(scene.cam_speed_rpm)
     return dev, [k, k, float("nan")], attrs
+
+
+def _model_truth_for(scene, dur):
+    """The rigid/elastic truth scene that covers ``dur`` s: its periodic steady state, or (not
+    periodic) a run over the whole duration up to MAX_MODEL_REVOLUTIONS turns; InputError else."""
+    import dataclasses
+
+    from acquisition import signal_chain as sc
+
+    if sc.model_truth_span(scene) >= dur:
+        return scene
+    needed = int(math.ceil((dur + 0.2) * scene.cam_speed_rpm / 60.0)) + 1 if math.isfinite(dur) else math.inf
+    if scene.truth_revolutions == 0 and needed <= sc.MAX_MODEL_REVOLUTIONS:
+        longer = dataclasses.replace(scene, truth_revolutions=needed)
+        if sc.model_truth_span(longer) >= dur:
+            return longer
+    raise InputError(f"the {scene.truth_model} truth does not reach a periodic steady state in {scene.model_revolutions} "
+                     f"cam turns (restitution {scene.restitution:g}, contact damping {scene.contact_damping:g} s/m), "
+                     f"so it cannot be repeated over {dur:g} s: give energy loss (--restitution < 1, --contact-damping > 0) "
+                     f"or a --duration of at most {sc.MAX_MODEL_REVOLUTIONS} turns")
 
 
 def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):

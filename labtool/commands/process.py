@@ -23,9 +23,13 @@ def process(
     rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
     lowpass_hz: Optional[float] = typer.Option(None, help="low-pass corner [Hz] (default: 100 x cam frequency)"),
     ac_tau: Optional[float] = typer.Option(None, help="AC-coupling time constant of the sensor chain [s], undone if given"),
-    channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=ai2'"),
+    channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=Dev1/ai2'"),
+    group: Optional[str] = typer.Option(None, help="TDMS group holding the samples (default: the only group with samples)"),
+    delimiter: Optional[str] = typer.Option(None, help="text tables: column delimiter, 'comma', 'semicolon' or 'tab' (default: detected)"),
+    decimal: Optional[str] = typer.Option(None, help="text tables: decimal mark, '.' or ',' (default: detected)"),
+    time_unit: Optional[str] = typer.Option(None, help="text tables: unit of the time column, s, ms or us (default: from its header)"),
     mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
-    chunk_samples: int = typer.Option(1 << 18, help="samples per processing chunk (memory bound)"),
+    chunk_samples: int = typer.Option(1 << 17, help="samples per processing chunk (memory bound; 2^17 keeps a 1-hour run under 300 MB)"),
     force: bool = typer.Option(False, help="overwrite an existing output file"),
 ) -> None:
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
@@ -48,7 +52,8 @@ def process(
     mapping = _channel_map(channels) if channels else {}
     mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
     cal = read_calibration(calibration) if calibration is not None else None
-    rec = open_recording(recording, sample_rate_hz=sample_rate)
+    rec = open_recording(recording, sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
+                         decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
     try:
         rec.rename_channels(mapping)
     except Exception:
@@ -91,3 +96,33 @@ def _channel_map(text: str) -> dict[str, str]:
             raise InputError(f"--channels: '{new.strip()}' is not one of aE_t, aE_n, tacho")
         out[new.strip()] = old.strip()
     return out
+
+
+def _delimiter(text):
+    from common.errors import InputError
+    if text is None:
+        return None
+    d = {"comma": ",", ",": ",", "semicolon": ";", ";": ";", "tab": "\t", "\\t": "\t", "\t": "\t"}.get(text.lower())
+    if d is None:
+        raise InputError(f"--delimiter must be comma, semicolon or tab, got {text!r}")
+    return d
+
+
+def _decimal(text):
+    from common.errors import InputError
+    if text is None:
+        return None
+    if text not in (".", ","):
+        raise InputError(f"--decimal must be '.' or ',', got {text!r}")
+    return text
+
+
+def _time_unit(text):
+    from common.errors import InputError
+    from processing.readers.units import time_unit
+    if text is None:
+        return None
+    f = time_unit(text)
+    if f is None:
+        raise InputError(f"--time-unit must be s, ms or us, got {text!r}")
+    return f

@@ -1,7 +1,9 @@
 """Readers of recordings into one lazily read :class:`Recording`, dispatched by content.
 
 ``open_recording(path)`` looks at the first bytes, not the file name: HDF5 signature -> labtool
-recording v1; ``TDSm`` -> LabVIEW TDMS; printable text -> CSV; anything else -> FileFormatError.
+recording v1 (hdf5_v1.py); ``TDSm`` -> LabVIEW TDMS (tdms.py); text starting ``LabVIEW Measurement``
+-> LVM (lvm.py); other printable text -> CSV-like exports (csv.py); anything else ->
+FileFormatError. One module per format; every reader gives the same :class:`Recording`.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ __all__ = ["open_recording", "Recording", "Event", "sniff"]
 
 
 def sniff(path) -> str:
-    """'hdf5', 'tdms' or 'csv' from the file's content; FileFormatError otherwise."""
+    """'hdf5', 'tdms', 'lvm' or 'csv' from the file's content; FileFormatError otherwise."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"recording {p} does not exist")
@@ -41,23 +43,33 @@ def sniff(path) -> str:
         if exc.start < len(head) - 4:
             raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)") from None
         text = head[:exc.start].decode("utf-8")
-    if "\x00" in text or not any(ch in text for ch in ",\n"):
+    if "\x00" in text or not any(ch in text for ch in ",;\t\n"):
         raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)")
-    return "csv"
+    return "lvm" if text.lstrip("\ufeff").startswith("LabVIEW Measurement") else "csv"
 
 
-def open_recording(path, sample_rate_hz: float | None = None) -> Recording:
-    """Open any supported recording; ``sample_rate_hz`` (Hz) is used only when the file states none."""
+def open_recording(path, sample_rate_hz: float | None = None, group: str | None = None,
+                   delimiter: str | None = None, decimal: str | None = None,
+                   time_unit_s: float | None = None) -> Recording:
+    """Open any supported recording.
+
+    sample_rate_hz (Hz): used when the file states none (TDMS, CSV) or to override a text table's
+    time column; group: the TDMS group; delimiter, decimal, time_unit_s (s per unit of a time column):
+    overrides of what the text readers detect.
+    """
     kind = sniff(path)
     if kind == "hdf5":
         from processing.readers.hdf5_v1 import open_hdf5_v1
         rec = open_hdf5_v1(path)
     elif kind == "tdms":
         from processing.readers.tdms import open_tdms
-        rec = open_tdms(path, sample_rate_hz)
+        rec = open_tdms(path, sample_rate_hz, group)
+    elif kind == "lvm":
+        from processing.readers.lvm import open_lvm
+        rec = open_lvm(path, sample_rate_hz, time_unit_s)
     else:
         from processing.readers.csv import open_csv
-        rec = open_csv(path, sample_rate_hz)
+        rec = open_csv(path, sample_rate_hz, delimiter, decimal, time_unit_s)
     if rec.n_samples == 0:
         rec.close()
         raise FileFormatError(f"{path}: the recording holds no samples")

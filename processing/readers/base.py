@@ -33,9 +33,10 @@ class Recording:
     """A recording opened for chunked reading.
 
     sample_rate_hz: the rate the device really ran at (Hz); channel_names: one per column;
-    ka_m_s2_per_v: per-channel calibration (m/s^2/V, NaN where none); complete: False for a
+    ka_m_s2_per_v: per-channel calibration (m/s^2/V, NaN where none); channel_units: "V" (read()
+    gives volts) or "m/s^2" (the file gave an acceleration, read() gives m/s^2); complete: False for a
     recording whose writer did not close cleanly; cam_speed_rpm: nominal, NaN when unknown.
-    ``read(start, stop)`` returns float64 volts of shape (stop - start, n_channels).
+    ``read(start, stop)`` returns float64 of shape (stop - start, n_channels) in channel_units.
     """
     source: str
     format: str
@@ -51,6 +52,16 @@ class Recording:
     attrs: dict = dataclasses.field(default_factory=dict)
     warnings: list[str] = dataclasses.field(default_factory=list)
     close: Callable[[], None] = lambda: None
+    channel_units: list[str] = dataclasses.field(default_factory=list)   # "V" or "m/s^2" per channel
+    unit_sources: list[str] = dataclasses.field(default_factory=list)    # where each unit was read
+    assumptions: list[str] = dataclasses.field(default_factory=list)     # what the reader assumed, in words
+
+    def __post_init__(self):
+        n = len(self.channel_names)
+        if not self.channel_units:
+            self.channel_units = ["V"] * n
+        if not self.unit_sources:
+            self.unit_sources = ["format (volts)"] * n
 
     def __enter__(self) -> "Recording":
         return self
@@ -74,7 +85,8 @@ class Recording:
         if name.lower() in low:
             return low.index(name.lower())
         raise FileFormatError(
-            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'})")
+            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'}); "
+            f"name the file's channels with --channels {name}=<channel>")
 
     def rename_channels(self, mapping: dict[str, str]) -> None:
         """Give source channels the names the chain uses, e.g. {"aE_t": "aE180t"} (new: old)."""

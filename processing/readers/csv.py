@@ -1,132 +1,141 @@
-"""Reader of CSV recordings with a stated sample rate.
+"""Reader of CSV-like exports: labtool's CSV, NI "Write To Measurement File" text, generic DAQ exports.
 
-Layout: optional comment lines ``# key = value`` (``sample_rate_hz``, ``cam_speed_rpm``,
-``ka_<channel>`` in m/s^2/V), then a header row of channel names, then one row per sample (volts).
-A ``time`` column (s), if present, is not a channel; it gives the sample rate when no comment does.
-Without either, the caller's ``sample_rate_hz`` is used, else InputError. The file is scanned
-once on opening (bounded memory) and read in chunks by row.
+What is detected, and reported as an assumption (a warning and the history's ``read`` step):
+- an optional header block before the column names: ``# key = value`` (labtool), ``key<sep>value``
+  or ``key: value`` lines; ``sample_rate_hz``/``Sample Rate``/``Fs`` (Hz), ``dt``/``Delta_X`` (s),
+  ``cam_speed_rpm``, ``ka_<channel>`` (m/s^2/V), ``start_time_utc`` are understood;
+- the delimiter (comma, semicolon, tab) and the decimal mark (a comma with ; or tab delimiters);
+- the column names row; units in the names (``aE_t [V]``, ``time (ms)``, ``t_ms``);
+- a time column (time, t, X_Value, Timestamp): numbers with a unit, or ISO 8601 timestamps; read
+  in full and checked row by row (text.py).
+What is ambiguous is refused with one line naming the option that settles it (``--delimiter``,
+``--decimal``, ``--time-unit``, ``--sample-rate``).
 """
 from __future__ import annotations
 
-import io
-import math
-
-import numpy as np
+import re
 
 from common.errors import FileFormatError, InputError
-from processing.readers.base import Recording, check_finite, check_sample_rate
+from processing.readers.text import Layout, find_time_column, open_table
+
+DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
+RATE_KEYS = {"sample_rate_hz": 1, "sample rate": 1, "samplerate": 1, "sampling rate": 1, "sample_rate": 1, "fs": 1,
+             "rate": 1, "scan rate": 1}
+STEP_KEYS = ("dt", "delta_x", "delta t", "sample interval", "wf_increment")
 
 
-def _parse_float(text: str, src: str, what: str) -> float:
+def read_head(path, size: int = 1 << 16) -> tuple[str, int]:
+    """(decoded start of the file, bytes that make the BOM)."""
+    with open(path, "rb") as fh:
+        raw = fh.read(size)
+    bom = 3 if raw.startswith(b"\xef\xbb\xbf") else 0
+    raw = raw[bom:]
     try:
-        return float(text)
-    except ValueError:
-        raise InputError(f"{src}: {what} {text!r} is not a number") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(raw) - 4:
+            text = raw.decode("latin-1")
+        else:
+            text = raw[:exc.start].decode("utf-8")
+    return text, bom
 
 
-def open_csv(path, sample_rate_hz: float | None = None) -> Recording:
-    src = str(path)
-    meta: dict[str, str] = {}
-    header = None
-    offsets: list[int] = []  # byte offset of every ~block of rows, for chunked reading
-    block_rows = 65536
-    n = 0
-    t0 = t1 = None
+def _is_number(cell: str, decimal: str) -> bool:
+    c = cell.strip()
+    if decimal == ",":
+        c = c.replace(".", "").replace(",", ".") if re.fullmatch(r"[-+]?[\d.]*,\d*([eE][-+]?\d+)?", c) else c
     try:
-        fh = open(path, "rb")
-    except OSError as exc:
-        raise InputError(f"cannot open {src}: {exc.strerror}") from None
-    with fh:
-        pos = 0
-        for raw in fh:
-            line = raw.decode("utf-8", errors="strict").strip() if raw.isascii() else _decode(raw, src)
-            here, pos = pos, pos + len(raw)
-            if not line:
-                continue
-            if line.startswith("#"):
-                if header is None and "=" in line:
-                    k, v = line[1:].split("=", 1)
-                    meta[k.strip().lower()] = v.strip()
-                continue
-            if header is None:
-                header = [h.strip() for h in line.split(",")]
-                if not header or any(not h for h in header) or all(_is_number(h) for h in header):
-                    raise FileFormatError(f"{src}: CSV needs a header row of channel names")
-                continue
-            if n % block_rows == 0:
-                offsets.append(here)
-            if n < 2:
-                cells = line.split(",")
-                if len(cells) != len(header):
-                    raise FileFormatError(f"{src}: row {n + 1} has {len(cells)} values, header has {len(header)}")
-                if "time" in [h.lower() for h in header]:
-                    tval = _parse_float(cells[[h.lower() for h in header].index("time")], src, "time value")
-                    t0, t1 = (tval, None) if n == 0 else (t0, tval)
-            n += 1
-    if header is None or n == 0:
-        raise FileFormatError(f"{src}: CSV file holds no samples")
-    lower = [h.lower() for h in header]
-    time_col = lower.index("time") if "time" in lower else None
-    names = [h for i, h in enumerate(header) if i != time_col]
-    if not names:
-        raise FileFormatError(f"{src}: CSV has no signal columns")
-    fs = None
-    if "sample_rate_hz" in meta:
-        fs = _parse_float(meta["sample_rate_hz"], src, "sample_rate_hz")
-    elif time_col is not None and t0 is not None and t1 is not None:
-        if not t1 > t0:
-            raise InputError(f"{src}: the time column does not increase")
-        fs = 1.0 / (t1 - t0)
-    elif sample_rate_hz is not None:
-        fs = sample_rate_hz
-    if fs is None:
-        raise InputError(f"{src}: CSV states no sample rate ('# sample_rate_hz = ...' or a time column); "
-                         "give it with --sample-rate")
-    fs = check_sample_rate(fs, src)
-    ka = np.array([_parse_float(meta[f"ka_{c.lower()}"], src, f"ka_{c}") if f"ka_{c.lower()}" in meta else math.nan
-                   for c in names])
-    rpm = _parse_float(meta["cam_speed_rpm"], src, "cam_speed_rpm") if "cam_speed_rpm" in meta else math.nan
-    keep = [i for i in range(len(header)) if i != time_col]
-
-    def read(start: int, stop: int) -> np.ndarray:
-        out = []
-        b0 = start // block_rows
-        skip = start - b0 * block_rows
-        with open(path, "rb") as fh:
-            fh.seek(offsets[b0])
-            need = stop - start + skip
-            lines = []
-            for raw in fh:
-                if not raw.strip() or raw.lstrip().startswith(b"#"):
-                    continue
-                lines.append(raw)
-                if len(lines) >= need:
-                    break
-        text = b"".join(lines[skip:]).decode("utf-8", errors="replace")
-        try:
-            arr = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=np.float64)
-        except ValueError as exc:
-            raise FileFormatError(f"{src}: bad CSV value near row {start + 1}: {exc}") from None
-        if arr.shape[1] != len(header) or arr.shape[0] != stop - start:
-            raise FileFormatError(f"{src}: CSV rows {start + 1}..{stop} do not have {len(header)} values each")
-        out = arr[:, keep]
-        check_finite(out, start, names, src)
-        return out
-
-    return Recording(source=src, format="csv", sample_rate_hz=fs, channel_names=names, n_samples=n, read=read,
-                     ka_m_s2_per_v=ka, cam_speed_rpm=rpm if rpm > 0 else math.nan, attrs=dict(meta))
-
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
+        float(c)
         return True
     except ValueError:
         return False
 
 
-def _decode(raw: bytes, src: str) -> str:
+def _data_like(cells, decimal) -> bool:
+    """A data row: every cell a number, except perhaps one timestamp."""
+    non = [c for c in cells if not _is_number(c, decimal)]
+    return len(cells) >= 2 and (not non or (len(non) == 1 and re.match(r"\d{4}-\d\d-\d\d", non[0].strip())))
+
+
+def detect(path, delimiter: str | None = None, decimal: str | None = None) -> tuple[Layout, dict]:
+    """The table's layout and the header block's key/values."""
+    text, bom = read_head(path)
+    lines = text.splitlines(keepends=True)
+    if len(lines) > 1 and not text.endswith(("\n", "\r")):
+        lines = lines[:-1]  # the last line may be cut at the read size
+    body = [ln.rstrip("\r\n") for ln in lines]
+    assumptions = []
+    cands = [delimiter] if delimiter else list(DELIMITERS)
+    found = None
+    for d in cands:
+        for dec in ([decimal] if decimal else ([".", ","] if d != "," else ["."])):
+            start = next((i for i, ln in enumerate(body) if ln.strip() and _data_like(ln.split(d), dec)), None)
+            if start is None:
+                continue
+            width = len(body[start].split(d))
+            tail = [ln for ln in body[start:start + 50] if ln.strip()]
+            if all(len(ln.split(d)) == width and _data_like(ln.split(d), dec) for ln in tail):
+                found = (d, dec, start, width)
+                break
+        if found:
+            break
+    if found is None:
+        raise FileFormatError(f"{path}: no table of numbers found (delimiter comma, semicolon or tab; give "
+                              "--delimiter and --decimal if the file uses others)")
+    d, dec, start, width = found
+    if not delimiter:
+        assumptions.append(f"delimiter {DELIMITERS.get(d, repr(d))} and decimal mark {dec!r} (detected)")
+    header_i = next((i for i in range(start - 1, -1, -1) if body[i].strip() and not body[i].lstrip().startswith("#")), None)
+    if header_i is None or len(body[header_i].split(d)) != width:
+        raise FileFormatError(f"{path}: the table has no row of column names ({width} names, "
+                              f"{DELIMITERS.get(d, d)}-separated, just above the numbers)")
+    columns = [c.strip().strip('"') for c in body[header_i].split(d)]
+    if any(not c for c in columns) or len(set(columns)) != len(columns):
+        raise FileFormatError(f"{path}: column names {columns} are empty or repeated")
+    meta = _header_block(body[:header_i], d)
+    offset = bom + sum(len(ln.encode("utf-8")) for ln in lines[:start])
+    lay = Layout(data_start=offset, delimiter=d, decimal=dec, columns=columns, time_col=find_time_column(columns),
+                 assumptions=assumptions)
+    lay.rate_hz, lay.units = _rate_from_meta(meta, path), {k[5:]: v for k, v in meta.items() if k.startswith("unit_")}
+    return lay, meta
+
+
+def _header_block(lines, d) -> dict:
+    meta = {}
+    for ln in lines:
+        s = ln.strip().lstrip("#").strip()
+        if not s:
+            continue
+        for sep in ("=", ":", d):
+            if sep in s:
+                k, v = s.split(sep, 1)
+                meta[k.strip().lower()] = v.strip().strip(d).strip()
+                break
+    return meta
+
+
+def _rate_from_meta(meta: dict, path) -> float | None:
+    for k in RATE_KEYS:
+        if k in meta:
+            return _num(meta[k], path, k)
+    for k in STEP_KEYS:
+        if k in meta:
+            dt = _num(meta[k], path, k)
+            if not dt > 0:
+                raise InputError(f"{path}: header '{k}' = {meta[k]!r} is not a usable sample interval")
+            return 1.0 / dt
+    return None
+
+
+def _num(text, path, what) -> float:
+    m = re.match(r"\s*([-+]?[\d.,]+(?:[eE][-+]?\d+)?)", str(text))
     try:
-        return raw.decode("utf-8").strip()
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{src}: not a text (CSV) file") from None
+        return float(m.group(1).replace(",", ".")) if m else float("nan")
+    except ValueError:
+        raise InputError(f"{path}: header '{what}' = {text!r} is not a number") from None
+
+
+def open_csv(path, sample_rate_hz: float | None = None, delimiter: str | None = None, decimal: str | None = None,
+             time_unit_s: float | None = None):
+    lay, meta = detect(path, delimiter, decimal)
+    return open_table(path, lay, "csv", meta, sample_rate_hz, time_unit_s, [])

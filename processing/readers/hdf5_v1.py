@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from common.errors import FileFormatError, InputError
+from common.hdf5 import open_file
 from processing.readers.base import Event, Recording, as_text, check_finite, check_sample_rate
 
 FORMAT = "labtool.recording"
@@ -22,18 +23,7 @@ VERSION = 1
 
 def open_hdf5_v1(path) -> Recording:
     src = str(path)
-    swmr_note = None
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, ValueError, RuntimeError) as exc:
-        # a recorder writing in SWMR mode that is still running, or was killed, leaves the file's
-        # consistency flags set: a SWMR reader may still open it and read what was flushed
-        try:
-            f = h5py.File(path, "r", swmr=True)
-            swmr_note = (f"{src}: the file is still marked open for writing (recorder running or killed); "
-                         "read in SWMR mode, up to the last flushed block")
-        except Exception:  # h5py raises OSError, ValueError or RuntimeError on damaged superblocks
-            raise FileFormatError(f"{src}: not a readable HDF5 file (truncated or corrupt?): {exc}") from None
+    f, swmr_note = open_file(path)  # superblock and size checked first: a cut file never hangs
     try:
         rec = _build(f, src)
         if swmr_note:

@@ -1,0 +1,137 @@
+"""``labtool export``: a measured.nc (from ``labtool process``) as CSV tables for other tools.
+
+Two files next to ``--output`` (default: the input's name): ``<stem>_cycles.csv``, the cycle
+statistics on the cam-angle grid (phi1 in rad and deg, means and standard deviations over the
+revolutions, the ideal kinematics), and ``<stem>_series.csv``, the per-sample time series (time in
+s from the first sample, then aE_t, aE_n, epsilon2, omega2, phi1, revolution, clipped). Column names
+carry the units (``omega2 [rad/s]``). Written with pandas, in chunks (bounded memory), each file
+atomically; both or neither.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+SERIES = ("aE_t", "aE_n", "epsilon2", "omega2", "phi1", "revolution", "clipped")
+CHUNK = 1 << 18
+
+
+def register(app: typer.Typer) -> None:
+    app.command("export")(export)
+
+
+def export(
+    measured: Path = typer.Argument(..., help="measured.nc written by 'labtool process'"),
+    csv: bool = typer.Option(False, "--csv", help="write CSV tables (the only format for now)"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                          help="path prefix of the tables (default: the input without .nc)"),
+    series: bool = typer.Option(True, help="also write the per-sample time series (large for long recordings)"),
+    force: bool = typer.Option(False, help="overwrite existing tables"),
+) -> None:
+    """Cycle statistics and time series of a measured file as CSV (units in the column names)."""
+    from common.errors import InputError
+    from common.files import check_output_path
+
+    if not csv:
+        raise InputError("say which format to export: --csv")
+    prefix = output if output is not None else measured.with_suffix("")
+    targets = {"cycles": Path(f"{prefix}_cycles.csv"), "series": Path(f"{prefix}_series.csv")}
+    if not series:
+        del targets["series"]
+    for p in targets.values():
+        check_output_path(p, force)
+    ds = _open(measured)
+    try:
+        written = _write_all(ds, targets)
+    finally:
+        ds.close()
+    for name, (path, rows) in written.items():
+        typer.echo(f"wrote {path}: {rows} rows ({name})")
+
+
+def _open(path: Path):
+    """The measured dataset, its variables checked for what export needs (numbers, not text)."""
+    import xarray as xr
+
+    from common.errors import FileFormatError, InputError
+    from common.hdf5 import check_superblock
+
+    if not path.is_file():
+        raise InputError(f"{path} does not exist (give the measured.nc that 'labtool process' wrote)")
+    check_superblock(path)  # a cut file must not hang h5py
+    try:
+        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False)
+    except Exception as exc:  # xarray/h5netcdf raise many kinds on foreign files
+        raise FileFormatError(f"{path}: not a NetCDF file from 'labtool process': {type(exc).__name__}: {exc}") from None
+    need = ("phi1_grid", "omega2_mean", "time", *SERIES)
+    missing = [v for v in need if v not in ds.variables]
+    if missing:
+        ds.close()
+        raise FileFormatError(f"{path}: not a measured file from 'labtool process' (missing {', '.join(missing)})")
+    for name in ds.variables:
+        if name in need or name.endswith(("_mean", "_std", "_kinematic")):
+            if ds[name].dtype.kind not in "fiub":
+                ds.close()
+                raise FileFormatError(f"{path}: variable '{name}' holds {ds[name].dtype} values, not numbers; "
+                                      "the file is damaged or not from 'labtool process'")
+    return ds
+
+
+def _label(ds, name: str) -> str:
+    units = ds[name].attrs.get("units", "")
+    return f"{name} [{units}]" if units and not str(units).startswith("seconds since") else name
+
+
+def _write_all(ds, targets: dict) -> dict:
+    """Write every table to a temporary file, then rename them together (both or neither)."""
+    import os
+    import tempfile
+
+    from common.errors import InputError
+
+    tmps, out = {}, {}
+    try:
+        for name, path in targets.items():
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+            os.close(fd)
+            tmps[name] = Path(tmp)
+            rows = (_cycles if name == "cycles" else _series)(ds, tmps[name])
+            out[name] = (path, rows)
+        for name, path in targets.items():
+            os.replace(tmps[name], path)
+    except OSError as exc:
+        raise InputError(f"cannot write {targets[name]}: {exc.strerror or exc}; nothing was exported") from None
+    finally:
+        for t in tmps.values():
+            t.unlink(missing_ok=True)
+    return out
+
+
+def _cycles(ds, path: Path) -> int:
+    import numpy as np
+    import pandas as pd
+
+    grid = ds["phi1_grid"].values
+    cols = {"phi1 [rad]": grid, "phi1 [deg]": np.degrees(grid)}
+    for name in ds.data_vars:
+        if ds[name].dims == ("phi1_grid",):
+            cols[_label(ds, name)] = ds[name].values
+    pd.DataFrame(cols).to_csv(path, index=False, float_format="%.9g")
+    return len(grid)
+
+
+def _series(ds, path: Path) -> int:
+    import pandas as pd
+
+    n = ds.sizes["time"]
+    t = ds["time"]
+    t0 = float(t[0]) if n else 0.0
+    for a in range(0, max(n, 1), CHUNK):
+        b = min(a + CHUNK, n)
+        cols = {"time [s]": t[a:b].values - t0}
+        for name in SERIES:
+            cols[_label(ds, name)] = ds[name][a:b].values
+        pd.DataFrame(cols).to_csv(path, mode="w" if a == 0 else "a", header=a == 0, index=False, float_format="%.9g")
+    return n

@@ -1,0 +1,247 @@
+"""Delimited-text sample tables (CSV exports, LabVIEW .lvm data blocks), read in chunks with pandas.
+
+The format modules (csv.py, lvm.py) find the layout (where the data start, delimiter, decimal
+mark, column names, time column and its unit) and say what they assumed; this module indexes the
+rows once (byte offsets every ``BLOCK`` rows), parses blocks on demand with pandas' C parser, and
+checks the time column in every block it reads, not only its first rows: a time step that is not
+1/fs (a gap, rows out of order, a wrong unit) is refused where it happens.
+"""
+from __future__ import annotations
+
+import dataclasses
+import io
+import math
+
+import numpy as np
+
+from common.errors import FileFormatError, InputError
+from processing.readers.base import Recording, check_finite, check_sample_rate
+from processing.readers.units import signal_unit, split_name_unit, time_unit
+
+BLOCK = 65536          # rows between two stored offsets
+MIN_PLAUSIBLE_FS = 500.0  # Hz: below it 100 harmonics of a 20 rpm cam do not fit; a time unit is wrong
+TIME_NAMES = ("time", "t", "x_value", "zeit", "timestamp", "datetime", "date/time")
+
+
+@dataclasses.dataclass
+class Layout:
+    """Where and how the samples are written (found by the format module)."""
+    data_start: int                 # byte offset of the first data row
+    delimiter: str
+    decimal: str
+    columns: list                   # header names as written
+    time_col: int | None = None
+    time_unit_s: float | None = None  # seconds per unit of a numeric time column (None: not stated)
+    units: dict = dataclasses.field(default_factory=dict)   # column name -> unit text from the header block
+    rate_hz: float | None = None    # a rate the header states
+    assumptions: list = dataclasses.field(default_factory=list)
+
+
+def find_time_column(columns) -> int | None:
+    for i, c in enumerate(columns):
+        name, _ = split_name_unit(c)
+        if name.strip().lower() in TIME_NAMES:
+            return i
+    return None
+
+
+def _index_rows(path, start: int) -> tuple[list[int], int]:
+    """Byte offsets of rows 0, BLOCK, 2 BLOCK, ... from ``start``, and the number of data rows.
+
+    Blank lines are allowed at the end only (several tables in one file are refused)."""
+    offsets: list[int] = []
+    n, blank_after, base, buf = 0, None, start, b""
+    with open(path, "rb") as fh:
+        fh.seek(start)
+        while True:
+            more = fh.read(1 << 22)
+            buf += more
+            if not more and buf and not buf.endswith(b"\n"):
+                buf += b"\n"
+            nl = np.flatnonzero(np.frombuffer(buf, dtype=np.uint8) == 10)
+            if len(nl):
+                starts = np.concatenate([[0], nl[:-1] + 1])
+                length = nl - starts
+                blank = (length == 0) | ((length == 1) & (np.frombuffer(buf, np.uint8)[starts.clip(max=len(buf) - 1)] == 13))
+                rows = np.flatnonzero(~blank)
+                if len(rows) and blank_after is not None:
+                    raise FileFormatError(f"{path}: blank line inside the data after row {blank_after}; the file "
+                                          "is damaged or holds several tables (give one table per file)")
+                if blank.any() and len(rows) and np.flatnonzero(blank)[0] < rows[-1]:
+                    raise FileFormatError(f"{path}: blank line inside the data after row "
+                                          f"{n + int((rows < np.flatnonzero(blank)[0]).sum())}; the file is damaged "
+                                          "or holds several tables (give one table per file)")
+                k = np.arange(n, n + len(rows))
+                offsets.extend((base + starts[rows[k % BLOCK == 0]]).tolist())
+                n += len(rows)
+                if blank.any() and (not len(rows) or np.flatnonzero(blank)[-1] > rows[-1]):
+                    blank_after = n
+                cut = int(nl[-1]) + 1
+                base += cut
+                buf = buf[cut:]
+            if not more:
+                break
+    return offsets, n
+
+
+def _parse(path, offset: int, nrows: int, lay: Layout) -> "object":
+    import pandas as pd
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        try:
+            return pd.read_csv(fh, sep=lay.delimiter, decimal=lay.decimal, header=None, nrows=nrows,
+                               engine="c", skip_blank_lines=True, dtype=str if nrows <= 8 else None,
+                               encoding="utf-8", encoding_errors="replace")
+        except (ValueError, pd.errors.ParserError) as exc:
+            raise FileFormatError(f"{path}: bad table near row {nrows}: {str(exc).splitlines()[0]}") from None
+
+
+def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | None, time_unit_s: float | None,
+               warn_list: list) -> Recording:
+    """A Recording over the table; ``sample_rate_hz``/``time_unit_s``: the user's overrides (or None)."""
+    src = str(path)
+    offsets, n = _index_rows(path, lay.data_start)
+    if n == 0:
+        raise FileFormatError(f"{src}: the table holds no samples")
+    head = _parse(path, offsets[0], min(n, 8), lay)
+    if head.shape[1] != len(lay.columns):
+        raise FileFormatError(f"{src}: rows have {head.shape[1]} values, the header names {len(lay.columns)} columns "
+                              f"(delimiter {lay.delimiter!r} right? give --delimiter)")
+    keep = [i for i in range(len(lay.columns)) if i != lay.time_col]
+    names, units, factors = [], [], []
+    for i in keep:
+        name, unit = split_name_unit(lay.columns[i])
+        unit = unit or lay.units.get(name) or lay.units.get(lay.columns[i])
+        if unit is None:
+            lay.assumptions.append(f"column '{name}' states no unit: read as volts")
+            unit = "V"
+        kind, f = signal_unit(unit, f"{src}: column '{name}'")
+        names.append(name)
+        units.append(kind)
+        factors.append(f)
+    fs, t0, start_iso = _rate(src, path, offsets, n, lay, head, sample_rate_hz, time_unit_s)
+    factors = np.asarray(factors)
+
+    def read(start: int, stop: int) -> np.ndarray:
+        b0 = start // BLOCK
+        df = _parse(path, offsets[b0], stop - b0 * BLOCK, lay).iloc[start - b0 * BLOCK:]
+        if df.shape != (stop - start, len(lay.columns)):
+            raise FileFormatError(f"{src}: rows {start + 1}..{stop} do not have {len(lay.columns)} values each")
+        if lay.time_col is not None and fs is not None:
+            _check_time(src, df.iloc[:, lay.time_col], start, fs, t0, lay)
+        try:
+            out = df.iloc[:, keep].to_numpy(dtype=np.float64) * factors[None, :]
+        except (TypeError, ValueError):
+            raise FileFormatError(f"{src}: a value in rows {start + 1}..{stop} is not a number "
+                                  f"(decimal mark {lay.decimal!r} right? give --decimal)") from None
+        check_finite(out, start, names, src)
+        return out
+
+    attrs = {k: v for k, v in meta.items()}
+    rpm = _number(meta.get("cam_speed_rpm"))
+    ka = np.array([_number(meta.get(f"ka_{c.lower()}")) for c in names])
+    rec = Recording(source=src, format=fmt, sample_rate_hz=fs, channel_names=names, n_samples=n, read=read,
+                    ka_m_s2_per_v=ka, start_time_utc=start_iso or str(meta.get("start_time_utc", "")),
+                    cam_speed_rpm=rpm if rpm > 0 else math.nan, attrs=attrs, channel_units=units,
+                    unit_sources=["column header" for _ in names], assumptions=list(lay.assumptions))
+    rec.warnings.extend(f"{src}: assumed: {a}" for a in lay.assumptions)
+    rec.warnings.extend(warn_list)
+    return rec
+
+
+def _number(v) -> float:
+    try:
+        return float(str(v).replace(",", ".")) if v is not None else math.nan
+    except ValueError:
+        return math.nan
+
+
+def _rate(src, path, offsets, n, lay: Layout, head, given_fs, given_unit):
+    """(fs Hz, first time value in s, ISO start or None) from the time column, the header, or the user."""
+    fs_header = lay.rate_hz
+    if lay.time_col is None:
+        fs = fs_header if fs_header else given_fs
+        if fs is None:
+            raise InputError(f"{src}: the table states no sample rate and has no time column; give --sample-rate")
+        return check_sample_rate(fs, src), 0.0, None
+    col = head.iloc[:, lay.time_col].astype(str).str.strip()
+    name, unit_text = split_name_unit(lay.columns[lay.time_col])
+    first = _parse(path, offsets[0], min(n, 2000), lay).iloc[:, lay.time_col]
+    iso = _as_datetime(col)
+    if iso is not None:
+        ts = _as_datetime(first.astype(str).str.strip())
+        if ts is None:
+            raise FileFormatError(f"{src}: time column '{name}' mixes timestamps and other values")
+        sec = (ts - ts[0]) / np.timedelta64(1, "s")
+        lay.time_unit_s = "datetime"
+        start_iso = np.datetime_as_string(ts[0], unit="us") + "+00:00"
+        lay.assumptions.append(f"time column '{name}' holds timestamps, taken as UTC")
+    else:
+        unit = given_unit or (time_unit(unit_text) if unit_text else None) or lay.time_unit_s
+        try:
+            sec = first.astype(str).str.replace(lay.decimal, ".", regex=False).astype(float).to_numpy()
+        except ValueError:
+            raise FileFormatError(f"{src}: time column '{name}' holds values that are neither numbers nor timestamps")
+        if unit is None:
+            d = np.median(np.diff(sec)) if len(sec) > 1 else math.nan
+            if not (d > 0 and 1.0 / d >= MIN_PLAUSIBLE_FS):
+                raise InputError(f"{src}: time column '{name}' states no unit; in seconds it gives "
+                                 f"{1.0 / d if d > 0 else float('nan'):g} Hz, too slow for cam data: give --time-unit "
+                                 "(s, ms, us) or --sample-rate")
+            unit = 1.0
+            lay.assumptions.append(f"time column '{name}' states no unit: read in seconds")
+        lay.time_unit_s = unit
+        sec = sec * unit
+        start_iso = None
+    if len(sec) < 2:
+        raise FileFormatError(f"{src}: one row is not a recording")
+    dt = np.diff(sec)
+    d = float(np.median(dt))
+    if not d > 0:
+        raise InputError(f"{src}: time column '{name}' does not increase")
+    fs = given_fs if given_fs else 1.0 / d
+    if fs_header and abs(fs_header * d - 1) > 1e-3:
+        raise InputError(f"{src}: the header states {fs_header:g} Hz but the time column steps by {d:g} s "
+                         f"({1 / d:g} Hz); fix the file or give --sample-rate")
+    return check_sample_rate(fs, src), float(sec[0]) if iso is None else 0.0, start_iso
+
+
+def _as_datetime(col):
+    """datetime64[ns] array if every value is an ISO timestamp (not a plain number), else None."""
+    import pandas as pd
+    vals = col.to_numpy(dtype=str)
+    if not len(vals) or all(_isnum(v) for v in vals[:4]):
+        return None
+    try:
+        ts = pd.to_datetime(pd.Series(vals), utc=True, format="ISO8601")
+    except (ValueError, TypeError):
+        return None
+    return ts.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy(dtype="datetime64[ns]")
+
+
+def _isnum(v: str) -> bool:
+    try:
+        float(v.replace(",", "."))
+        return True
+    except ValueError:
+        return False
+
+
+def _check_time(src, col, start: int, fs: float, t0: float, lay: Layout) -> None:
+    """Every row's time equals t0 + row / fs within 1 % of a step: no gap, no reordering, one rate."""
+    if lay.time_unit_s == "datetime":
+        ts = _as_datetime(col.astype(str).str.strip())
+        if ts is None:
+            raise FileFormatError(f"{src}: a time value in rows {start + 1}.. is not a timestamp")
+        t = (ts - ts[0]) / np.timedelta64(1, "s")
+        expect = np.arange(len(t)) / fs
+        bad = np.abs(t - expect) > 0.01 / fs
+    else:
+        t = col.astype(str).str.replace(lay.decimal, ".", regex=False).astype(float).to_numpy() * lay.time_unit_s
+        expect = t0 + (start + np.arange(len(t))) / fs
+        bad = np.abs(t - expect) > 0.01 / fs + 1e-9 * np.abs(expect)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise FileFormatError(f"{src}: the time column is not uniform at row {start + k + 1} "
+                              f"({t[k]:.9g} s where {expect[k]:.9g} s follows from {fs:g} Hz): a gap, rows out of "
+                              "order or a second rate; labtool reads uniformly sampled tables only")

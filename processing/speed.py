@@ -1,0 +1,54 @@
+"""The cam speed from the revolution marks, checked against the stated speed and sample rate.
+
+A revolution is irregular when its period leaves (1 - IRREGULAR, 1 / (1 - IRREGULAR)) x the median period (0.8, 1.25) (a
+missed or extra tacho pulse, a stall): its cam angle is not known, so its samples become NaN and it
+stays out of the statistics. A measured speed more than 1.5x off the stated one means the sample
+rate (or the stated speed) is wrong: refused, never processed at the wrong scale.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from common.errors import InputError
+
+IRREGULAR = 0.2          # relative deviation from the median period that makes a revolution irregular
+REFUSE_RATIO = 1.5       # measured / stated speed beyond this (either way): the rate is wrong
+
+
+@dataclasses.dataclass(frozen=True)
+class CamSpeed:
+    period_samples: float            # median revolution period (samples)
+    rpm: float                       # mean over the regular revolutions (rpm)
+    periods: np.ndarray              # every mark-to-mark period (samples)
+    irregular_by_segment: list       # per segment: bool per revolution
+    n_irregular: int
+
+
+def estimate(marks_by_seg, fs: float, rpm_hint, source: str, warn) -> CamSpeed:
+    """CamSpeed from the marks of every segment (samples); ``rpm_hint`` the stated speed or None."""
+    periods = np.concatenate([np.diff(m) for m in marks_by_seg if len(m) >= 2] or [np.empty(0)])
+    if len(periods) == 0:
+        raise InputError(f"{source}: fewer than two cam revolutions found; cannot process "
+                         "(is the cam turning, are aE_t and the tacho connected?)")
+    period = float(np.median(periods))
+    lo, hi = (1 - IRREGULAR) * period, period / (1 - IRREGULAR)
+    regular = (periods > lo) & (periods < hi)
+    rpm = 60.0 * fs / float(np.mean(periods[regular]))
+    if rpm_hint and math.isfinite(rpm_hint):
+        ratio = rpm / rpm_hint
+        if not (1 / REFUSE_RATIO < ratio < REFUSE_RATIO):
+            raise InputError(
+                f"{source}: the data give {rpm:.1f} rpm at the stated {fs:g} Hz, but the cam turned at "
+                f"{rpm_hint:g} rpm: the sample rate (or the stated cam speed) is wrong; fix the file or give --rpm")
+        if abs(ratio - 1) > IRREGULAR:
+            warn(f"measured cam speed {rpm:.1f} rpm differs from the stated {rpm_hint:g} rpm by "
+                 f"{100 * abs(ratio - 1):.0f} %")
+    irregular = [~((np.diff(m) > lo) & (np.diff(m) < hi)) for m in marks_by_seg]
+    n_irr = int(sum(x.sum() for x in irregular))
+    if n_irr:
+        warn(f"{n_irr} revolutions deviate by more than {100 * IRREGULAR:.0f} % from the median period "
+             f"{period / fs * 1e3:.1f} ms (missed tacho pulses?); their samples are NaN")
+    return CamSpeed(period, rpm, periods, irregular, n_irr)
