@@ -88,10 +88,13 @@ def identify(req: FitRequest, progress=None) -> FitOutcome:
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     req.check()
+    # the options first: a wrong parameter name must not wait for the measurement to be read
+    free = parse_free(req.free, req.model, req.overrides.get("elastic_gap") or "physical")
+    space = make_space(free, req.bounds)
+    if isinstance(req.start, dict):
+        _start(req.start, space, space.from_unit(np.full(len(free), 0.5)))
     say("reading and aligning the measured revolutions")
     target = load_target(req.measured, req.cond, req.overrides)
-    free = parse_free(req.free, req.model, target.op.get("elastic_gap", "physical"))
-    space = make_space(free, req.bounds)
     fixed = {**target.op, "ka_gain": 1.0, "delay_ms": 0.0, **req.chain}
     x_scene = np.array([fixed.get(p.op_key, p.start) for p in free], float)
     x_start, start_note = _start(req.start, space, x_scene)
@@ -124,9 +127,17 @@ def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say, notes):
         raise SolverError(f"the {req.model} model fails at the fitted point {space.as_dict(space.from_unit(u_best))}: "
                           f"{after.error}")
     J = final.jacobian(u_best, central=True)
+    # one Gauss-Newton step with the central Jacobian: the search stops within its tolerance
+    # (xtol 2e-3 of the range), which can exceed a smooth objective's interval
+    step = -np.linalg.pinv(J, rcond=1e-10) @ after.residuals
+    u_gn = np.clip(u_best + step, 0.0, 1.0)
+    if np.max(np.abs(u_gn - u_best)) > 1e-6:
+        e_gn = final.at(u_gn)
+        if e_gn.ok and e_gn.objective < after.objective:
+            u_best, after = u_gn, e_gn
     lin = uncertainty.linear(J, after.residuals, u_best, ev.blocks(None))
     other = search.Problem(ev, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u_best)
-    lin.rev_u, lin.preset_u = uncertainty.numerical(J, after.residuals,
+    lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals,
                                                     ev.revolution_residuals(space.from_unit(u_best), after),
                                                     other.residuals if other.ok else None)
     profiles = [uncertainty.profile(final, lin, J, i) for i in range(len(space.params))]

@@ -8,7 +8,8 @@ recording at 180 rpm the residuals' autocorrelation falls to its noise level onl
 the residual grid, ~20 deg). So the covariance is the **Newey-West (HAC) sandwich**
 (J^T J)^-1 (sum over lags of Bartlett-weighted J^T r r^T J) (J^T J)^-1, within each signal's block
 of residuals (statsmodels ``cov_nw_panel``), with ``nlags`` twice the lag at which the residuals'
-autocorrelation first falls below its noise level 2 / sqrt(n), and never narrower than
+autocorrelation first falls below its noise level 2 / sqrt(n) (at least Newey-West's rule of
+thumb), and never narrower than
 s^2 (J^T J)^-1. The measurement's 95 % half-width of u_i is t(0.975, N_eff - p) sqrt(cov[i, i])
 (N_eff = N / the mean variance inflation).
 
@@ -16,8 +17,8 @@ The models add a numerical uncertainty of their own (``numerical``): a damped mo
 differ by 0.1-2 % and its cycle by as much between solver presets, so the objective is rough at
 that scale and its minimum lies anywhere within it. Both are measured at the optimum with one
 Gauss-Newton step: the spread of the steps each of the run's steady revolutions alone asks for,
-and the step the other preset's residuals ask for. The interval's half-width is the measurement's
-and these two in quadrature, mapped to the parameter through the search scale (additive on a
+the step the other preset's residuals ask for, and the step still left (the search's convergence).
+The interval's half-width is the measurement's and these in quadrature, mapped to the parameter through the search scale (additive on a
 linear scale, a factor on a log scale); ``sources`` gives each one's share.
 
 The profile checks that: S_i(u_i) = min over the other parameters of S at fixed u_i, on both sides
@@ -64,6 +65,7 @@ class Linear:
     nlags: int = 0
     rev_u: np.ndarray | None = None     # (p,) half-width from the model's revolution-to-revolution variation
     preset_u: np.ndarray | None = None  # (p,) the optimum's shift to the other solver preset
+    conv_u: np.ndarray | None = None    # (p,) the Gauss-Newton step still left at the optimum (convergence)
 
     @property
     def sd_u(self) -> np.ndarray:
@@ -91,10 +93,8 @@ class Linear:
     @property
     def numerical_u(self) -> np.ndarray:
         """The numerical half-width (unit box): revolution variation and preset shift combined."""
-        z = np.zeros(self.u.size)
-        rev = z if self.rev_u is None else self.rev_u
-        pre = z if self.preset_u is None else self.preset_u
-        return np.sqrt(rev ** 2 + pre ** 2)
+        parts = [v for v in (self.rev_u, self.preset_u, self.conv_u) if v is not None]
+        return np.sqrt(sum(v ** 2 for v in parts)) if parts else np.zeros(self.u.size)
 
     def half_u(self) -> np.ndarray:
         """The 95 % half-width (unit box): the measurement's (t sd) and the numerical one in quadrature."""
@@ -108,28 +108,32 @@ class Linear:
         """Shares of parameter i's interval variance: measurement, model revolutions, solver preset."""
         parts = {"measurement": float((self.t * self.sd_u[i]) ** 2),
                  "model_revolutions": 0.0 if self.rev_u is None else float(self.rev_u[i] ** 2),
-                 "solver_preset": 0.0 if self.preset_u is None else float(self.preset_u[i] ** 2)}
+                 "solver_preset": 0.0 if self.preset_u is None else float(self.preset_u[i] ** 2),
+                 "convergence": 0.0 if self.conv_u is None else float(self.conv_u[i] ** 2)}
         total = sum(parts.values())
         return {k: (v / total if total > 0 and math.isfinite(total) else None) for k, v in parts.items()}
 
 
 def numerical(J: np.ndarray, r: np.ndarray, rev_residuals: list, r_other: np.ndarray | None):
-    """The optimum's numerical uncertainty (unit box, per parameter) from one Gauss-Newton step
-    with the optimum's Jacobian: ``rev_u`` = 2 x the standard deviation of the steps that each of
-    the model run's steady revolutions alone would ask for (its own revolution-to-revolution
-    variation: the objective is rough at that scale, the optimum anywhere inside), ``preset_u`` =
-    |the step the other solver preset's residuals ``r_other`` ask for| (the preset's error)."""
+    """The optimum's numerical uncertainty (unit box, per parameter) from Gauss-Newton steps with
+    the optimum's Jacobian: ``rev`` = 2 x the standard deviation of the steps that each of the model
+    run's steady revolutions alone would ask for (its own revolution-to-revolution variation: the
+    objective is rough at that scale, the optimum anywhere inside), ``pre`` = |the step the other
+    solver preset's residuals ``r_other`` ask for| (the preset's error), ``conv`` = |the step the
+    residuals ``r`` still ask for| (the search's convergence)."""
     p = J.shape[1]
     pinv = np.linalg.pinv(J, rcond=1e-10)
     steps = np.array([-pinv @ rk for rk in rev_residuals]) if rev_residuals else np.zeros((0, p))
     rev = 2.0 * steps.std(axis=0, ddof=1) if steps.shape[0] >= 2 else np.zeros(p)
     pre = np.abs(pinv @ (r_other - r)) if r_other is not None else np.zeros(p)
-    return rev, pre
+    conv = np.abs(pinv @ r)
+    return rev, pre, conv
 
 
 def autocorrelation_lags(r: np.ndarray, groups: list[tuple[int, int]]) -> int:
-    """Twice the largest lag (over the blocks) at which the residuals' circular autocorrelation
-    first falls below 2 / sqrt(n), at most half a block: the Newey-West window."""
+    """The Newey-West window: twice the largest lag (over the blocks) at which the residuals'
+    circular autocorrelation first falls below 2 / sqrt(n), at least Newey and West's rule of
+    thumb 4 (n / 100)^(2/9), at most half a block."""
     lags = []
     for a, b in groups:
         x = np.asarray(r[a:b], float)
@@ -143,7 +147,8 @@ def autocorrelation_lags(r: np.ndarray, groups: list[tuple[int, int]]) -> int:
         ac = ac / ac[0]
         below = np.flatnonzero(ac[1:n // 2] < 2.0 / math.sqrt(n))
         lag = int(below[0]) + 1 if below.size else n // 2
-        lags.append(min(2 * lag, n // 2))
+        rule = int(4 * (n / 100.0) ** (2.0 / 9.0))        # Newey & West's rule of thumb, as a floor
+        lags.append(min(max(2 * lag, rule), n // 2))
     return max(lags) if lags else 0
 
 
