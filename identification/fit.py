@@ -35,6 +35,8 @@ ACCURACIES = ("fast", "standard")
 OMEGA1_MODES = ("const", "var")
 DEFAULT_REVOLUTIONS = 3       # the first is the start-up transient; the last two judge periodicity
 POLISH_NFEV = 6               # least-squares iterations at the requested preset after the fast search
+RESTARTS = 1                  # searches again from a deeper point the profiles find
+UNEXPLAINED = 10.0            # objective per residual beyond which the model is said not to explain the measurement
 METRIC_KEYS = ("iso_rating", "iso_grade", "sg_magnitude", "sg_phase", "sg_comprehensive", "nrmse", "band_overlap")
 
 
@@ -111,22 +113,41 @@ def identify(req: FitRequest, progress=None) -> FitOutcome:
         search.minimize(polish, u_best, max_nfev=POLISH_NFEV)
         if polish.best.ev is not None:
             u_best = polish.best.u
-    say(f"intervals and profiles ({req.accuracy})")
-    after, lin, profiles = _uncertainty(ev, space, req, u_best, say, notes)
+    for attempt in range(RESTARTS + 1):
+        say(f"intervals and profiles ({req.accuracy})")
+        after, lin, profiles, deeper = _uncertainty(ev, space, req, u_best, say)
+        if deeper is None:
+            break
+        where = ", ".join(f"{n} = {v:.4g}" for n, v in space.as_dict(space.from_unit(deeper[0])).items())
+        found = f"a point checked for the intervals has a lower objective ({deeper[1]:.4g} < {after.objective:.4g}) at {where}"
+        if attempt == RESTARTS:
+            notes.append(f"{found}, again after a restart: the objective is rough or has several minima here; "
+                         "the result is the best point found; try --start there or narrower --bounds")
+            break
+        notes.append(f"{found}: the search restarted from there")
+        u_best = _restart(ev, req, deeper[0], say)
+    chi2 = after.objective / after.residuals.size
+    if chi2 > UNEXPLAINED:
+        notes.append(f"the {req.model} model leaves {chi2:.3g} x the measurement's variance (its scatter and a 1 % "
+                     "floor) unexplained: the values are those of the closest {req.model} model, which is not the "
+                     "stand's physics here; the intervals include that misfit".replace("{req.model}", req.model))
     summary = _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profiles, notes,
                        time.perf_counter() - t0)
     return FitOutcome(summary, target, space, before, after, profiles, lin)
 
 
-def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say, notes):
+def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say):
     """At the optimum and the requested preset: the Jacobian (central differences), the HAC
-    covariance, the numerical spread (revolutions, the other preset) and one profile a parameter."""
+    covariance, the numerical spread (revolutions, the other preset, convergence, roughness) and
+    one profile a parameter; ``deeper`` = (u, objective) of a point these visited lower than the
+    optimum by more than a threshold and the roughness (the search missed a deeper minimum), else None."""
     final = search.Problem(ev, req.accuracy, None, say, "intervals")
     after = final.at(u_best)
     if not after.ok:
         raise SolverError(f"the {req.model} model fails at the fitted point {space.as_dict(space.from_unit(u_best))}: "
                           f"{after.error}")
     J = final.jacobian(u_best, central=True)
+    u_j, r_j = u_best, after.residuals
     # one Gauss-Newton step with the central Jacobian: the search stops within its tolerance
     # (xtol 2e-3 of the range), which can exceed a smooth objective's interval
     step = -np.linalg.pinv(J, rcond=1e-10) @ after.residuals
@@ -138,18 +159,34 @@ def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say, notes):
     lin = uncertainty.linear(J, after.residuals, u_best, ev.blocks(None))
     other = search.Problem(ev, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u_best)
     lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals,
-                                                    ev.revolution_residuals(space.from_unit(u_best), after),
-                                                    other.residuals if other.ok else None)
+                                                                 ev.revolution_residuals(space.from_unit(u_best), after),
+                                                                 other.residuals if other.ok else None)
+    lin.rough_u, lin.rough = uncertainty.roughness(final, lin, J, u_j, r_j, search.FD_STEP)
+    # every point evaluated (cached) within the roughness and the threshold of the optimum widens the interval
+    lin.set_hull(space.to_unit(ev.acceptable(req.accuracy, after.objective + lin.acceptance())))
     profiles = [uncertainty.profile(final, lin, J, i) for i in range(len(space.params))]
-    lower = [(prof, u, o) for prof in profiles for u, o in zip(prof.u, prof.objective)
-             if o < after.objective - lin.threshold(prof.index)]
-    if lower:
-        prof, u, o = min(lower, key=lambda t: t[2])
-        name = space.params[prof.index].name
-        notes.append(f"the profile of {name} found a lower objective ({o:.4g} < {after.objective:.4g}) at "
-                     f"{name} = {space.value(prof.index, u):.4g}: the objective has another, deeper minimum the "
-                     "search missed; try --start there or narrower --bounds")
-    return after, lin, profiles
+    # a point visited here lower than the optimum by more than the threshold and the roughness:
+    # the search stopped in a shallower minimum
+    margin = max(min(lin.threshold(i) for i in range(len(space.params))), lin.rough)
+    best = final.best
+    deeper = (best.u, best.ev.objective) if best.ev is not None and best.ev.objective < after.objective - margin else None
+    return after, lin, profiles, deeper
+
+
+def _restart(ev: Evaluator, req: FitRequest, u0, say) -> np.ndarray:
+    """Least squares again from a deeper point a profile found (search preset, then a polish)."""
+    prob = search.Problem(ev, SEARCH_PRESET, ev.model_runs + req.max_runs // 2, say, "search again")
+    try:
+        search.minimize(prob, u0)
+    except search.Budget:
+        pass
+    u = prob.best.u if prob.best.ev is not None else u0
+    if req.accuracy != SEARCH_PRESET:
+        polish = search.Problem(ev, req.accuracy, ev.model_runs + POLISH_NFEV * (u.size + 1), say, "polish")
+        search.minimize(polish, u, max_nfev=POLISH_NFEV)
+        if polish.best.ev is not None:
+            u = polish.best.u
+    return u
 
 
 def _start(start, space, x_scene) -> tuple[np.ndarray, str]:
@@ -260,6 +297,7 @@ def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
         "ci95_profile": [space.value(i, plo), space.value(i, phi)],
         "profile_agrees": all(r is None or PROFILE_LOW <= r <= PROFILE_HIGH for r in (prof.rho_low, prof.rho_high)),
         "interval_sources": lin.sources(i),
+        "roughness_over_threshold": lin.rough_ratio(i),
         "identifiable": not why,
         "notes": why,
     }
@@ -284,9 +322,11 @@ def _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profi
         "objective_before": before.objective if before.ok else None,
         "objective_after": after.objective,
         "degrees_of_freedom": lin.dof,
+        "objective_per_residual": after.objective / after.residuals.size,
         "residual_scale": math.sqrt(lin.s2),
         "interval_inflation": {p.key: float(v) for p, v in zip(space.params, lin.inflation)},
         "newey_west_lags": lin.nlags,
+        "roughness": lin.rough,
         "metrics_before": metrics(target, before, _delay_deg(ev.values(x_scene))),
         "metrics_after": metrics(target, after, _delay_deg(fitted_op)),
         "profiles": {p.key: {"values": [space.value(i, u) for u in profiles[i].u], "objective": profiles[i].objective,

@@ -175,6 +175,7 @@ class Evaluator:
         self.evaluations = 0
         self.failures: list[dict] = []
         self.worst: dict = {}          # harmonics -> the worst objective seen (the failure penalty's scale)
+        self.visited: dict = {}        # (preset, x rounded) -> x: every point evaluated, once
         self.run_s = 0.0
 
     # ------------------------------------------------------------------ points
@@ -235,13 +236,15 @@ class Evaluator:
         gives a penalty (PENALTY x the worst objective so far, spread evenly) and is recorded in
         ``failures``; the search moves away from it."""
         self.evaluations += 1
-        vals = self.values(x_edge)
+        x = np.asarray(x_edge, float)
+        self.visited.setdefault((preset, tuple(np.round(x, 12))), x)
+        vals = self.values(x)
         lev = self.target.level(harmonics)
         n_res = len(SIGNALS) * lev.sub.size + (2 if self.target.has_impacts else 0)
         (cycle, pred, error), new = self._model_run(vals, preset)
         if error is not None:
             if new:
-                self.failures.append({"at": self.space.as_dict(x_edge), "accuracy": preset, "error": error})
+                self.failures.append({"at": self.space.as_dict(x), "accuracy": preset, "error": error})
             level = PENALTY * max(self.worst.get(lev.harmonics, 0.0), float(n_res))
             return Evaluation(np.full(n_res, math.sqrt(level / n_res)), None, None, error, new)
         shown = pipeline.chain_view(cycle, vals)
@@ -255,6 +258,17 @@ class Evaluator:
         parts = [(lev.view(signals[s], full) - lev.mean[s]) / lev.sigma[s] for s in SIGNALS]
         parts.append(event_residuals(self.target, pred, delay_deg))
         return np.concatenate(parts)
+
+    def acceptable(self, preset: str, limit: float) -> np.ndarray:
+        """Every point evaluated at ``preset`` whose full-resolution objective is at most ``limit``
+        (rows of free values, edge units), from the cached runs: no new run."""
+        rows = []
+        for (p, _), x in list(self.visited.items()):
+            if p == preset and self.cached(x, preset):
+                e = self.evaluate(x, preset)
+                if e.ok and e.objective <= limit:
+                    rows.append(x)
+        return np.array(rows).reshape(-1, len(self.space.params))
 
     def revolution_residuals(self, x_edge, e: Evaluation) -> list[np.ndarray]:
         """The residuals at ``x_edge`` with each of the model run's revolutions after the first as

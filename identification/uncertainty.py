@@ -17,12 +17,15 @@ The models add a numerical uncertainty of their own (``numerical``): a damped mo
 differ by 0.1-2 % and its cycle by as much between solver presets, so the objective is rough at
 that scale and its minimum lies anywhere within it. Both are measured at the optimum with one
 Gauss-Newton step: the spread of the steps each of the run's steady revolutions alone asks for,
-the step the other preset's residuals ask for, and the step still left (the search's convergence).
-The interval's half-width is the measurement's and these in quadrature, mapped to the parameter through the search scale (additive on a
+the step the other preset's residuals ask for, the step still left (the search's convergence), and
+how far the objective's roughness (its departure from the Gauss-Newton quadratic at the Jacobian's
+points) hides the minimum (``roughness``). The interval's half-width is the measurement's and these
+in quadrature, mapped to the parameter through the search scale (additive on a
 linear scale, a factor on a log scale); ``sources`` gives each one's share.
 
 The profile checks that: S_i(u_i) = min over the other parameters of S at fixed u_i, on both sides
-at the interval's edge (at least ``2 FD_STEP`` away, the models' own resolution) and at the bounds.
+at the interval's edge (at least ``2 FD_STEP`` away, the models' own resolution) and, when the
+interval spans more than a quarter of the bounds, at the bounds.
 Linear theory predicts S_i - S = threshold_i (d / (t sd_i))^2 at a distance d, threshold_i =
 t^2 cov[i, i] / (J^T J)^-1[i, i]; the ratio rho of the profile's rise to that prediction tells how
 far it holds, and the profile's own interval edge is t sd_i / sqrt(rho) from the optimum on that
@@ -31,7 +34,8 @@ G = (J^T J)^-1) and take one Gauss-Newton step with the optimum's Jacobian: two 
 
 Not identifiable (the ``notes`` say which): the objective does not depend on the parameter (a zero
 column of J), its profile is flat (S_i at both bounds below its threshold), its interval is wider
-than the bounds, or it is correlated with another beyond ``MAX_CORRELATION``.
+than the bounds or spans more than half of them (``MOST_OF_BOUNDS``, on the search scale), or it is
+correlated with another beyond ``MAX_CORRELATION``.
 """
 from __future__ import annotations
 
@@ -48,6 +52,8 @@ from identification.search import FD_STEP
 MAX_CORRELATION = 0.95
 PROFILE_AGREES = (0.5, 2.0)     # rho within this: the linear interval's edge is within ~30 % of the profile's
 BOUND_TOL = 1e-3                # u this close to 0 or 1 is at the bound
+BOUNDS_CHECK = 0.25             # the profile visits the bounds when the interval spans more than this of them
+MOST_OF_BOUNDS = 0.5            # an interval spanning more than this of the bounds identifies nothing
 
 
 @dataclasses.dataclass
@@ -66,6 +72,10 @@ class Linear:
     rev_u: np.ndarray | None = None     # (p,) half-width from the model's revolution-to-revolution variation
     preset_u: np.ndarray | None = None  # (p,) the optimum's shift to the other solver preset
     conv_u: np.ndarray | None = None    # (p,) the Gauss-Newton step still left at the optimum (convergence)
+    rough_u: np.ndarray | None = None   # (p,) where the objective's roughness hides the minimum (roughness)
+    rough: float = 0.0                  # the roughness R itself (objective units)
+    hull_lo: np.ndarray | None = None   # (p,) range of the points evaluated within R + threshold of the optimum
+    hull_hi: np.ndarray | None = None
 
     @property
     def sd_u(self) -> np.ndarray:
@@ -93,7 +103,7 @@ class Linear:
     @property
     def numerical_u(self) -> np.ndarray:
         """The numerical half-width (unit box): revolution variation and preset shift combined."""
-        parts = [v for v in (self.rev_u, self.preset_u, self.conv_u) if v is not None]
+        parts = [v for v in (self.rev_u, self.preset_u, self.conv_u, self.rough_u) if v is not None]
         return np.sqrt(sum(v ** 2 for v in parts)) if parts else np.zeros(self.u.size)
 
     def half_u(self) -> np.ndarray:
@@ -101,15 +111,37 @@ class Linear:
         return np.sqrt((self.t * self.sd_u) ** 2 + self.numerical_u ** 2)
 
     def interval_u(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 95 % interval (unit box): u +- half_u, widened to every point evaluated whose
+        objective lies within the roughness and the threshold of the optimum (``hull``)."""
         half = self.half_u()
-        return self.u - half, self.u + half
+        lo, hi = self.u - half, self.u + half
+        if self.hull_lo is not None:
+            lo, hi = np.minimum(lo, self.hull_lo), np.maximum(hi, self.hull_hi)
+        return lo, hi
+
+    def rough_ratio(self, i: int) -> float:
+        """The roughness over parameter i's 95 % threshold."""
+        thr = self.threshold(i)
+        return self.rough / thr if math.isfinite(thr) and thr > 0 else math.nan
+
+    def set_hull(self, rows_u: np.ndarray) -> None:
+        """The acceptable points (unit box rows) that widen the interval."""
+        if rows_u.size:
+            self.hull_lo, self.hull_hi = rows_u.min(axis=0), rows_u.max(axis=0)
+
+    def acceptance(self) -> float:
+        """The objective's margin above the optimum that counts as acceptable: R + the largest finite threshold."""
+        thr = [self.threshold(i) for i in range(self.u.size)]
+        thr = [t for t in thr if math.isfinite(t)]
+        return self.rough + (max(thr) if thr else 0.0)
 
     def sources(self, i: int) -> dict:
         """Shares of parameter i's interval variance: measurement, model revolutions, solver preset."""
         parts = {"measurement": float((self.t * self.sd_u[i]) ** 2),
                  "model_revolutions": 0.0 if self.rev_u is None else float(self.rev_u[i] ** 2),
                  "solver_preset": 0.0 if self.preset_u is None else float(self.preset_u[i] ** 2),
-                 "convergence": 0.0 if self.conv_u is None else float(self.conv_u[i] ** 2)}
+                 "convergence": 0.0 if self.conv_u is None else float(self.conv_u[i] ** 2),
+                 "roughness": 0.0 if self.rough_u is None else float(self.rough_u[i] ** 2)}
         total = sum(parts.values())
         return {k: (v / total if total > 0 and math.isfinite(total) else None) for k, v in parts.items()}
 
@@ -128,6 +160,35 @@ def numerical(J: np.ndarray, r: np.ndarray, rev_residuals: list, r_other: np.nda
     pre = np.abs(pinv @ (r_other - r)) if r_other is not None else np.zeros(p)
     conv = np.abs(pinv @ r)
     return rev, pre, conv
+
+
+def roughness(problem, lin: "Linear", J: np.ndarray, u0: np.ndarray, r: np.ndarray, step: float) -> np.ndarray:
+    """Where the objective's roughness hides its minimum (unit box, per parameter).
+
+    At the central Jacobian's points u* +- h e_i (cached runs, no new one) the objective is compared
+    with the Gauss-Newton quadratic ||r + J (u - u*)||^2: a smooth objective differs from it by its
+    curvature's second order only, a rough one (a rebound more or less, an impact on the other
+    flank: the models change in small discrete steps) by the size of its steps, R (rms over the
+    points). The minimum then lies anywhere the quadratic rises by less than R: sqrt(R (J^T J)^-1_ii)
+    along parameter i. ``u0``, ``r``: the Jacobian's centre and its residuals. Returns the
+    half-widths and R."""
+    u0 = np.asarray(u0, float)
+    gaps = []
+    for i in range(u0.size):
+        if not (step <= u0[i] <= 1.0 - step):
+            continue                      # a forward difference fits its point exactly: no information
+        for sign in (1.0, -1.0):
+            v = u0.copy()
+            v[i] += sign * step
+            e = problem.at(v)
+            if e.ok:
+                pred = r + J[:, i] * sign * step
+                gaps.append(e.objective - float(pred @ pred))
+    if not gaps:
+        return np.zeros(u0.size), 0.0
+    R = float(np.sqrt(np.mean(np.square(gaps))))
+    g = np.diag(lin.gn_inv)
+    return np.where(np.isfinite(g) & (g > 0), np.sqrt(R * np.where(np.isfinite(g), g, 0.0)), 0.0), R
 
 
 def autocorrelation_lags(r: np.ndarray, groups: list[tuple[int, int]]) -> int:
@@ -223,7 +284,9 @@ def profile(problem, lin: Linear, J: np.ndarray, i: int) -> Profile:
     half = lin.t * lin.sd_u[i]
     d = max(half, 2 * FD_STEP) if math.isfinite(half) else 0.5
     checks = {"low": max(u_opt[i] - d, 0.0), "high": min(u_opt[i] + d, 1.0)}
-    points = sorted({round(v, 9) for v in (checks["low"], checks["high"], 0.0, 1.0)
+    # the bounds only where the flat-profile check could matter: an interval over a quarter of them
+    wide = float(lin.half_u()[i]) > BOUNDS_CHECK / 2 if math.isfinite(float(lin.half_u()[i])) else True
+    points = sorted({round(v, 9) for v in (checks["low"], checks["high"]) + ((0.0, 1.0) if wide else ())
                      if abs(v - u_opt[i]) > 1e-6})
     prof = Profile(i, [float(u_opt[i])], [S])
     for v in points:
@@ -271,9 +334,13 @@ def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str]) -> list
     notes = []
     if not lin.sensitive[i]:
         return ["the objective does not depend on it at the optimum (no jump or contact it changes)"]
+
     lo, hi = lin.interval_u()
-    if lo[i] < 0.0 and hi[i] > 1.0:
+    width = float(hi[i] - lo[i])
+    if width > 1.0:
         notes.append("its 95 % interval is wider than the bounds")
+    elif width > MOST_OF_BOUNDS:
+        notes.append(f"its 95 % interval spans {100 * width:.0f} % of the bounds (on the search scale)")
     if prof is not None and len(prof.u) >= 3:
         S = lin.objective
         at_bounds = [o for u, o in zip(prof.u, prof.objective) if u <= BOUND_TOL or u >= 1 - BOUND_TOL]
