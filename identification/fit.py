@@ -4,8 +4,9 @@ The steps (docs/identification.md):
 
 1. the measurement side once (identification.objective.load_target);
 2. *before*: the model at the scene's values (what ``labtool report`` would simulate);
-3. the search at the ``fast`` preset: a coarse scan of the bounds (unless a start is given), then
-   bounded least squares from its best point (identification.search);
+3. the search at the ``fast`` preset: a coarse scan of the bounds, bounded least squares on
+   smoothed cycles from its best points (and a given start), then at full resolution from the best
+   (identification.search);
 4. for another requested preset, a few least-squares iterations at that preset from there;
 5. the Jacobian at the optimum (central differences) at the requested preset: 95 % intervals and
    correlations; a profile of the objective per parameter checks them and finds what this
@@ -43,7 +44,8 @@ METRIC_KEYS = ("iso_rating", "iso_grade", "sg_magnitude", "sg_phase", "sg_compre
 @dataclasses.dataclass
 class FitRequest:
     """What to fit. ``free``: the --free text; ``bounds``/``start`` in edge units by parameter name
-    (``start``: "scan" (default), "scene", or {name: value}); ``overrides``: the operating point as
+    (``start``: "scan" (default), "scene", or {name: value}: a given start is searched from first,
+    beside the scan's best points unless ``scan`` is False); ``overrides``: the operating point as
     ``labtool report`` takes it (rpm, law, Fu, backlash_mm, ..., elastic_gap); ``chain``: fixed
     values of the chain parameters that are not free (ka_gain, delay_ms)."""
 
@@ -59,6 +61,7 @@ class FitRequest:
     chain: dict = dataclasses.field(default_factory=dict)
     max_runs: int = 200
     cond: align.Conditioning | None = None
+    scan: bool = True
 
     def check(self) -> None:
         if self.accuracy not in ACCURACIES:
@@ -162,8 +165,12 @@ def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say):
                                                                  ev.revolution_residuals(space.from_unit(u_best), after),
                                                                  other.residuals if other.ok else None)
     lin.rough_u, lin.rough = uncertainty.roughness(final, lin, J, u_j, r_j, search.FD_STEP)
-    # every point evaluated (cached) within the roughness and the threshold of the optimum widens the interval
-    lin.set_hull(space.to_unit(ev.acceptable(req.accuracy, after.objective + lin.acceptance())))
+    # every point evaluated (cached) within the roughness and the threshold of the optimum widens the
+    # interval, at the requested preset and, measured from its own value at the optimum, the search's
+    rows = [ev.acceptable(req.accuracy, after.objective + lin.acceptance())]
+    if req.accuracy != SEARCH_PRESET and other.ok:
+        rows.append(ev.acceptable(SEARCH_PRESET, other.objective + lin.acceptance()))
+    lin.set_hull(space.to_unit(np.vstack(rows)))
     profiles = [uncertainty.profile(final, lin, J, i) for i in range(len(space.params))]
     # a point visited here lower than the optimum by more than the threshold and the roughness:
     # the search stopped in a shallower minimum
@@ -221,16 +228,16 @@ SCAN_STARTS = 2       # least-squares starts on the smoothed cycles: the scan's 
 
 
 def _search(ev: Evaluator, space, req: FitRequest, x_start, say, notes) -> np.ndarray:
-    """Scan (unless a start is given), least squares on the smoothed cycles from the scan's best
+    """Scan, least squares on the smoothed cycles from the given start (if any) and the scan's best
     ``SCAN_STARTS`` points, then least squares at full resolution from the best of those, all at
-    the search preset; the best u."""
+    the search preset; the best u. ``req.scan`` False with a given start: that start only."""
     prob = search.Problem(ev, SEARCH_PRESET, req.max_runs, say, "scan", harmonics=coarse_harmonics(ev.target.cond))
+    given = req.start != "scan"
     try:
-        if req.start == "scan":
+        starts = [space.to_unit(x_start)] if given else []
+        if req.scan or not given:
             results = sorted(search.scan(prob, search.scan_points(space, space.to_unit(x_start))), key=lambda r: r[1])
-            starts = [u for u, obj in results[:SCAN_STARTS] if np.isfinite(obj)]
-        else:
-            starts = [space.to_unit(x_start)]
+            starts += [u for u, obj in results[:SCAN_STARTS] if np.isfinite(obj)]
         prob.phase = "search, smoothed"
         for u0 in starts:
             search.minimize(prob, u0)
@@ -281,13 +288,15 @@ def metrics(target, e: Evaluation, delay_deg: float = 0.0) -> dict | None:
 def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
     """One parameter's entry of the JSON (edge units)."""
     p = space.params[i]
-    lo_u, hi_u = lin.interval_u()
+    lo, hi, sides = uncertainty.interval(lin, prof, i)
+    lin_lo, lin_hi = lin.interval_u()
     plo, phi = prof.interval_u(lin)
-    why = uncertainty.verdict(lin, prof, i, space.keys)
+    why = uncertainty.verdict(lin, prof, i, space.keys, lo, hi)
     bound = uncertainty.at_bound(float(lin.u[i]))
     return {
         "value": space.value(i, float(lin.u[i])),
-        "ci95": [space.value(i, lo_u[i]), space.value(i, hi_u[i])],
+        "ci95": [space.value(i, lo), space.value(i, hi)],
+        "ci95_linear": [space.value(i, lin_lo[i]), space.value(i, lin_hi[i])],
         "bound_hit": bound is not None,
         "bound": bound,
         "unit": p.unit,
@@ -299,7 +308,7 @@ def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
         "interval_sources": lin.sources(i),
         "roughness_over_threshold": lin.rough_ratio(i),
         "identifiable": not why,
-        "notes": why,
+        "notes": why + sides,
     }
 
 

@@ -329,14 +329,37 @@ def _profiled(problem, lin: Linear, J: np.ndarray, i: int, v: float) -> float:
     return float(best)
 
 
-def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str]) -> list[str]:
-    """Why parameter ``i`` is not identifiable from this measurement (empty: it is)."""
+def interval(lin: Linear, prof: Profile | None, i: int) -> tuple[float, float, list[str]]:
+    """Parameter i's 95 % interval (unit box): the linear one (with the numerical parts and the
+    acceptable points), widened to the profile's where the profile rises more slowly than linear
+    theory says; a side where the profile does not rise at all reaches the bound. Returns
+    (lo, hi, notes)."""
+    lo_all, hi_all = lin.interval_u()
+    lo, hi = float(lo_all[i]), float(hi_all[i])
+    notes = []
+    if prof is not None:
+        plo, phi = prof.interval_u(lin)
+        if plo == -math.inf:
+            lo = min(lo, 0.0)
+            notes.append("its profile does not rise towards the lower bound")
+        elif math.isfinite(plo):
+            lo = min(lo, plo)
+        if phi == math.inf:
+            hi = max(hi, 1.0)
+            notes.append("its profile does not rise towards the upper bound")
+        elif math.isfinite(phi):
+            hi = max(hi, phi)
+    return lo, hi, notes
+
+
+def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str], lo: float, hi: float) -> list[str]:
+    """Why parameter ``i`` is not identifiable from this measurement (empty: it is); ``lo``, ``hi``:
+    its interval (unit box, ``interval``)."""
     notes = []
     if not lin.sensitive[i]:
         return ["the objective does not depend on it at the optimum (no jump or contact it changes)"]
 
-    lo, hi = lin.interval_u()
-    width = float(hi[i] - lo[i])
+    width = float(hi - lo)
     if width > 1.0:
         notes.append("its 95 % interval is wider than the bounds")
     elif width > MOST_OF_BOUNDS:

@@ -50,11 +50,29 @@ def _register_all() -> None:
 _register_all()
 
 
+INTERRUPTED = 130      # exit code after Ctrl-C (128 + SIGINT)
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the process exit code."""
     try:
         rv = app(args=argv, standalone_mode=False, prog_name="labtool")
-        return int(rv) if isinstance(rv, int) else 0
+        code = int(rv) if isinstance(rv, int) else 0
+        if code == INTERRUPTED:      # typer returns Ctrl-C as a silent 130 when not standalone
+            typer.echo("labtool: interrupted", err=True)
+        if argv is None:
+            sys.exit(code)
+        return code
     except LabtoolError as exc:
         typer.echo(f"labtool: error: {exc}", err=True)
         code = 2
@@ -62,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         code = exc.exit_code
     except typer.Abort:
         typer.echo("labtool: interrupted", err=True)
-        code = 130
+        code = INTERRUPTED
     except click_exc.UsageError as exc:
         hint = f" (see 'labtool {exc.ctx.command_path.split(' ', 1)[-1]} --help')" if exc.ctx else ""
         typer.echo(f"labtool: error: {exc.format_message()}{hint}", err=True)
@@ -72,7 +90,14 @@ def main(argv: list[str] | None = None) -> int:
         code = 2
     except KeyboardInterrupt:
         typer.echo("labtool: interrupted", err=True)
-        code = 130
+        code = INTERRUPTED
+    except SystemError as exc:
+        # Ctrl-C inside a numba-compiled loop surfaces as a chain of "returned a result with an
+        # exception set" with the KeyboardInterrupt at its root
+        if not _caused_by_interrupt(exc):
+            raise
+        typer.echo("labtool: interrupted", err=True)
+        code = INTERRUPTED
     if argv is None:
         sys.exit(code)
     return code

@@ -391,3 +391,27 @@ def test_the_numerical_spread_is_the_steps_the_revolutions_and_the_other_preset_
     assert np.allclose(conv, 0.0)
     _, _, conv = uncertainty.numerical(J, np.arange(10.0) * 0.01, [], None)     # a slope left: the step to take
     assert conv[1] == pytest.approx(0.01) and conv[0] == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.hostile("interrupted")
+@pytest.mark.parametrize("how", ["plain", "numba"])
+def test_ctrl_c_in_python_or_in_a_compiled_loop_is_one_line_exit_130(measured, monkeypatch, capsys, tmp_path, how):
+    # numba turns a KeyboardInterrupt inside a compiled loop into chained SystemErrors
+    from labtool.cli import main
+
+    def interrupted(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            if how == "plain":
+                raise
+            try:
+                raise SystemError("CPUDispatcher(run) returned a result with an exception set") from exc
+            except SystemError as inner:
+                raise SystemError("_numba_unpickle returned a result with an exception set") from inner
+
+    monkeypatch.setattr(pipeline, "run_simulation", interrupted)
+    out = tmp_path / "fit.json"
+    rc = main(["fit", str(measured), "--model", "rigid", "--free", "backlash", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 130 and err == ["labtool: interrupted"] and not out.exists()

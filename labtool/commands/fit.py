@@ -37,7 +37,9 @@ def fit(
                                          "(default: backlash 0.01:0.6 mm, restitution 0:1, contact_damping 0:400 s/m, "
                                          "contact_length 1:30 mm, ka_gain 0.5:2, delay -5:5 ms)"),
     start: str = typer.Option("scan", help="scan (a coarse scan of the bounds, default), scene (the scene's values) or "
-                              "name=value,... (edge units)"),
+                              "name=value,... (edge units): searched from first, beside the scan's best points"),
+    scan: bool = typer.Option(True, "--scan/--no-scan", help="also search from the coarse scan's best points (with "
+                              "--no-scan a given start alone: the answer may then depend on it)"),
     rpm: Optional[float] = typer.Option(None, help="cam speed n1 to simulate [rpm] (default: the file's)"),
     law: Optional[str] = typer.Option(None, help="motion law (default: the file's, else sine)"),
     fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0)"),
@@ -86,17 +88,20 @@ def fit(
                  "contact_length_mm": contact_length_mm, "elastic_gap": elastic_gap}
     req = FitRequest(measured, model, free, omega1, accuracy, revolutions,
                      parse_assignments(bounds, "--bounds", ranges=True), start_value, overrides,
-                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs)
+                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs, scan=scan)
     err = console(stderr=True)
     with (err.status("fit") if err.is_terminal else ProgressLines(sys.stderr, "fit")) as status:
         outcome = identify(req, progress=lambda msg: status.update(msg))
         text = json.dumps(outcome.summary, indent=1, allow_nan=False)
-        if output is not None:
-            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        fig = None
         if figure is not None:
             status.update("drawing the figure")
             from identification.figures import fit_figure
             fig = fit_figure(outcome)
+        # both outputs are ready before either is written (each atomically)
+        if output is not None:
+            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        if fig is not None:
             atomic_write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     if as_json:
         typer.echo(text)
