@@ -22,7 +22,11 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
+	@$(BIN)/python -c "import numbalsoda" 2>/dev/null || $(BIN)/pip install -q -e '.[bench]' || \
+	  echo "bench: numbalsoda could not be built (it needs gfortran and cmake: apt-get install -y gfortran cmake); its peers are skipped"
 	$(BIN)/python benchmarks/run_all.py
+	$(BIN)/python benchmarks/peers_bench.py
+	$(BIN)/python benchmarks/bench_doe.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -96,6 +96,16 @@ class Device(abc.ABC):
     def actual_rate_hz(self) -> float:
         """Sample rate the device really runs at (Hz)."""
 
+    @property
+    def input_range_v(self) -> tuple[float, ...]:
+        """+-input range of every channel (V) as the hardware really has it; NaN where unknown."""
+        return tuple(float("nan") for _ in self.channel_names)
+
+    def buffer_fill(self) -> float | None:
+        """Fraction (0..1) of the device's sample buffer holding unread samples; None if unknown.
+        Near 1 the next block overruns: the reader is not keeping up."""
+        return None
+
     def describe(self) -> str:
         return type(self).__name__
 

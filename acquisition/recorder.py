@@ -20,16 +20,30 @@ says so, with ``missing_samples=N`` at the start of its detail (an ``overrun`` e
 sits at the same row). Readers split the data at these events; nothing is joined silently. Without
 gaps, row i is the sample taken at i / sample_rate_hz.
 
-The file is opened with ``libver="latest"`` and switched to SWMR mode, so another process can
-read it while it grows; it is flushed at least every ``flush_interval_s`` (0.5 s default) of wall
-time. A killed process leaves a file that opens, with every sample up to the last flush and
-``complete`` False. ``complete`` is set after the SWMR session is closed, by reopening the file.
+The file is written with HDF5 file-format bounds ``libver=("v110", "v110")`` (the oldest SWMR
+needs; HDF5 1.10+ tools read it) and switched to SWMR mode, so another process can read it while it
+grows; it is flushed at least every ``flush_interval_s`` (0.5 s default) of wall time. A killed
+process leaves a file that opens, with every sample up to the last flush and ``complete`` False.
+The closing attributes (``complete``, ``stop_time_utc``, ``stop_reason``, ``n_samples``,
+``samples_lost``, the headroom figures) exist from the start and are modified in place at the close,
+still in SWMR mode, so a live reader never blocks it. One writer at a time: ``writer_lock`` holds
+an exclusive lock on the file while it is recorded. The disk's free space is checked before every
+write: below ``reserve_bytes`` the run stops with DiskFull and the file closes cleanly
+(``complete`` False, ``n_samples`` = the rows in ``signals``), instead of HDF5 meeting ENOSPC.
+
+Headroom (for reports): ``signals`` carries per-channel ``input_range_v`` (+-V the device really
+has), ``peak_abs_v``, ``rms_v`` (V, over the whole recording), ``peak_fraction_of_range`` and
+``clipped`` (int8, 1 if a clip event was seen); the root attribute ``headroom_summary`` says the
+same in one line.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import errno
 import os
+import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -37,9 +51,14 @@ import h5py
 import numpy as np
 
 from acquisition.device import Block, Event
+from acquisition.writer_lock import WriterLock
+from common.hdf5 import open_file
 
 FORMAT = "labtool.recording"
 FORMAT_VERSION = 1
+# HDF5 file-format bounds: v110 is the oldest that SWMR needs; anything newer (HDF5 2.0's "latest")
+# writes datatype and attribute messages that HDF5 1.10-1.14 tools (HDFView, MATLAB, LabVIEW) cannot read
+LIBVER = ("v110", "v110")
 EVENT_DTYPE = np.dtype([("index", "<i8"), ("kind", "S16"), ("detail", "S256")])
 
 
@@ -52,25 +71,35 @@ def utc_now() -> str:
 
 
 def _attr(value):
-    """h5py-friendly attribute value (None -> skipped by the caller)."""
+    """h5py-friendly attribute value (None -> skipped by the caller); text arrays as UTF-8 strings."""
     if isinstance(value, (list, tuple)):
-        return np.asarray(value)
+        value = np.asarray(value)
+    if isinstance(value, np.ndarray) and value.dtype.kind in "UO":
+        return np.array([str(v) for v in value.ravel()], dtype=h5py.string_dtype("utf-8")).reshape(value.shape)
     return value
 
 
 class Recorder:
     """Append-only writer of one recording. Use as a context manager or call ``close``.
 
-    path            output file (replaced if it exists: the caller checks --force first)
+    path            output file; an existing one is replaced only if ``replace`` and no other
+                    process is recording into it (writer_lock); while this recorder is open,
+                    every other writer is refused
     channel_names   names of the columns of ``signals``
     rate_hz         sample rate the device really runs at (Hz)
-    attrs           extra root attributes (scene, seed, ...)
+    attrs           extra root attributes (scene, seed, operating point, ...)
     ka_m_s2_per_v   per-channel Ka (m/s^2 per V), NaN where none (tacho)
+    input_range_v   per-channel +-input range the device really has (V), NaN where unknown
     on_flush        callback(n_samples_flushed) after every flush (tests, progress)
+    reserve_bytes   disk space held back (an unnamed, preallocated file) for closing the recording:
+                    the run stops (DiskFull) before HDF5 would meet ENOSPC, and if it meets it
+                    anyway (another program filled the disk) the reserve is released so HDF5 can
+                    still write its metadata and close the file with every row it claims
     """
 
     def __init__(self, path, channel_names, rate_hz: float, attrs: dict | None = None, ka_m_s2_per_v=None,
-                 chunk_rows: int = 4096, flush_interval_s: float = 0.5, on_flush=None, clock=time.monotonic):
+                 input_range_v=None, chunk_rows: int = 4096, flush_interval_s: float = 0.5, on_flush=None,
+                 clock=time.monotonic, replace: bool = True, reserve_bytes: int | None = None):
         self.path = Path(path)
         self.channel_names = tuple(channel_names)
         self.rate_hz = float(rate_hz)
@@ -78,9 +107,11 @@ class Recorder:
         self.on_flush = on_flush
         self._clock = clock
         nch = len(self.channel_names)
-        ka = np.full(nch, np.nan) if ka_m_s2_per_v is None else np.asarray(ka_m_s2_per_v, dtype=float)
-        if ka.shape != (nch,):
-            raise ValueError("ka_m_s2_per_v needs one value per channel")
+        ka = _per_channel(ka_m_s2_per_v, nch, "ka_m_s2_per_v")
+        self.input_range_v = _per_channel(input_range_v, nch, "input_range_v")
+        self.reserve_bytes = int(reserve_bytes if reserve_bytes is not None else max(512_000, 8 * chunk_rows * nch * 4))
+        self._chunk_bytes = chunk_rows * nch * 4
+        self._pending_bytes = 0  # appended since the last flush: HDF5's chunk cache writes them at the flush
         self.n_samples = 0  # rows written
         self.device_index = 0  # device sample count seen so far (rows + samples lost)
         self.n_flushed = 0
@@ -89,38 +120,61 @@ class Recorder:
         self.samples_lost = 0
         self.clipped = set()
         self.peak_v = np.zeros(nch)
+        self._sum_sq = np.zeros(nch)
         self.events: list[Event] = []
         self.closed = False
-        if self.path.exists():
-            self.path.unlink()
+        self.healthy = True  # False once HDF5 itself failed a write: the file is then left as it is
+        self._lock = WriterLock.create(self.path, replace)
         try:
-            self._f = h5py.File(self.path, "w", libver="latest")
+            self._reserve = _DiskReserve(self.path.parent, self.reserve_bytes)
+            self._f = h5py.File(self.path, "w", libver=LIBVER)
         except OSError as exc:
+            self.path.unlink(missing_ok=True)
+            self._lock.release()
             raise _classify(exc) from None
+        try:
+            self._create_layout(attrs or {}, ka, nch, chunk_rows)
+        except BaseException:
+            self._f.close()
+            self.path.unlink(missing_ok=True)
+            self._reserve.release()
+            self._lock.release()
+            raise
+        self._last_flush = self._clock()
+        self.add_event(Event(0, "start", f"recording started at {self._f.attrs['start_time_utc']}"))
+        self.flush()
+
+    def _create_layout(self, attrs: dict, ka, nch: int, chunk_rows: int) -> None:
         f = self._f
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
         f.attrs["sample_rate_hz"] = self.rate_hz
         f.attrs["start_time_utc"] = utc_now()
         f.attrs["complete"] = False
-        for k, v in (attrs or {}).items():
+        f.attrs["writer_lock"] = "exclusive while recording" if self._lock.held else f"none: {self._lock.reason}"
+        for k, v in attrs.items():
             if v is not None:
                 f.attrs[k] = _attr(v)
-        # the attributes set on close exist from the start: SWMR forbids new objects later
+        # everything the close sets exists from the start: SWMR forbids new objects later, and the
+        # close modifies values in place (no reopen, so a live SWMR reader cannot block it)
         f.attrs["stop_time_utc"] = ""
         f.attrs["n_samples"] = 0
+        f.attrs["samples_lost"] = 0
         f.attrs["stop_reason"] = "recording (not closed)"
+        f.attrs["headroom_summary"] = ""
         self._sig = f.create_dataset("signals", shape=(0, nch), maxshape=(None, nch), dtype="f4",
                                      chunks=(chunk_rows, nch))
-        self._sig.attrs["channel_names"] = np.array(self.channel_names, dtype=h5py.string_dtype("utf-8"))
-        self._sig.attrs["ka_m_s2_per_v"] = ka
-        self._sig.attrs["units"] = "V"
+        sa = self._sig.attrs
+        sa["channel_names"] = np.array(self.channel_names, dtype=h5py.string_dtype("utf-8"))
+        sa["ka_m_s2_per_v"] = ka
+        sa["units"] = "V"
+        sa["input_range_v"] = self.input_range_v
+        for name in HEADROOM_ATTRS:
+            sa[name] = np.full(nch, np.nan)
+        sa["clipped"] = np.zeros(nch, np.int8)
         self._ev = f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(256,))
         self._ev.attrs["fields"] = "index: row of signals (int64); kind: ASCII; detail: UTF-8 (fixed-length bytes)"
         f.swmr_mode = True
-        self._last_flush = self._clock()
-        self.add_event(Event(0, "start", f"recording started at {f.attrs['start_time_utc']}"))
-        self.flush()
 
     # -- writing
     def write_block(self, block: Block) -> None:
@@ -145,8 +199,14 @@ class Recorder:
             self._append_rows(data)
             with np.errstate(invalid="ignore"):
                 self.peak_v = np.fmax(self.peak_v, np.nanmax(np.abs(data), axis=0))
+                self._sum_sq += np.nansum(np.square(data, dtype=np.float64), axis=0)
         if self._clock() - self._last_flush >= self.flush_interval_s:
             self.flush()
+
+    @property
+    def rms_v(self) -> np.ndarray:
+        """RMS of every channel over the rows written so far (V, mean included)."""
+        return np.sqrt(self._sum_sq / self.n_samples) if self.n_samples else np.full(len(self.channel_names), np.nan)
 
     def add_event(self, ev: Event) -> None:
         self.events.append(ev)
@@ -154,29 +214,54 @@ class Recorder:
             self.overruns += 1
         if ev.kind == "clip":
             self.clipped.add(ev.detail.split(":")[0])
+        # events are not held to the reserve: it is there so that the stop and fault events fit
         row = np.array([(ev.index, ev.kind.encode("ascii"), ev.detail.encode("utf-8")[:256])], dtype=EVENT_DTYPE)
         try:
             n = self._ev.shape[0]
             self._ev.resize((n + 1,))
             self._ev[n] = row[0]
-        except OSError as exc:
-            raise _classify(exc) from exc
+        except (OSError, RuntimeError) as exc:
+            raise self._failed(exc) from exc
+
+    def _failed(self, exc) -> OSError:
+        """HDF5 failed a write: mark the file unhealthy, free the reserve so the close can work."""
+        self.healthy = False
+        self._reserve.release()
+        return _classify(exc)
+
+    def _guard_space(self, nbytes: int) -> None:
+        """DiskFull before HDF5 is asked to write more than the disk holds (it crashes on ENOSPC).
+        What the next flush writes counts: the rows still in HDF5's chunk cache, two partial chunks."""
+        try:
+            free = shutil.disk_usage(self.path.parent).free
+        except OSError:
+            return
+        need = nbytes + self._pending_bytes + 2 * self._chunk_bytes + 64_000
+        if free < need:
+            raise DiskFull(errno.ENOSPC, f"{free / 1e3:.0f} kB left on the disk, {need / 1e3:.0f} kB needed "
+                                         "for the next rows")
 
     def _append_rows(self, rows: np.ndarray) -> None:
         """The one place samples reach the file (tests replace it to simulate a full disk)."""
+        self._guard_space(rows.nbytes)
+        n = self._sig.shape[0]
         try:
-            n = self._sig.shape[0]
             self._sig.resize((n + rows.shape[0], rows.shape[1]))
             self._sig[n:] = rows
-        except OSError as exc:
-            raise _classify(exc) from exc
+        except (OSError, RuntimeError) as exc:
+            err = self._failed(exc)
+            with contextlib.suppress(Exception):  # claim only the rows really written
+                self._sig.resize((n, rows.shape[1]))
+            raise err from exc
         self.n_samples += rows.shape[0]
+        self._pending_bytes += rows.nbytes
 
     def flush(self) -> None:
         try:
             self._f.flush()
-        except OSError as exc:
-            raise _classify(exc) from exc
+        except (OSError, RuntimeError) as exc:
+            raise self._failed(exc) from exc
+        self._pending_bytes = 0
         self.n_flushed = self.n_samples
         self._last_flush = self._clock()
         if self.on_flush is not None:
@@ -184,43 +269,78 @@ class Recorder:
 
     # -- closing
     def close(self, complete: bool = True, reason: str = "stopped") -> None:
-        """Write the stop event, flush, close; then mark ``complete`` (reopening outside SWMR).
+        """Write the stop event and the closing attributes, flush, close, release the lock.
 
-        complete=False keeps the file marked incomplete (e.g. disk full). Never raises on a second call.
+        complete=False keeps the file marked incomplete (e.g. disk full). Never raises on a second
+        call. The attributes are modified in place in SWMR mode: a reader holding the file open does
+        not stop the close (reopening it for writing would fail on the reader's lock).
         """
         if self.closed:
             return
         self.closed = True
         try:
+            if reason and len(reason) > 250:
+                reason = reason[:250]
             self.add_event(Event(self.n_samples, "stop", reason))
-            self._f.attrs["n_samples"] = self.n_samples
+            self._write_closing_attrs(complete, reason)
             self._f.flush()
             self.n_flushed = self.n_samples
         finally:
-            self._f.close()
-        with h5py.File(self.path, "r+", libver="latest") as f:
-            f.attrs["stop_time_utc"] = utc_now()
-            f.attrs["stop_reason"] = reason
-            f.attrs["complete"] = bool(complete)
-            f.attrs["samples_lost"] = int(self.samples_lost)
+            try:
+                self._f.close()
+            finally:
+                self._reserve.release()
+                self._lock.release()
+
+    def _write_closing_attrs(self, complete: bool, reason: str) -> None:
+        a, sa = self._f.attrs, self._sig.attrs
+        peak, rms = self.peak_v.astype(float), self.rms_v.astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = peak / self.input_range_v
+        sa.modify("peak_abs_v", peak)
+        sa.modify("rms_v", rms)
+        sa.modify("peak_fraction_of_range", frac)
+        sa.modify("clipped", np.array([n in self.clipped for n in self.channel_names], np.int8))
+        a.modify("headroom_summary", headroom_summary(self.channel_names, peak, self.input_range_v, self.clipped))
+        a.modify("n_samples", int(self.n_samples))
+        a.modify("samples_lost", int(self.samples_lost))
+        a.modify("stop_reason", reason)
+        a.modify("stop_time_utc", utc_now())
+        a.modify("complete", bool(complete))
 
     def abandon(self, reason: str) -> None:
-        """Close after a write failure: keep whatever reached the file, ``complete`` stays False."""
+        """Close after HDF5 itself failed a write: keep whatever reached the file, ``complete``
+        stays False, ``n_samples`` says how many rows are real. Does what still works."""
         if self.closed:
             return
         self.closed = True
-        for step in (lambda: self.add_event(Event(self.n_samples, "fault", reason)),
-                     lambda: self._f.flush(), lambda: self._f.close()):
+        self._reserve.release()
+        steps = [lambda: self._sig.resize((self.n_samples, self._sig.shape[1])),
+                 lambda: self._f.attrs.modify("n_samples", int(self.n_samples)),
+                 lambda: self._f.attrs.modify("stop_reason", reason[:250]),
+                 lambda: self._f.flush(), lambda: self._f.close()]
+        for step in steps:
             try:
                 step()
             except Exception:  # the disk is full: do what still works
                 pass
-        try:
-            with h5py.File(self.path, "r+", libver="latest") as f:
-                f.attrs["stop_reason"] = reason
-                f.attrs["n_samples"] = f["signals"].shape[0]
+        self._lock.release()
+        try:  # what really reached the file
+            with h5py.File(self.path, "r", swmr=True) as f:
+                self.n_samples = min(self.n_samples, int(f["signals"].shape[0]))
         except Exception:
             pass
+
+    def discard(self) -> None:
+        """Close and delete a recording that holds no sample (a run that failed before its first block)."""
+        if not self.closed:
+            self.closed = True
+            with contextlib.suppress(Exception):
+                self._f.close()
+        self._reserve.release()
+        if self.n_samples == 0:
+            self.path.unlink(missing_ok=True)
+        self._lock.release()
 
     def __enter__(self):
         return self
@@ -233,21 +353,82 @@ class Recorder:
         return False
 
 
-def _classify(exc: OSError) -> OSError:
-    """ENOSPC (also when h5py wraps it in its message) -> DiskFull; other OSErrors unchanged."""
-    if getattr(exc, "errno", None) == errno.ENOSPC or "No space left" in str(exc):
+HEADROOM_ATTRS = ("peak_abs_v", "rms_v", "peak_fraction_of_range")
+HEADROOM_WARN = 0.8  # peak above this fraction of the input range: little headroom left
+
+
+def headroom_summary(names, peak_v, range_v, clipped=()) -> str:
+    """One line per recording: each channel's peak as % of its input range, flagged above 80 %."""
+    parts = []
+    for name, p, r in zip(names, peak_v, range_v):
+        if not (np.isfinite(p) and np.isfinite(r) and r > 0):
+            parts.append(f"{name} peak {p:.3g} V (range unknown)")
+            continue
+        flag = " CLIPPED" if name in clipped else (" LOW HEADROOM" if p / r > HEADROOM_WARN else "")
+        parts.append(f"{name} {100 * p / r:.1f} % of +-{r:g} V{flag}")
+    return "; ".join(parts)
+
+
+def _per_channel(values, nch: int, what: str) -> np.ndarray:
+    out = np.full(nch, np.nan) if values is None else np.asarray(values, dtype=float)
+    if out.shape != (nch,):
+        raise ValueError(f"{what} needs one value per channel")
+    return out
+
+
+class _DiskReserve:
+    """Disk space held by an unnamed, preallocated file in the recording's folder; ``release``
+    gives it back. Unnamed (O_TMPFILE where the system has it, else unlinked at once), so a killed
+    run leaves nothing behind: the kernel frees the space with the process."""
+
+    def __init__(self, folder: Path, nbytes: int):
+        self._f = None
+        if nbytes <= 0:
+            return
+        f = tempfile.TemporaryFile(dir=folder if str(folder) else ".")
+        try:
+            if hasattr(os, "posix_fallocate"):
+                os.posix_fallocate(f.fileno(), 0, nbytes)
+            else:  # pragma: no cover - no fallocate: write the bytes
+                f.write(b"\0" * nbytes)
+                f.flush()
+        except OSError as exc:
+            f.close()
+            if exc.errno == errno.ENOSPC:
+                raise DiskFull(errno.ENOSPC, f"less than {nbytes / 1e3:.0f} kB free: not enough to start a recording") from None
+            raise
+        self._f = f
+
+    def release(self) -> None:
+        if self._f is not None:
+            f, self._f = self._f, None
+            f.close()
+
+
+def _classify(exc: Exception) -> OSError:
+    """ENOSPC (also when h5py wraps it in a RuntimeError's message) -> DiskFull; other OSErrors
+    unchanged; any other HDF5 failure -> OSError with its first line."""
+    if isinstance(exc, DiskFull):
+        return exc
+    if getattr(exc, "errno", None) == errno.ENOSPC or "No space left" in str(exc) or "errno = 28" in str(exc):
         return DiskFull(errno.ENOSPC, os.strerror(errno.ENOSPC))
-    return exc
+    if isinstance(exc, OSError):
+        return exc
+    return OSError(errno.EIO, " ".join(str(exc).split())[:200])
 
 
 def read_recording(path) -> dict:
-    """Minimal reader for tests and calibration: attrs, signals (float64), channel names, Ka, events.
+    """Minimal reader for tests and tools: attrs, signals (float64), channel names, Ka, events.
 
-    (The full reader, with checks and warnings, is processing's job.)
+    Opened through common.hdf5.open_file (superblock and file size checked first, so a truncated
+    file is one FileFormatError, never a hang; SWMR read for a file still marked open for writing).
+    The full reader, with checks and warnings, is processing's.
     """
-    with h5py.File(path, "r", libver="latest", swmr=True) as f:
+    from common.errors import FileFormatError
+
+    f, _note = open_file(path)
+    with f:
         if f.attrs.get("format") != FORMAT:
-            from common.errors import FileFormatError
             raise FileFormatError(f"{path} is not a labtool recording (format attribute missing)")
         names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["signals"].attrs["channel_names"]]
         ev = f["events"][...]

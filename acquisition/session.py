@@ -2,8 +2,9 @@
 
 ``run(device, path, ...)`` configures and starts the device, writes every block, and always
 leaves a readable file: a clean end (duration reached, Ctrl-C, device disconnected) closes it with
-``complete = True`` and a ``stop`` event saying why; a full disk stops the run, keeps every sample
-that reached the file and leaves ``complete = False``.
+``complete = True`` and a ``stop`` event saying why; a full disk stops the run (before HDF5 meets
+ENOSPC: the recorder keeps a reserve), keeps every sample that reached the file and leaves
+``complete = False``. A run that fails before its first sample leaves no file.
 """
 from __future__ import annotations
 
@@ -38,10 +39,12 @@ class RunResult:
 
 def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: dict | None = None,
         ka_m_s2_per_v=None, progress=None, recorder_factory=Recorder, flush_interval_s: float = 0.5,
-        on_flush=None) -> RunResult:
+        on_flush=None, replace: bool = True, on_block=None) -> RunResult:
     """Acquire ``duration_s`` seconds (None: until Ctrl-C or the device ends) into ``path``.
 
-    progress(recorder, elapsed_wall_s) is called after every block (the CLI's live display).
+    progress(recorder, elapsed_wall_s) is called after every block (the CLI's live display);
+    on_block(block) sees every block as written (the monitor's statistics). ``replace`` lets an
+    existing file be replaced, never one that another process is recording into.
     """
     actual = device.configure(rate_hz)
     meta = dict(getattr(device, "metadata", {}) or {})
@@ -51,11 +54,15 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         meta["requested_duration_s"] = float(duration_s)
     try:
         rec = recorder_factory(path, device.channel_names, actual, attrs=meta, ka_m_s2_per_v=ka_m_s2_per_v,
-                               flush_interval_s=flush_interval_s, on_flush=on_flush)
+                               input_range_v=device.input_range_v, flush_interval_s=flush_interval_s,
+                               on_flush=on_flush, replace=replace)
     except OSError as exc:
         _try(device.stop)
         reason = os.strerror(exc.errno) if exc.errno else " ".join(str(exc).split())
         raise InputError(f"cannot write the recording {path}: {reason}") from None
+    except BaseException:
+        _try(device.stop)
+        raise
     target = None if duration_s is None else int(round(duration_s * actual))
     outcome, message, complete = "done", "duration reached", True
     t0 = time.perf_counter()
@@ -75,6 +82,8 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
                 block.data = block.data[: max(0, target - block.first_index)]
                 block.events = [e for e in block.events if e.index < target]
             rec.write_block(block)
+            if on_block is not None:
+                on_block(block)
             if progress is not None:
                 progress(rec, time.perf_counter() - t0)
     except KeyboardInterrupt:
@@ -84,10 +93,12 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message)))
     except OSError as exc:  # DiskFull included; a plain ENOSPC from below is the same thing
         if isinstance(_classify(exc), DiskFull):
-            outcome, message = "disk_full", "disk full (ENOSPC): recording stopped, samples written so far kept"
+            outcome, message = "disk_full", f"disk full ({_classify(exc).strerror}): recording stopped"
         else:
             outcome, message = "write_error", f"cannot write {path}: {exc.strerror or exc}; recording stopped"
         complete = False
+        if rec.healthy:
+            _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message[:250])))
     except BaseException as exc:  # a bug or a model failure mid-run: keep the data, say so, re-raise
         outcome, message, complete = "error", f"stopped by {type(exc).__name__}: {' '.join(str(exc).split())}", False
         _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message[:250])))
@@ -95,17 +106,25 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     finally:
         stop.restore()
         _try(device.stop)
-        if outcome in ("disk_full", "write_error"):
-            rec.abandon(message)
-        else:
-            try:
-                rec.close(complete=complete, reason=message)
-            except DiskFull:
-                rec.abandon("disk full while closing")
-                outcome, message, complete = "disk_full", "disk full (ENOSPC) while closing: samples written so far kept", False
+        outcome, message, complete = _close(rec, outcome, message, complete)
     wall = time.perf_counter() - t0
     return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
                      rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)
+
+
+def _close(rec: Recorder, outcome: str, message: str, complete: bool):
+    """Close the recording as the run ended; returns (outcome, message, complete) as they stand after."""
+    if outcome == "error" and rec.n_samples == 0:
+        rec.discard()  # nothing was recorded: leave no empty file behind
+    elif not rec.healthy:
+        rec.abandon(message)
+    else:
+        try:
+            rec.close(complete=complete, reason=message)
+        except OSError:
+            rec.abandon("disk full while closing")
+            return "disk_full", "disk full (ENOSPC) while closing", False
+    return outcome, message, complete
 
 
 class _StopRequest:

@@ -26,6 +26,7 @@ import numpy as np
 from acquisition import signal_chain as sc
 from acquisition.device import Block, Device, DeviceDisconnected, Event
 from common.errors import InputError
+from common.recording_attrs import source_name
 
 BOARD_CLOCK_HZ = 12.8e6  # the simulated board divides a 12.8 MHz timebase (as NI DSA boards do)
 MIN_RATE_HZ = 1000.0
@@ -50,9 +51,23 @@ def parse_fault(text: str) -> Fault:
     """``kind@seconds`` (e.g. ``overrun@1.5``, ``drop@2``, ``disconnect@3``, ``clip@0.5``)."""
     try:
         kind, at = text.split("@")
-        return Fault(kind.strip(), float(at))
+        at_s = float(at)
     except ValueError:
         raise InputError(f"fault '{text}' must look like kind@seconds, e.g. overrun@1.5") from None
+    if not (math.isfinite(at_s) and 0 <= at_s <= MAX_FAULT_S):
+        raise InputError(f"fault '{text}': the time must be a number of seconds from 0 to {MAX_FAULT_S:g}")
+    return Fault(kind.strip(), at_s)
+
+
+MAX_SEED = 2**63 - 1  # stored as an int64 attribute
+MAX_FAULT_S = 1e7
+
+
+def check_seed(seed) -> int:
+    """The noise seed as an int in [0, 2**63 - 1]; InputError otherwise."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= MAX_SEED:
+        raise InputError(f"--seed must be an integer from 0 to {MAX_SEED} (2**63 - 1), got {seed!r}")
+    return int(seed)
 
 
 def board_rate(rate_hz: float) -> float:
@@ -72,7 +87,7 @@ class SimStand(Device):
                  faults=(), buffer_s: float = 1.0, clock=time.monotonic, sleep=time.sleep):
         self.scene = scene or sc.StandScene()
         self.params = params or sc.ChainParams()
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.duration_s = duration_s
         self.realtime = realtime
         self.block_s = block_s
@@ -85,6 +100,17 @@ class SimStand(Device):
         self.metadata = {}
 
     # -- Device API
+    @property
+    def input_range_v(self) -> tuple[float, ...]:
+        return (float(self.params.adc_range_v),) * len(self.channel_names)
+
+    def buffer_fill(self) -> float | None:
+        """Unread samples the simulated FIFO holds now, as a fraction of ``buffer_s`` (realtime only)."""
+        if not (self.realtime and self._started) or self._rate is None:
+            return None
+        backlog = (self._clock() - self._t0) * self._rate - self._k * self._block
+        return float(min(1.0, max(0.0, backlog / (self.buffer_s * self._rate))))
+
     def configure(self, rate_hz: float) -> float:
         self._rate = board_rate(rate_hz)
         self._block = max(1, int(round(self.block_s * self._rate)))
@@ -93,8 +119,13 @@ class SimStand(Device):
         self._k = 0  # next internal block to generate
         self._n_total = None if self.duration_s is None else int(round(self.duration_s * self._rate))
         self._fault_at = [(int(f.at_s * self._rate), f) for f in self.faults]
-        self.metadata = {"device": "sim", "seed": self.seed, **self.scene.attrs(), **self.params.attrs(),
-                         "block_samples": self._block}
+        chain = self.params.attrs()
+        self.metadata = {"device": "sim", "seed": self.seed, **self.scene.attrs(), **chain,
+                         "block_samples": self._block, "sensor_model": chain.get("sensor", ""),
+                         "conditioner_model": chain.get("conditioner", "")}
+        if self.scene.mode == "run":  # the operating point is the simulated scene's own (common/recording_attrs)
+            for name in ("law", "cam_speed_rpm", "Fu_N", "backlash_mm", "jt_factor"):
+                self.metadata[source_name(name)] = "simulated stand scene"
         return self._rate
 
     @property

@@ -1,42 +1,124 @@
-"""Wall time of ``run_design`` for the 16 runs of Table 1: in-process, local processes, Dask.
+"""Sweeps at scale: per-run cost of ``labtool doe run`` and its Dask scaling (issue 17).
 
-Run: ``.venv/bin/python benchmarks/bench_doe.py [--model kinematic|rigid|elastic] [--accuracy fast]``.
-Prints one line per executor; no assertion (speed is measured here, never in tests).
+On a 4096-run design (Fu 16 levels x n1 16 x j 4 x Jt 4, sine law, omega1 variable, standard):
+
+* ``direct``: ``simulate(scene, model)`` in a plain loop in this process (warm), per run: the floor
+  that the runner's overhead is measured against;
+* ``doe run --workers 1``: the whole command (a new process: imports, the runs, the CSV and
+  NetCDF) divided by the number of runs, and the runner's own per-run cost it prints;
+* Dask: ``doe run --scheduler`` against a LocalCluster of 1 and of 2 worker processes (one thread
+  each, started and warmed before timing), interleaved repeats, medians; the ratio of their
+  throughputs.
+
+Run: ``.venv/bin/python benchmarks/bench_doe.py [--models elastic,rigid] [--repeats 2]``. Writes
+``benchmarks/results/doe_scaling.json``. No assertion (speed is measured here, never in tests).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import pathlib
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
 import warnings
 
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
+LABTOOL = [sys.executable, "-m", "labtool.cli"]
+FACTORS_4096 = """factor,symbol,unit,level_1,level_2,level_3,level_4,level_5,level_6,level_7,level_8,level_9,level_10,level_11,level_12,level_13,level_14,level_15,level_16
+A,Fu,N,0,5,10,15,20,25,30,35,40,45,50,55,60,65,70,75
+B,n1,rpm,150,160,170,180,190,200,210,220,230,240,250,260,270,280,290,300
+C,j,mm,0.016,0.05,0.09,0.128,,,,,,,,,,,,
+D,Jt,factor_of_nominal,1,2,3,4,,,,,,,,,,,,
+"""
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--model", default="kinematic")
-    ap.add_argument("--accuracy", default="fast")
-    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    args = ap.parse_args()
-    warnings.simplefilter("ignore", RuntimeWarning)
 
-    from distributed import LocalCluster
+def doe_run(args: list[str], out: pathlib.Path) -> tuple[float, str]:
+    for p in (out, out.with_suffix(".nc")):
+        p.unlink(missing_ok=True)
+    t0 = time.perf_counter()
+    proc = subprocess.run(LABTOOL + ["doe", "run", *args, "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"doe run failed: {proc.stderr.strip()}")
+    return wall, proc.stdout.strip().splitlines()[-1 if "note:" not in proc.stdout else -2]
 
-    from models.study.doe import run_design, table1_factors
+
+def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> float:
     from models.dynamics.scene import Scene
+    from models.dynamics.simulate import simulate
+    from models.study.doe import Design, read_factors
+    design = Design(tuple(read_factors(factors_csv)), Scene(), model)
+    # a random sample: every 16th run would always hit the same levels of the fastest factors
+    import numpy as np
+    idx = sorted(np.random.default_rng(0).choice(len(design), size=min(sample, len(design)), replace=False))
+    simulate(design.scene(0), model)                     # compile / load the cache, build the tables
+    t0 = time.perf_counter()
+    for i in idx:
+        simulate(design.scene(int(i)), model)
+    return (time.perf_counter() - t0) / len(idx)
 
-    factors, base = table1_factors(), Scene(accuracy=args.accuracy)
-    runs = [("in-process", dict(workers=1)), (f"{args.workers} processes", dict(workers=args.workers))]
-    for name, kw in runs:
-        t0 = time.perf_counter()
-        res = run_design(factors, base, args.model, **kw)
-        print(f"{args.model:9s} {name:22s} {time.perf_counter() - t0:7.2f} s wall, "
-              f"sum of run times {res.frame.wall_s.sum():7.2f} s, failures {len(res.failures)}")
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
-        t0 = time.perf_counter()
-        res = run_design(factors, base, args.model, scheduler=cluster.scheduler_address)
-        print(f"{args.model:9s} {'Dask ' + str(args.workers) + ' workers':22s} {time.perf_counter() - t0:7.2f} s wall, "
-              f"sum of run times {res.frame.wall_s.sum():7.2f} s, failures {len(res.failures)}")
+
+def _warm(model: str) -> int:
+    from models.dynamics.scene import Scene
+    from models.dynamics.simulate import simulate
+    simulate(Scene(), model)
+    return os.getpid()
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--models", default="elastic,rigid")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--sample", type=int, default=256, help="runs of the direct loop")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    from distributed import Client, LocalCluster
+
+    tmp = pathlib.Path(tempfile.mkdtemp(prefix="bench_doe_"))
+    factors = tmp / "factors_4096.csv"
+    factors.write_text(FACTORS_4096)
+    n_runs = 4096
+    out: dict = {"runs": n_runs, "machine": {"nproc": os.cpu_count()}, "models": {}}
+    clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                dashboard_address=None) for n in (1, 2)}
+    try:
+        for model in args.models.split(","):
+            for c in clusters.values():
+                with Client(c.scheduler_address) as client:
+                    client.run(_warm, model)
+            direct = direct_per_run(model, factors, args.sample)
+            rec = {"direct_ms_per_run": direct * 1e3, "in_process": [], "dask_1": [], "dask_2": []}
+            base = ["--model", model, "--factors", str(factors), "--yes"]
+            for rep in range(args.repeats):
+                wall, line = doe_run(base + ["--workers", "1"], tmp / "w1.csv")
+                rec["in_process"].append(wall)
+                print(f"{model} in-process     {wall:7.2f} s  {wall / n_runs * 1e3:6.2f} ms/run  | {line}", flush=True)
+                for n in (1, 2):
+                    wall, line = doe_run(base + ["--scheduler", clusters[n].scheduler_address], tmp / f"d{n}.csv")
+                    rec[f"dask_{n}"].append(wall)
+                    print(f"{model} Dask {n} worker(s) {wall:7.2f} s  {wall / n_runs * 1e3:6.2f} ms/run  | {line}",
+                          flush=True)
+            med = {k: statistics.median(rec[k]) for k in ("in_process", "dask_1", "dask_2")}
+            rec.update(
+                doe_run_ms_per_run=med["in_process"] / n_runs * 1e3,
+                overhead_ms_per_run=(med["in_process"] / n_runs - direct) * 1e3,
+                dask_1_ms_per_run=med["dask_1"] / n_runs * 1e3, dask_2_ms_per_run=med["dask_2"] / n_runs * 1e3,
+                dask_2_over_1_throughput=med["dask_1"] / med["dask_2"])
+            out["models"][model] = rec
+            print(f"{model}: direct {direct * 1e3:.2f} ms/run, whole doe run {rec['doe_run_ms_per_run']:.2f} ms/run "
+                  f"(overhead {rec['overhead_ms_per_run']:+.2f} ms), Dask 2 workers / 1 worker throughput "
+                  f"{rec['dask_2_over_1_throughput']:.2f}x", flush=True)
+    finally:
+        for c in clusters.values():
+            c.close()
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "doe_scaling.json").write_text(json.dumps(out, indent=1))
+    return out
 
 
 if __name__ == "__main__":

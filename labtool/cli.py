@@ -23,6 +23,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # plain click help: rich markup would read units such as "[mm]" or "[s/m]" as style tags and
+    # drop them, and its option table cuts long option names at 80 columns
+    rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
@@ -35,6 +38,7 @@ COMMAND_MODULES = (
     "labtool.commands.fit",
     "labtool.commands.doe",
     "labtool.commands.acquire",
+    "labtool.commands.devices",
     "labtool.commands.calibrate",
     "labtool.commands.process",
     "labtool.commands.export",

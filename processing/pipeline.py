@@ -32,6 +32,7 @@ from scipy import signal
 
 from common import cf
 from common import history as H
+from common import recording_attrs
 from common.errors import InputError
 from common.files import atomic_write
 from models.mechanism import Mechanism
@@ -291,6 +292,8 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> di
         values[f"ka_{name}_m_s2_per_v"] = cal[name]["ka_m_s2_per_v"]
         values[f"ka_{name}_uncertainty_m_s2_per_v"] = cal[name]["uncertainty_m_s2_per_v"]
         values[f"ka_source_{name}"] = cal[name]["source"]
+    # the run's operating point (with its sources), metadata and headroom, as the recording states them
+    values.update({k: rec.attrs[k] for k in recording_attrs.carried() if k in rec.attrs and k not in values})
     for k, v in values.items():
         if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)):
             continue

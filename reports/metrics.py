@@ -237,20 +237,22 @@ def _dtw_fill(x, y, window):
 
 @njit(cache=True)
 def _dtw_backtrack(D):
-    """Warping path (0-based index arrays) from the end; on a tie the diagonal step first."""
+    """Warping path (0-based index arrays) from the end. On a tie the step (i-1, j) first, then
+    (i, j-1), then the diagonal: dtwalign's order for the ISO step pattern (objective-rating-metrics),
+    so that equal-cost paths resolve the same way as in the independent implementation."""
     i, j = D.shape[0] - 1, D.shape[1] - 1
     pi = np.empty(i + j, dtype=np.int64)
     pj = np.empty(i + j, dtype=np.int64)
     k = 0
     pi[0], pj[0] = i - 1, j - 1
     while i > 1 or j > 1:
-        a, b, c = D[i - 1, j - 1], D[i - 1, j], D[i, j - 1]
-        if a <= b and a <= c:
-            i, j = i - 1, j - 1
-        elif b <= c:
+        up, left, diag = D[i - 1, j], D[i, j - 1], D[i - 1, j - 1]
+        if up <= left and up <= diag:
             i = i - 1
-        else:
+        elif left <= diag:
             j = j - 1
+        else:
+            i, j = i - 1, j - 1
         k += 1
         pi[k], pj[k] = i - 1, j - 1
     return pi[:k + 1][::-1].copy(), pj[:k + 1][::-1].copy()

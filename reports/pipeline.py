@@ -151,15 +151,25 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
     for key, attr_names in (("law", ("law",)), ("Fu", ("Fu_N", "Fu")), ("backlash_mm", ("backlash_mm",)),
                             ("jt_factor", ("jt_factor",))):
         if overrides.get(key) is not None:
-            out[key] = overrides[key]
-        elif key == "law":
-            out[key] = str(ds.attrs.get("law", EXPERIMENT["law"]))
+            out[key], out[f"{key}_source"] = overrides[key], "option"
+            continue
+        if key == "law":
+            v, name = (str(ds.attrs["law"]), "law") if "law" in ds.attrs else (None, "")
         else:
-            v = _attr_float(ds, *attr_names)
-            if v is None and key == "backlash_mm":
-                b = _attr_float(ds, "backlash_m")
-                v = None if b is None else b * 1e3
-            out[key] = EXPERIMENT[key] if v is None else v
+            v, name = None, ""
+            for n in attr_names:
+                v = _attr_float(ds, n)
+                if v is not None:
+                    name = n
+                    break
+            if v is None and key == "backlash_mm" and _attr_float(ds, "backlash_m") is not None:
+                v, name = _attr_float(ds, "backlash_m") * 1e3, "backlash_m"
+        if v is None:  # not in the file: the paper's experiment, said so
+            out[key], out[f"{key}_source"] = EXPERIMENT[key], "not in the file: the paper's experiment"
+        else:
+            stated = ds.attrs.get(f"{name}_source")
+            out[key] = v
+            out[f"{key}_source"] = f"file attribute {name}" + (f", {stated}" if stated else "")
     for key, default in MODEL_OPTIONS.items():
         out[key] = default if overrides.get(key) is None else overrides[key]
     return out

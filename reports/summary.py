@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from common import recording_attrs
 from reports.events import KEYS as EVENT_KEYS
 from reports.pipeline import Report, closest, headline, robust_verdict
 
@@ -85,7 +86,15 @@ def measured_info(report: Report) -> dict:
         "partial_revolutions_left_out": report.cycles.partial,
         "processing_history": history,
         "events": measured_events(report),
+        # the run as its recording states it (common/recording_attrs.py): test ID, operator, sensor, ...
+        "run": {k: _plain_attr(a[k]) for k in recording_attrs.RUN_METADATA + ("motor_setting", "headroom_summary")
+                if k in a},
     }
+
+
+def _plain_attr(v):
+    v = v.item() if hasattr(v, "item") and getattr(v, "size", 1) == 1 else v
+    return v.decode() if isinstance(v, bytes) else v
 
 
 def measured_events(report: Report) -> dict | None:

@@ -97,11 +97,26 @@ def test_factor_levels_accepted_iff_two_or_more_distinct(levels):
 def test_unknown_symbol_or_unit_is_refused_before_running():
     base = Scene()
     with pytest.raises(InputError, match="no simulation parameter 'colour'"):
-        doe.run_design([doe.Factor("A", "colour", "", (1.0, 2.0))], base, "kinematic", workers=1)
+        doe.Design([doe.Factor("A", "colour", "", (1.0, 2.0))], base, "kinematic").validate()
     with pytest.raises(InputError, match="unit 'km' not understood"):
-        doe.run_design([doe.Factor("A", "j", "km", (1.0, 2.0))], base, "kinematic", workers=1)
-    with pytest.raises(InputError, match="load Fu must be >= 0"):  # Scene's own validation, per run
-        doe.run_design([doe.Factor("A", "Fu", "N", (-5.0, 2.0))], base, "kinematic", workers=1)
+        doe.Design([doe.Factor("A", "j", "km", (1.0, 2.0))], base, "kinematic").validate()
+    with pytest.raises(InputError, match="load Fu must be >= 0"):  # Scene's own validation, per level
+        doe.Design([doe.Factor("A", "Fu", "N", (-5.0, 2.0))], base, "kinematic").validate()
+
+
+def test_lazy_design_rows_are_the_full_factorial():
+    """Design (lazy, any size) gives the same run order, levels and scenes as full_factorial."""
+    f = doe.table1_factors()
+    design, table = doe.Design(f, Scene(), "kinematic"), doe.full_factorial(f)
+    assert len(design) == len(table) == 16
+    for i in (0, 5, 15):
+        assert design.level_indices(i) == tuple(table.loc[i, [x.column for x in f]])
+        assert design.scene(i) == doe.scene_for_run(Scene(), f, {x.symbol: table.loc[i, x.symbol] for x in f})
+    big = doe.Design([doe.Factor(chr(65 + k), s, u, tuple(range(1, 11)))
+                      for k, (s, u) in enumerate([("Fu", "N"), ("n1", "rpm"), ("Jt", "-"), ("Kc", "-"),
+                                                  ("lw", "mm"), ("k", "-")])], Scene(), "elastic")
+    assert len(big) == 10**6 and big.level_indices(10**6 - 1) == (10,) * 6
+    assert big.level_indices(123456) == (2, 3, 4, 5, 6, 7)
 
 
 @pytest.fixture(scope="module")
@@ -135,12 +150,18 @@ def test_doe_run_local_processes_writes_table_and_netcdf(kinematic_2x3, capsys):
     assert main(["doe", "analyze", str(d / "r.csv"), "--json"]) == 0
 
 
-def test_doe_run_in_process_equals_process_pool(kinematic_2x3):
+def _in_process(d, name="one.csv"):
+    assert main(["doe", "run", "--model", "kinematic", "--factors", str(d / "f.toml"), "--workers", "1",
+                 "-o", str(d / name)]) == 0
+    return pd.read_csv(d / name)
+
+
+def test_doe_run_in_process_equals_process_pool(kinematic_2x3, capsys):
     _, d = kinematic_2x3
-    res = doe.run_design(doe.read_factors(d / "f.toml"), Scene(), "kinematic", workers=1)
-    assert res.where == "in-process" and not res.failures
+    one = _in_process(d)
+    assert "(in-process," in capsys.readouterr().out
     pooled = pd.read_csv(d / "r.csv")
-    assert res.table()["MR13D_min_Nm"].to_numpy() == pytest.approx(pooled["MR13D_min_Nm"].to_numpy(), rel=1e-9)
+    pd.testing.assert_frame_equal(one, pooled)
 
 
 def test_doe_run_on_a_local_dask_cluster(tmp_path):
@@ -152,15 +173,15 @@ def test_doe_run_on_a_local_dask_cluster(tmp_path):
         rc = main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"),
                    "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "d.csv")])
     assert rc == 0
-    local = doe.run_design(doe.read_factors(tmp_path / "f.toml"), Scene(), "kinematic", workers=1).table()
+    local = _in_process(tmp_path)
     remote = pd.read_csv(tmp_path / "d.csv")
     assert remote.MR13D_max_Nm.to_numpy() == pytest.approx(local.MR13D_max_Nm.to_numpy(), rel=1e-9)
 
 
 def test_unreachable_scheduler_is_an_input_error(tmp_path):
+    from execution.backends import DaskCluster
     with pytest.raises(InputError, match="cannot reach the Dask scheduler"):
-        doe.run_design([doe.Factor("A", "Fu", "N", (0.0, 65.0))], Scene(), "kinematic",
-                       scheduler="tcp://127.0.0.1:1", connect_timeout_s=0.5)
+        DaskCluster("tcp://127.0.0.1:1", connect_timeout_s=0.5)
 
 
 def test_failed_runs_are_reported_and_left_empty(tmp_path, monkeypatch, capsys):

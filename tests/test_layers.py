@@ -24,11 +24,14 @@ RANK = {
     "models": 3,                 # models/__init__ and models.data
     "acquisition": 4,
     "processing": 4,
+    # execution backends of sweeps (chunks on local processes or Dask, results streamed to disk):
+    # above models, which must not import them; beside acquisition and processing
+    "execution": 4,
     "reports": 5,
     "identification": 6,         # labtool fit: imports reports, processing, models; only labtool imports it
     "labtool": 7,
 }
-FIRST_PARTY = {"common", "models", "acquisition", "processing", "reports", "identification", "labtool"}
+FIRST_PARTY = {"common", "models", "acquisition", "processing", "execution", "reports", "identification", "labtool"}
 
 # Known wrong-way imports and cycles, to be removed, never added to (issue 14).
 KNOWN_UPWARD: set[tuple[str, str]] = {

@@ -233,7 +233,7 @@ def test_disk_full_cli_one_line_exit_2(tmp_path, monkeypatch, capsys):
     p = tmp_path / "full.h5"
     assert main(["acquire", "--fast", "--duration", "2", "-o", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("labtool: error: disk full") and "5000 samples kept" in err[-1]
+    assert err[-1].startswith("labtool: error: disk full") and "5000 samples (0.500 s) kept" in err[-1]
     assert read_recording(p)["signals"].shape[0] == 5000
 
 

@@ -9,8 +9,9 @@ from typing import List, Optional
 
 import typer
 
-from common.files import check_output_path
+from acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
 from common.errors import InputError
+from common.files import check_output_path
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {
@@ -60,7 +61,8 @@ def load_scene(path: Path) -> dict:
 
 def acquire(
     output: Path = typer.Option(..., "-o", "--output", help="recording to write (HDF5, format v1)"),
-    device: str = typer.Option("sim", help="sim | nidaqmx:<physical channels> (e.g. nidaqmx:Dev1/ai0:2)"),
+    device: Optional[str] = typer.Option(None, help="sim | nidaqmx:<physical channels> (e.g. nidaqmx:Dev1/ai0:2), "
+                                         "or nidaqmx with --device-file (default: sim)"),
     rpm: Optional[float] = typer.Option(None, help="cam speed n1 (rpm) (sim) (default 180)"),
     duration: Optional[float] = typer.Option(None, help="seconds to record; inf = until Ctrl-C (default 10)"),
     rate: Optional[float] = typer.Option(None, help="sample rate (Hz) (default 10000)"),
@@ -84,8 +86,23 @@ def acquire(
     contact_damping: Optional[float] = typer.Option(None, help="sim, twin and elastic truths: Hunt-Crossley contact damping (s/m) (default 40)"),
     scene: Optional[Path] = typer.Option(None, help="TOML scene file with a (stand) table; options given here override it"),
     fault: Optional[List[str]] = typer.Option(None, help="sim fault injection kind@seconds (overrun, drop, disconnect, clip); repeatable"),
-    iepe_excitation: bool = typer.Option(False, help="nidaqmx: the DAQ powers the IEPE sensor (no 480C02)"),
-    force: bool = typer.Option(False, help="overwrite an existing output file"),
+    iepe_excitation: bool = typer.Option(False, help="nidaqmx: the DAQ powers the IEPE sensors with 4 mA (no 480C02)"),
+    device_file: Optional[Path] = typer.Option(None, help="nidaqmx: TOML device file (channels by role, range [V], "
+                                               "terminal, coupling, IEPE [A], sensitivity [mV/g] or TEDS, clock, "
+                                               "trigger); see docs/acquisition.md"),
+    ni: Optional[List[str]] = typer.Option(None, "--ni", help="nidaqmx setting CHANNEL.KEY=VALUE, trigger.KEY=VALUE or "
+                                           "device.KEY=VALUE, over the device file (e.g. --ni aE_t.range_v=5 "
+                                           "--ni trigger.type=digital); repeatable"),
+    test_id: Optional[str] = typer.Option(None, help="test ID stored in the recording"),
+    operator: Optional[str] = typer.Option(None, help="operator's name stored in the recording"),
+    sensor_model: Optional[str] = typer.Option(None, help="accelerometer model (e.g. PCB 352A76)"),
+    sensor_serial: Optional[str] = typer.Option(None, help="accelerometer serial number(s)"),
+    conditioner_gain: Optional[float] = typer.Option(None, help="signal conditioner gain [-] (480C02: 1, 10 or 100)"),
+    motor_setting: Optional[str] = typer.Option(None, help="motor / variator setting as stated by the operator"),
+    notes: Optional[str] = typer.Option(None, help="free-text notes stored in the recording"),
+    status_every: float = typer.Option(5.0, help="not on a terminal: one status line every this many seconds "
+                                       "[s] (0 = none)"),
+    force: bool = typer.Option(False, help="overwrite an existing output file (never one being recorded)"),
 ) -> None:
     """Record aE_t, aE_n (volts) and the tacho from the stand into DESIGN.md's recording format v1."""
     from acquisition.device import parse_device
@@ -105,7 +122,9 @@ def acquire(
             opts["_truth"] = {**opts["_truth"], name: float(value)}
     if "ripple" in given or (scene is not None and "ripple" in load_scene(scene)):
         opts["_ripple_given"] = True
-    kind, arg = parse_device(device)
+    if device is None:
+        device = "nidaqmx" if device_file is not None else "sim"
+    kind, arg = ("nidaqmx", "") if device.strip() == "nidaqmx" and device_file is not None else parse_device(device)
     if kind == "nidaqmx" and "ka" not in given and (scene is None or "ka" not in load_scene(scene)):
         opts["ka"] = None
     dur = float(opts["duration"])
@@ -118,23 +137,75 @@ def acquire(
     if output.is_dir():
         raise InputError(f"{output} is a folder; give a file name for the recording")
     check_output_path(output, force)
+    if not (math.isfinite(status_every) and status_every >= 0):
+        raise InputError(f"--status-every must be >= 0 s, got {status_every:g}")
+    meta_given = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
+                      conditioner_gain=conditioner_gain, notes=notes)
 
-    if kind == "sim":
-        dev, ka_ch, attrs = _sim_device(opts, realtime, fault or [], dur)
-    else:
-        if fault:
-            raise InputError("--fault works with --device sim only")
-        if not realtime:
-            raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
-        from acquisition.nidaqmx_driver import NIDAQmxDevice
-        dev = NIDAQmxDevice(arg, iepe_excitation=iepe_excitation)
-        k = float("nan") if opts["ka"] is None else float(opts["ka"])
-        ka_ch = [k if n in ("aE_t", "aE_n") else float("nan") for n in dev.channel_names]
-        attrs = {"ka_source": "none" if opts["ka"] is None else "--ka option"}
-        if rpm is not None:
-            attrs["cam_speed_rpm"] = float(rpm)
+    dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
+                                iepe_excitation, meta_given, motor_setting)
     attrs["command"] = "labtool acquire " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch)
+    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
+
+
+def _device(kind, arg, opts, given, realtime, faults, dur, device_file, ni, iepe_excitation, meta_given,
+            motor_setting):
+    """The device, its per-channel Ka and the recording's attributes (operating point, metadata)."""
+    if kind == "sim":
+        if device_file is not None or ni:
+            raise InputError("--device-file and --ni configure NI-DAQmx devices; use them with --device nidaqmx")
+        dev, ka_ch, attrs = _sim_device(opts, realtime, faults, dur)
+        attrs.update(run_metadata_attrs(meta_given))
+        if motor_setting is not None:
+            attrs.update(operating_point_attrs({"motor_setting": motor_setting}, "stated by the operator (--motor-setting)"))
+        return dev, ka_ch, attrs
+    if faults:
+        raise InputError("--fault works with --device sim only")
+    if not realtime:
+        raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
+    return _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting)
+
+
+def _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting):
+    """The NI device (configuration checked, nothing touched yet), per-channel Ka and the attributes:
+    the operating point as the operator stated it (each value with its source), the run metadata
+    (device file's [metadata], then the options), and where each channel's Ka comes from."""
+    from acquisition import nidaqmx_config as nc
+    from acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
+    from acquisition.trigger import SoftwareTrigger
+
+    doc = nc.load_device_file(device_file) if device_file is not None else None
+    cfg = nc.build(expand_channels(arg) if arg else None, doc, overrides=ni,
+                   source=f"device file {device_file}" if device_file is not None else "command line",
+                   iepe_excitation_a=0.004 if iepe_excitation else None)
+    meta = {k: v for k, v in cfg.metadata.items()}
+    meta.update({k: v for k, v in meta_given.items() if v is not None})
+    attrs = run_metadata_attrs(meta)
+    stated = {"law": "law", "cam_speed_rpm": "rpm", "Fu_N": "fu", "backlash_mm": "backlash_mm", "jt_factor": "jt_factor"}
+    op = {name: opts[key] for name, key in stated.items() if key in given}
+    if motor_setting is not None:
+        op["motor_setting"] = motor_setting
+    attrs.update(operating_point_attrs(op, {n: f"stated by the operator ({OPTION[n]})" for n in op}))
+    dev = NIDAQmxDevice(cfg)
+    ka_ch, sources = [], []
+    for ch, nominal in zip(cfg.channels, dev.ka_nominal):
+        if ch.kind != "accel":
+            ka_ch.append(float("nan"))
+            sources.append("none (not an accelerometer)")
+        elif opts["ka"] is not None:
+            ka_ch.append(float(opts["ka"]))
+            sources.append("--ka option")
+        elif math.isfinite(nominal):
+            ka_ch.append(nominal)
+            sources.append(f"nominal: {ch.sensitivity_mv_per_g:g} mV/g x gain {ch.conditioner_gain:g} (calibrate to measure it)")
+        else:
+            ka_ch.append(float("nan"))
+            sources.append("none (calibrate, or give --ka or the sensitivity)")
+    attrs["ka_source"] = "; ".join(f"{n}: {s}" for n, s in zip(cfg.names, sources))
+    if cfg.trigger.software:
+        dev = SoftwareTrigger(dev, cfg.names.index(nc.trigger_channel(cfg).name), cfg.trigger.level_v,
+                              cfg.trigger.edge, cfg.trigger.pretrigger_samples)
+    return dev, ka_ch, attrs
 
 
 def _sim_device(opts, realtime, faults, dur):
@@ -182,73 +253,111 @@ def _model_truth_for(scene, dur):
                      f"or a --duration of at most {sc.MAX_MODEL_REVOLUTIONS} turns")
 
 
-def _run(dev, output: Path, rate: float, duration, attrs, ka_ch):
+def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, status_every: float = 5.0):
     from labtool.output import console
 
     from acquisition import session
 
-    console = console(stderr=True)
-    live = None
-    progress = None
-    if console.is_terminal:
-        live, progress = _live_display(console, dev, duration)
+    con = console(stderr=True)
+    display = _Display(con, dev, duration, ka_ch, status_every)
     try:  # session.run turns Ctrl-C and SIGTERM into a clean stop between blocks
-        if live is not None:
-            live.start()
-        result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=progress)
-        if live is not None:
-            progress.finish(result.wall_s)
+        result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=display.progress,
+                             on_block=display.on_block, replace=force)
+        display.progress(None, result.wall_s, final=True)
     finally:
-        if live is not None:
-            live.stop()
+        display.stop()
     rt = (result.n_samples / result.rate_hz) / result.wall_s if result.wall_s > 0 else float("inf")
     typer.echo(f"wrote {output}: {result.n_samples} samples x {len(dev.channel_names)} channels at "
                f"{result.rate_hz:g} Hz ({result.n_samples / result.rate_hz:.3f} s, {rt:.1f}x real time), "
                f"{result.overruns} overruns, {result.gaps} gaps, complete={str(result.complete).lower()}")
+    # the simulated stand states its whole operating point; a real stand only what the operator said
+    missing = [] if dev.metadata.get("device") == "sim" else missing_operating_point(attrs)
+    if missing:
+        typer.echo(f"labtool: warning: operating point not stated: {', '.join(missing)} "
+                   f"({', '.join(OPTION[m] for m in missing)}); a report will assume the paper's experiment for "
+                   "them and say so", err=True)
+    if display.headroom_warning:
+        typer.echo(f"labtool: warning: {display.headroom_warning}", err=True)
     if result.clipped:
         typer.echo(f"labtool: warning: clipping on {', '.join(result.clipped)} (ADC range exceeded); "
                    "see the 'clip' events", err=True)
     if result.outcome == "interrupted":
         typer.echo(f"labtool: {result.message}; the recording is closed and complete", err=True)
     if result.outcome in ("disconnected", "disk_full", "write_error"):
-        raise InputError(f"{result.message}; {result.n_samples} samples kept in {output}")
+        raise InputError(f"{result.message}; {result.n_samples} samples ({result.n_samples / result.rate_hz:.3f} s) "
+                         f"kept in {output}, complete={str(result.complete).lower()}")
 
 
-def _live_display(console, dev, duration):
-    """A rich Live panel (elapsed, samples, rate, overruns, peak per channel, clipping) and its updater."""
-    from rich.live import Live
-    from rich.table import Table
+class _Display:
+    """The live monitor (acquisition.monitor figures, labtool.monitor_view layout): a rich Live panel
+    on a terminal (4 updates/s), else one status line on stderr every ``status_every`` s of wall time."""
 
-    state = {"last": -1.0}
-    names = dev.channel_names
+    def __init__(self, con, dev, duration, ka_ch, status_every: float):
+        self.con, self.dev, self.duration, self.ka = con, dev, duration, ka_ch
+        self.status_every = status_every
+        self.monitor = None
+        self.live = None
+        self.last = 0.0
+        self.rec = None
+        self.headroom_warning = ""
+        self.off = False
 
-    def render(rec=None, elapsed=0.0):
-        t = Table(title=dev.describe(), show_header=False, expand=False)
-        t.add_column("what")
-        t.add_column("value", justify="right")
-        n = rec.n_samples if rec else 0
-        rate = rec.rate_hz if rec else float("nan")
-        t.add_row("elapsed", f"{elapsed:7.1f} s" + (f" / {duration:g} s of data" if duration else ""))
-        t.add_row("samples", f"{n} ({n / rate if rec else 0:.1f} s of data)")
-        t.add_row("rate", f"{rate:g} Hz device, {n / elapsed if elapsed > 0 else 0:,.0f} samples/s written")
-        t.add_row("overruns / gaps", f"{rec.overruns if rec else 0} / {rec.gaps if rec else 0}")
-        for i, name in enumerate(names):
-            peak = rec.peak_v[i] if rec else 0.0
-            t.add_row(f"peak {name}", f"{peak:6.3f} V" + ("  [bold red]CLIPPING[/]" if rec and name in rec.clipped else ""))
-        return t
+    def on_block(self, block) -> None:
+        if self.off:
+            return
+        try:
+            self._feed(block)
+        except Exception as exc:  # the display must never stop a recording
+            self._switch_off(exc)
 
-    live = Live(render(), console=console, refresh_per_second=4, transient=False)
+    def _feed(self, block) -> None:
+        if self.monitor is None:
+            from acquisition.monitor import Monitor
+            self.monitor = Monitor(self.dev.channel_names, self.dev.actual_rate_hz, self.ka, self.dev.input_range_v,
+                                   self.duration)
+            if self.con.is_terminal:
+                from rich.live import Live
+                self.live = Live(console=self.con, refresh_per_second=4, transient=False)
+                self.live.start()
+        self.monitor.update(block)
 
-    def progress(rec, elapsed, final=False):
-        state["rec"] = rec
-        if final or elapsed - state["last"] >= 0.25:
-            state["last"] = elapsed
-            live.update(render(rec, elapsed))
+    def progress(self, rec, elapsed: float, final: bool = False) -> None:
+        if rec is not None:
+            self.rec = rec
+        if self.off or self.monitor is None or self.rec is None:
+            return
+        try:
+            self._show(elapsed, final)
+        except Exception as exc:  # the display must never stop a recording
+            self._switch_off(exc)
 
-    def finish(wall_s):
-        if state.get("rec") is not None:
-            progress(state["rec"], wall_s, final=True)
+    def _switch_off(self, exc) -> None:
+        self.stop()
+        self.off = True
+        typer.echo(f"labtool: warning: live monitor off ({type(exc).__name__}: {' '.join(str(exc).split())[:200]}); "
+                   "the recording goes on", err=True)
 
-    progress.finish = finish
+    def _show(self, elapsed: float, final: bool) -> None:
+        every = 0.25 if self.live is not None else self.status_every
+        if not final and (every <= 0 or elapsed - self.last < every):
+            return
+        self.last = elapsed
+        r = self.rec
+        snap = self.monitor.snapshot(elapsed, r.overruns, r.gaps, r.samples_lost, r.clipped, self.dev.buffer_fill(),
+                                     rows=r.n_samples)
+        from labtool import monitor_view as view
+        if self.live is not None:
+            self.live.update(view.render(snap, self.dev.describe(), width=self.con.width))
+        elif self.status_every > 0:
+            self.con.print(view.status_line(snap), markup=False, highlight=False, soft_wrap=True)
+        if final:
+            low = [f"{c.name} {100 * c.fraction:.0f} % of +-{c.range_v:g} V" for c in snap.channels
+                   if c.state == "warn" and c.name != "tacho"]
+            if low:
+                self.headroom_warning = (f"little headroom: peak {', '.join(low)} (> 80 %); a larger range or a "
+                                         "lower conditioner gain would keep impacts from clipping")
 
-    return live, progress
+    def stop(self) -> None:
+        if self.live is not None:
+            live, self.live = self.live, None
+            live.stop()

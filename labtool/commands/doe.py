@@ -7,13 +7,12 @@ the ANOVA (Fisher's F) and the reduced effect models in the paper's matrix form 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import List, Optional
 
 import typer
 
-from common.files import atomic_write, check_output_path, write_netcdf
+from common.files import atomic_write, check_output_path
 
 doe_app = typer.Typer(
     help="Simulated experiments: full factorial runs (Tables 2-3) and their ANOVA (eqs 20-28).",
@@ -23,6 +22,10 @@ doe_app = typer.Typer(
 
 def register(app: typer.Typer) -> None:
     app.add_typer(doe_app, name="doe")
+
+
+# a design whose estimated time exceeds this asks for confirmation (terminal) or --yes (s)
+CONFIRM_ABOVE_S = 600.0
 
 
 @doe_app.command("run")
@@ -38,16 +41,34 @@ def run(
                                                      "closed (no gap: the convention that reproduces Table 3)"),
     scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786); "
                                                        "default: local processes"),
-    workers: Optional[int] = typer.Option(None, help="local worker processes (default: all cores; 1 = in-process)"),
+    workers: Optional[int] = typer.Option(None, help="local worker processes (default: all cores when the measured "
+                                                     "work is over 3 s, else this process; 1 = in-process)"),
+    chunk_runs: Optional[int] = typer.Option(None, help="runs per task (default: sized from the measured per-run "
+                                                        "cost, about 1 s of work per task)"),
+    fresh: bool = typer.Option(False, help="discard the finished chunks of an interrupted run into this output "
+                                           "(default: a rerun of the same design resumes from them)"),
+    yes: bool = typer.Option(False, "--yes", "-y", help=f"run a design estimated at more than "
+                                                        f"{CONFIRM_ABOVE_S / 60:.0f} min without asking"),
     netcdf: Optional[Path] = typer.Option(None, help="NetCDF to write (default: the CSV's name with .nc)"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
 ) -> None:
-    """Simulate the full factorial of the factors and write the results table and its NetCDF."""
-    from models.study.doe import read_factors, responses_for, run_design, table1_factors
-    from common.errors import SolverError
+    """Simulate the full factorial of the factors and write the results table and its NetCDF.
+
+    Runs go in chunks to this process, local processes or a Dask cluster; each finished chunk is
+    written to OUTPUT.parts/ at once, so an interrupted run (Ctrl-C, a kill, a full disk) keeps
+    them and the same command again resumes where it stopped. A design estimated (runs x measured
+    per-run cost / workers) at more than 10 min asks for confirmation, or needs --yes when not on
+    a terminal.
+    """
+    from common.errors import InputError, SolverError
+    from execution.backends import backend_for, check_scheduler_address
+    from execution.design import parts_folder, run_design
     from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors, responses_for, table1_factors
 
     responses_for(model)
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
     nc_path = netcdf if netcdf is not None else output.with_suffix(".nc")
     if nc_path == output:
         raise typer.BadParameter("the NetCDF path must differ from the CSV path", param_hint="--netcdf")
@@ -55,40 +76,67 @@ def run(
         check_output_path(p, force)
     if workers is not None and workers < 1:
         raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    if chunk_runs is not None and chunk_runs < 1:
+        raise typer.BadParameter(f"must be >= 1, got {chunk_runs}", param_hint="--chunk-runs")
     fset = read_factors(factors) if factors is not None else table1_factors()
     base = Scene(law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
-    n_runs = math.prod(len(f.levels) for f in fset)
+    design = Design(tuple(fset), base, model)
+    design.validate()
+    n_runs = len(design)
+    history = (f"labtool doe run --model {model} --law {law} --omega1 {omega1} --accuracy {accuracy}"
+               + (f" --elastic-gap {elastic_gap}" if model == "elastic" else "")
+               + (f" --factors {factors}" if factors else ""))
 
     from labtool.output import console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from execution.progress import BarProgress, LineProgress
     err = console(stderr=True)
-    with Progress(TextColumn(f"doe run ({model})"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=err, disable=not err.is_terminal, transient=True) as bar:
-        task = bar.add_task("runs", total=n_runs)
-        result = run_design(fset, base, model, workers=workers, scheduler=scheduler,
-                            progress=lambda done, total: bar.update(task, completed=done))
 
-    table = result.table()
-    for c in ("jumps", "impacts"):  # counts print as integers when every run has one
-        if c in table and table[c].notna().all():
-            table[c] = table[c].round().astype(int)
-    atomic_write(output, lambda tmp: table.to_csv(tmp, index=False, float_format="%.10g"))
-    ds = result.dataset()
-    ds.attrs["history"] = (f"labtool doe run --model {model} --law {law} --omega1 {omega1} "
-                           f"--accuracy {accuracy}" + (f" --elastic-gap {elastic_gap}" if model == "elastic" else "")
-                           + (f" --factors {factors}" if factors else ""))
-    write_netcdf(ds, nc_path)
-    if len(table) <= 64:  # the table itself, as in the paper; large designs only get the summary line
+    def on_estimate(cost_s, n_left, n_workers):
+        from execution.chunked import estimate_text
+        total = cost_s * n_left / max(n_workers, 1)
+        if total <= CONFIRM_ABOVE_S or yes:
+            return
+        text = estimate_text(cost_s, n_left, n_workers)
+        if err.is_terminal and typer.get_text_stream("stdin").isatty():
+            if typer.confirm(f"doe run: {text}; run it?", default=False, err=True):
+                return
+            raise InputError(f"not run: {text}")
+        raise InputError(f"this design is {text}, more than {CONFIRM_ABOVE_S / 60:.0f} min; pass --yes to run it "
+                         "(finished chunks are kept, a rerun resumes), or use fewer levels")
+
+    folder = parts_folder(output)
+    if folder.exists() and not fresh:
+        err.print(f"resuming from the finished chunks in {folder} (--fresh discards them)", highlight=False,
+                  markup=False, soft_wrap=True)
+    backend = backend_for(workers, scheduler)
+    label = f"doe run ({model})"
+    try:
+        if err.is_terminal:
+            with BarProgress(label, err, n_runs) as bar:
+                result = run_design(design, output, nc_path, backend, chunk_items=chunk_runs, fresh=fresh,
+                                    on_estimate=on_estimate, progress=bar, history=history)
+        else:
+            line = LineProgress(label, lambda text: typer.echo(text, err=True))
+            result = run_design(design, output, nc_path, backend, chunk_items=chunk_runs, fresh=fresh,
+                                on_estimate=on_estimate, progress=line, history=history)
+    finally:
+        if backend is not None:
+            backend.close()
+
+    if n_runs <= 64:  # the table itself, as in the paper; large designs only get the summary line
+        import pandas as pd
         gap_note = f", gap {elastic_gap}" if model == "elastic" else ""
-        _print_results(table, f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}")
+        _print_results(pd.read_csv(output), f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}")
+    per_run = "" if result.cost_s is None else f", {result.cost_s * 1e3:.3g} ms per run"
+    resumed = f"; {result.resumed} runs resumed from {folder}" if result.resumed else ""
     typer.echo(f"wrote {output} and {nc_path}: {n_runs} runs of the {model} model "
-               f"({result.where}, {result.wall_s:.1f} s)")
+               f"({result.where}, {result.wall_s:.1f} s{per_run}{resumed})")
     if model == "elastic" and elastic_gap == "physical":
         typer.echo("note: the follower crosses the backlash here; the paper's Table 3 counts (1 jump, 0 impacts) "
                    "come from --elastic-gap closed (docs/models.md)")
-    if result.failures:
+    if result.n_failed:
         first = min(result.failures)
-        raise SolverError(f"{len(result.failures)} of {n_runs} runs failed and are left empty in {output} "
+        raise SolverError(f"{result.n_failed} of {n_runs} runs failed and are left empty in {output} "
                           f"(run {first}: {result.failures[first]})")
 
 

@@ -223,7 +223,7 @@ def parse_level_column(column: str) -> tuple[str, str] | None:
 
 
 # --------------------------------------------------------------------------------------------
-# running a design: one simulation per run, on local processes or a Dask cluster
+# the runs of a design: one simulation per run (execution backends live in the execution layer)
 
 # response columns of the result table per model level, in the paper's order (Tables 2 and 3)
 RESPONSES_BY_MODEL = {
@@ -232,8 +232,9 @@ RESPONSES_BY_MODEL = {
     "elastic": ("MR13D_max_Nm", "MR13D_min_Nm", "xel_max_mm", "xel_min_mm", "jumps", "impacts"),
     "kinematic": ("MR13D_max_Nm", "MR13D_min_Nm"),
 }
+COUNT_RESPONSES = ("jumps", "impacts")   # integers in the result table
 
-_RESPONSE_ATTRS = {  # units and long names of the NetCDF variables (paper's indicator names)
+RESPONSE_ATTRS = {  # units and long names of the NetCDF variables (paper's indicator names)
     "MR13D_max_Nm": ("N m", "(MR13D)max, moment about D of the cam-on-follower reaction, max over the rise"),
     "MR13D_min_Nm": ("N m", "(MR13D)min, moment about D of the cam-on-follower reaction, min over the rise"),
     "dphi2_max_deg": ("deg", "(phi2rcj - phi2rfj)max, follower angle deviation due to the backlash"),
@@ -247,56 +248,10 @@ _RESPONSE_ATTRS = {  # units and long names of the NetCDF variables (paper's ind
 }
 
 
-@dataclasses.dataclass
-class DesignRun:
-    """Outcome of running a design: the design table with responses, failures and timing."""
-
-    factors: list[Factor]
-    model: str
-    responses: tuple[str, ...]
-    frame: pd.DataFrame            # full_factorial columns + one column per response (NaN if failed)
-    failures: dict[int, str]       # run number -> one-line reason
-    wall_s: float
-    where: str                     # "in-process", "N local processes", "Dask cluster at ..."
-
-    def table(self) -> pd.DataFrame:
-        """The CSV shaped like Tables 2/3: run, level columns, responses."""
-        cols = ["run"] + [f.column for f in self.factors] + list(self.responses)
-        return self.frame[cols].copy()
-
-    def dataset(self):
-        """xarray Dataset: one dimension per factor (symbol, level values as coordinates)."""
-        import xarray as xr
-        dims = [f.symbol for f in self.factors]
-        shape = tuple(len(f.levels) for f in self.factors)
-        coords = {}
-        for f in self.factors:
-            _field, _scale, text = SCENE_FACTORS.get(f.symbol, (None, None, f.symbol))
-            coords[f.symbol] = xr.DataArray(np.asarray(f.levels, dtype=float), dims=[f.symbol], attrs={
-                "units": f.unit or "1", "long_name": f"factor {f.name}: {text}",
-                "level_column": f.column})
-        # full_factorial's order is C order over the factors' level indices
-        ordered = self.frame.sort_values([f.column for f in self.factors])
-        data = {}
-        for r in self.responses:
-            units, long_name = _RESPONSE_ATTRS.get(r, ("1", r))
-            data[r] = xr.DataArray(ordered[r].to_numpy(dtype=float).reshape(shape), dims=dims,
-                                   attrs={"units": units, "long_name": long_name})
-        data["run"] = xr.DataArray(ordered["run"].to_numpy().reshape(shape), dims=dims,
-                                   attrs={"units": "1", "long_name": "run number in the paper's order"})
-        data["wall_s"] = xr.DataArray(ordered["wall_s"].to_numpy(dtype=float).reshape(shape), dims=dims,
-                                      attrs={"units": "s", "long_name": "wall time of the run's simulation"})
-        ds = xr.Dataset(data, coords=coords)
-        ds.attrs.update(model=self.model, failed_runs=",".join(map(str, sorted(self.failures))) or "none",
-                        title="labtool doe run: full factorial simulated experiment")
-        return ds
-
-
 def simulate_run(scene, model: str) -> dict:
     """Run one simulation; never raises for a user-side failure (it is reported per run).
 
     Returns ``{"ok": True, "indicators": {...}, "wall_s": s}`` or ``{"ok": False, "error": msg}``.
-    Top-level so that process pools and Dask workers can pickle it by reference.
     """
     import time
 
@@ -321,107 +276,90 @@ def responses_for(model: str) -> tuple[str, ...]:
         raise InputError(f"doe run needs --model one of {', '.join(RESPONSES_BY_MODEL)}, got '{model}'") from None
 
 
-def run_design(factors: list[Factor], base_scene, model: str, workers: int | None = None,
-               scheduler: str | None = None, progress=None, connect_timeout_s: float = 10.0) -> DesignRun:
-    """Simulate every run of the full factorial of ``factors`` with ``model``.
+@dataclasses.dataclass(frozen=True)
+class Design:
+    """The full factorial of ``factors`` run with ``model`` on ``base`` (a Scene), without listing it.
 
-    base_scene  Scene holding every non-factor setting (law, omega1 mode, accuracy ...)
-    workers     local processes (default: the number of cores); 1 = in this process
-    scheduler   address of a Dask distributed scheduler (``tcp://host:8786``); then the runs go
-                there and ``workers`` is ignored (the cluster decides)
-    progress    callable(done, total) called after each finished run
+    Run ``i`` (0-based; the paper's run number is ``i + 1``) has the level indices of
+    ``numpy.unravel_index(i, shape)``: the paper's order, first factor slowest. Nothing is built
+    per run until it is asked for, so a design of 10^6 runs costs nothing to hold; ``row(i)`` runs
+    one simulation (a pure function of the design and ``i``, the unit an executor maps).
     """
-    import os
-    import time
 
-    responses = responses_for(model)
-    design = full_factorial(factors)
-    # build every Scene first: a bad factor value fails here, before anything runs
-    scenes = [scene_for_run(base_scene, factors, {f.symbol: row[f.symbol] for f in factors})
-              for _, row in design.iterrows()]
-    total = len(scenes)
-    outcomes: dict[int, dict] = {}
-    t0 = time.perf_counter()
+    factors: tuple[Factor, ...]
+    base: object                 # models.dynamics.scene.Scene
+    model: str
 
-    def done(i, out):
-        outcomes[i] = out
-        if progress is not None:
-            progress(len(outcomes), total)
+    def __post_init__(self):
+        object.__setattr__(self, "factors", tuple(self.factors))
+        responses_for(self.model)
 
-    if scheduler:
-        where = f"Dask cluster at {scheduler}"
-        _run_on_dask(scenes, model, scheduler, done, connect_timeout_s)
-    else:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        if n < 1:
-            raise InputError(f"--workers must be >= 1, got {n}")
-        n = min(n, total)
-        if n == 1:
-            where = "in-process"
-            for i, sc in enumerate(scenes):
-                done(i, simulate_run(sc, model))
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(f.levels) for f in self.factors)
+
+    @property
+    def responses(self) -> tuple[str, ...]:
+        return RESPONSES_BY_MODEL[self.model]
+
+    @property
+    def level_columns(self) -> list[str]:
+        return [f.column for f in self.factors]
+
+    @property
+    def columns(self) -> list[str]:
+        """Columns of the result table (Tables 2/3): run, level columns, responses."""
+        return ["run"] + self.level_columns + list(self.responses)
+
+    def __len__(self) -> int:
+        return math.prod(self.shape)
+
+    def validate(self) -> None:
+        """Refuse a factor symbol, unit or level value that no run could use (InputError), before
+        anything runs: each level of each factor is set alone on the base scene (the Scene's checks
+        are per field, so this covers every combination)."""
+        for f in self.factors:
+            field, scale, _ = scene_field(f)
+            for v in f.levels:
+                self.base.replace(**{field: v * scale})
+
+    def level_indices(self, i: int) -> tuple[int, ...]:
+        """1-based level index of each factor in run ``i`` (0-based)."""
+        return tuple(int(k) + 1 for k in np.unravel_index(i, self.shape))
+
+    def scene(self, i: int):
+        """The Scene of run ``i`` (0-based)."""
+        idx = self.level_indices(i)
+        return scene_for_run(self.base, list(self.factors),
+                             {f.symbol: f.levels[k - 1] for f, k in zip(self.factors, idx)})
+
+    def row(self, i: int) -> dict:
+        """Simulate run ``i``: {run, level columns, responses (None if failed), wall_s, error}."""
+        out = {"run": i + 1, **dict(zip(self.level_columns, self.level_indices(i)))}
+        try:
+            scene = self.scene(i)
+        except InputError as exc:
+            res = {"ok": False, "error": str(exc)}
         else:
-            import concurrent.futures as cf
-            import multiprocessing as mp
-            from concurrent.futures.process import BrokenProcessPool
-            where = f"{n} local processes"
-            # spawn: a forked child could inherit a lock held by the progress bar's thread
-            pool = cf.ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn"))
-            try:
-                futs = {pool.submit(simulate_run, sc, model): i for i, sc in enumerate(scenes)}
-                for fut in cf.as_completed(futs):
-                    try:
-                        out = fut.result()
-                    except BrokenProcessPool as exc:  # a worker died (memory, signal)
-                        out = {"ok": False, "error": f"worker process died: {exc}"}
-                    done(futs[fut], out)
-            except BaseException:
-                # Ctrl-C or an error here: do not wait for the runs still queued
-                pool.shutdown(wait=False, cancel_futures=True)
-                raise
-            pool.shutdown(wait=True)
-    frame = design.copy()
-    failures = {}
-    for r in responses:
-        frame[r] = np.nan
-    frame["wall_s"] = np.nan
-    for i, out in outcomes.items():
-        run = int(design.loc[i, "run"])
-        if not out["ok"]:
-            failures[run] = out["error"]
-            continue
-        frame.loc[i, "wall_s"] = out["wall_s"]
-        for r in responses:
-            v = out["indicators"].get(r)
-            frame.loc[i, r] = np.nan if v is None else v
-    missing = [r for r in responses if frame[r].isna().all() and len(failures) < total]
-    if missing:
-        raise InputError(f"model '{model}' does not compute {', '.join(missing)}; "
-                         "is it the level you meant?")
-    return DesignRun(factors, model, responses, frame, failures, time.perf_counter() - t0, where)
+            res = simulate_run(scene, self.model)
+        ind = res.get("indicators", {})
+        missing = [r for r in self.responses if res["ok"] and r not in ind]
+        if missing:
+            res = {"ok": False, "error": f"model '{self.model}' does not compute {', '.join(missing)}"}
+        for r in self.responses:
+            out[r] = ind.get(r) if res["ok"] else None
+        out["wall_s"] = res.get("wall_s")
+        out["error"] = "" if res["ok"] else res["error"]
+        return out
 
+    def fingerprint(self) -> dict:
+        """What identifies the design's results (a resumed run must match it exactly)."""
+        return {"model": self.model,
+                "factors": [dataclasses.asdict(f) for f in self.factors],
+                "base_scene": repr(self.base) + f" mechanism={self.base.mechanism!r}",
+                "runs": len(self)}
 
-def _run_on_dask(scenes, model, address, done, timeout_s) -> None:
-    try:
-        from distributed import Client, as_completed
-    except ImportError:  # pragma: no cover - distributed is a dependency
-        raise InputError("--scheduler needs the 'distributed' package") from None
-    try:
-        client = Client(address, timeout=timeout_s, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler at {address} ({exc}); "
-                         "check the address (tcp://host:port) and that the scheduler runs") from None
-    try:
-        import uuid
-        batch = uuid.uuid4().hex[:12]
-        futures = [client.submit(simulate_run, sc, model, pure=False, key=f"labtool-doe-{batch}-run-{i + 1}")
-                   for i, sc in enumerate(scenes)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        for fut in as_completed(futures, loop=client.loop):
-            try:
-                out = fut.result()
-            except Exception as exc:  # the worker died or could not import labtool's models
-                out = {"ok": False, "error": f"Dask worker failed: {type(exc).__name__}: {exc}"}
-            done(index[fut.key], out)
-    finally:
-        client.close()
+    def coordinate_attrs(self, f: Factor) -> dict:
+        """CF attributes of a factor's coordinate in the design's NetCDF."""
+        _field, _scale, text = SCENE_FACTORS.get(f.symbol, (None, None, f.symbol))
+        return {"units": f.unit or "1", "long_name": f"factor {f.name}: {text}", "level_column": f.column}

@@ -1,0 +1,1 @@
+"""Peer solvers for the benchmarks: the same equations as labtool, written independently."""

@@ -1,0 +1,231 @@
+"""A factorial design (``models.study.doe.Design``) run in chunks, streamed to disk, then assembled.
+
+``run_design(design, csv_path, nc_path, backend)`` maps ``design.row`` over the runs with
+:func:`execution.chunked.map_chunked`; the finished chunks go to ``<csv>.parts/``
+(:class:`execution.parts.PartStore`, keyed by the design's fingerprint: a rerun of the same
+design resumes, another design is refused). When every run is done the parts are assembled, one
+part at a time, into
+
+* the results CSV shaped like the paper's Tables 2/3 (run, level columns, responses; counts as
+  integers, a failed run's cells empty), and
+* the NetCDF with one dimension per factor (its level values as the coordinate, CF units and long
+  names), one variable per response plus ``run`` and ``wall_s``, written hyperslab by hyperslab
+  (a chunk of consecutive runs is a few rectangular blocks of the factor grid),
+
+both written to temporary names and renamed together; then the parts folder is removed. Memory
+stays that of the chunks in flight and one part, whatever the number of runs.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from common.errors import InputError
+from execution.chunked import map_chunked
+from execution.parts import DiskFull, PartStore, _is_disk_full
+
+EXTRA_COLUMNS = ("wall_s", "error")
+MAX_LISTED_FAILURES = 100
+# disk needed per run at the least (bytes: its CSV row and NetCDF values), checked against the free
+# space before anything runs; a disk that fills later is caught where it fills
+BYTES_PER_RUN = 100
+
+
+@dataclasses.dataclass
+class DesignOutcome:
+    n_runs: int
+    resumed: int
+    failures: dict[int, str]         # run number -> reason (first MAX_LISTED_FAILURES)
+    n_failed: int
+    where: str
+    wall_s: float
+    cost_s: float | None
+
+
+def parts_folder(csv_path: Path) -> Path:
+    return Path(str(csv_path) + ".parts")
+
+
+def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_items=None, fresh=False,
+               on_estimate=None, progress=None, history: str = "") -> DesignOutcome:
+    """Run every run of ``design`` not finished yet and write the CSV and the NetCDF."""
+    design.validate()
+    csv_path, nc_path = Path(csv_path), Path(nc_path)
+    check_free_space(csv_path.parent, len(design))
+    store = PartStore(parts_folder(csv_path), design.fingerprint(),
+                      design.columns + list(EXTRA_COLUMNS), fresh=fresh)
+    try:
+        out = map_chunked(design.row, range(len(design)), store, backend, chunk_items=chunk_items,
+                          on_estimate=on_estimate, progress=progress, unit="runs")
+        if out.failed_chunks:
+            a, b, msg = out.failed_chunks[0]
+            runs = sum(y - x for x, y, _ in out.failed_chunks)
+            raise InputError(f"{len(out.failed_chunks)} chunk(s) ({runs} runs, first runs {a + 1}-{b}) failed on the "
+                             f"workers: {msg}; the finished runs are kept in {store.folder}, rerun to retry")
+        failures, n_failed = assemble(design, store, csv_path, nc_path, history)
+    except BaseException:
+        if not store.part_files():      # refused or failed before any run finished: leave nothing
+            store.remove()
+        raise
+    finally:
+        store.close()
+    store.remove()
+    return DesignOutcome(len(design), out.resumed, failures, n_failed, out.where, out.wall_s, out.cost_s)
+
+
+def check_free_space(folder: Path, n_runs: int) -> None:
+    need = n_runs * BYTES_PER_RUN
+    free = shutil.disk_usage(folder if str(folder) else ".").free
+    if need > free:
+        raise InputError(f"a design of {n_runs} runs needs about {need / 1e6:.3g} MB in {folder or '.'}, "
+                         f"{free / 1e6:.3g} MB are free; free space or write elsewhere")
+
+
+def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: str):
+    """Parts -> CSV + NetCDF (temporary names, renamed together). Returns (failures, n_failed)."""
+    import h5netcdf
+
+    parts = store.part_files()
+    _check_tiling(parts, len(design), store)
+    # HDF5 does not fail cleanly on a full disk: refuse before writing when the outputs cannot fit
+    need = sum(p.stat().st_size for _, _, p in parts) + 8 * len(design) * (len(design.responses) + 2) + 65536
+    free = shutil.disk_usage(csv_path.parent if str(csv_path.parent) else ".").free
+    if need > free:
+        raise DiskFull(f"{csv_path} and {nc_path} need about {need / 1e6:.3g} MB, {free / 1e6:.3g} MB are free: "
+                       f"nothing written; all {len(design)} runs are finished and kept in {store.folder}; free "
+                       "space and rerun the same command to write the results without computing again")
+    tmp_csv = csv_path.with_name(f".{csv_path.name}.tmp")
+    tmp_nc = nc_path.with_name(f".{nc_path.name}.tmp")
+    failures, n_failed = {}, 0
+    try:
+        with open(tmp_csv, "w") as fh, h5netcdf.File(tmp_nc, "w") as nc:
+            variables = _netcdf_layout(nc, design)
+            for k, (a, b, path) in enumerate(parts):
+                frame = store.read(path)
+                if len(frame) != b - a or not np.array_equal(frame["run"].to_numpy(), np.arange(a + 1, b + 1)):
+                    raise InputError(f"{path} is damaged (its rows are not runs {a + 1}-{b}); delete it and "
+                                     "rerun the same command to compute those runs again")
+                bad = frame["error"].fillna("") != ""
+                n_failed += int(bad.sum())
+                for run, msg in zip(frame["run"][bad], frame["error"][bad]):
+                    if len(failures) < MAX_LISTED_FAILURES:
+                        failures[int(run)] = msg
+                _write_csv_part(fh, frame, design, header=(k == 0))
+                for name, var in variables.items():
+                    column = frame[name].to_numpy(dtype=float if name != "run" else np.int64)
+                    for index, offset, size in hyperslabs(a, b, design.shape):
+                        var[index] = column[offset - a: offset - a + size].reshape(_block_shape(index))
+            nc.attrs["failed_runs"] = _failed_text(failures, n_failed)
+            nc.attrs["history"] = history
+        os.replace(tmp_csv, csv_path)
+        os.replace(tmp_nc, nc_path)
+    except OSError as exc:
+        tmp_csv.unlink(missing_ok=True)
+        tmp_nc.unlink(missing_ok=True)
+        reason = "disk full" if _is_disk_full(exc) else exc.strerror or str(exc)
+        raise DiskFull(f"{reason} while writing {csv_path} and {nc_path}: neither was written; all "
+                       f"{len(design)} runs are finished and kept in {store.folder}; free space and rerun "
+                       "the same command to write the results without computing again") from None
+    except BaseException:
+        tmp_csv.unlink(missing_ok=True)
+        tmp_nc.unlink(missing_ok=True)
+        raise
+    return failures, n_failed
+
+
+def _check_tiling(parts, n: int, store) -> None:
+    pos = 0
+    for a, b, path in parts:
+        if a != pos:
+            raise InputError(f"{store.folder}: runs {pos + 1}-{a} are missing, or {path.name} overlaps "
+                             "another part; rerun the same command")
+        pos = b
+    if pos != n:
+        raise InputError(f"{store.folder}: runs {pos + 1}-{n} are missing; rerun the same command")
+
+
+def _write_csv_part(fh, frame, design, header: bool) -> None:
+    table = frame[design.columns].copy()
+    from models.study.doe import COUNT_RESPONSES
+    for c in COUNT_RESPONSES:
+        if c in table:
+            table[c] = table[c].round().astype("Int64")   # integers; a failed run's cell stays empty
+    table.to_csv(fh, index=False, header=header, float_format="%.10g")
+
+
+def _failed_text(failures: dict, n_failed: int) -> str:
+    if not n_failed:
+        return "none"
+    text = ",".join(map(str, sorted(failures)))
+    return text if n_failed <= len(failures) else f"{text},... ({n_failed} in all)"
+
+
+def _netcdf_layout(nc, design) -> dict:
+    """Dimensions, coordinates and empty variables; returns {column: variable} to fill."""
+    from models.study.doe import RESPONSE_ATTRS
+    dims = tuple(f.symbol for f in design.factors)
+    nc.dimensions = {f.symbol: len(f.levels) for f in design.factors}
+    for f in design.factors:
+        v = nc.create_variable(f.symbol, (f.symbol,), float)
+        v[:] = np.asarray(f.levels, dtype=float)
+        v.attrs.update(design.coordinate_attrs(f))
+    chunks = _chunking(design.shape)
+    out = {}
+    for name in design.responses:
+        units, long_name = RESPONSE_ATTRS.get(name, ("1", name))
+        out[name] = nc.create_variable(name, dims, float, fillvalue=np.nan, chunks=chunks)
+        out[name].attrs.update(units=units, long_name=long_name)
+    out["run"] = nc.create_variable("run", dims, np.int64, chunks=chunks)
+    out["run"].attrs.update(units="1", long_name="run number in the paper's order")
+    out["wall_s"] = nc.create_variable("wall_s", dims, float, fillvalue=np.nan, chunks=chunks)
+    out["wall_s"].attrs.update(units="s", long_name="wall time of the run's simulation")
+    nc.attrs.update(model=design.model, title="labtool doe run: full factorial simulated experiment")
+    return out
+
+
+def _chunking(shape):
+    """HDF5 chunks of at most ~64k values, whole trailing dimensions first (they are written together)."""
+    chunks, size = [], 1
+    for n in reversed(shape):
+        c = max(1, min(n, 65536 // size))
+        chunks.append(c)
+        size *= c
+    return tuple(reversed(chunks))
+
+
+def hyperslabs(a: int, b: int, shape: tuple[int, ...]):
+    """The flat C-order range [a, b) of an array of ``shape`` as rectangular blocks: yields
+    (index tuple of ints and slices, flat offset of the block's first element, number of elements)."""
+    if a >= b:
+        return
+    if len(shape) == 1:
+        yield (slice(a, b),), a, b - a
+        return
+    inner = math.prod(shape[1:])
+    i0, r0 = divmod(a, inner)
+    i1, r1 = divmod(b, inner)
+    if i0 == i1:
+        for idx, off, size in hyperslabs(r0, r1, shape[1:]):
+            yield (slice(i0, i0 + 1),) + idx, i0 * inner + off, size
+        return
+    if r0:
+        for idx, off, size in hyperslabs(r0, inner, shape[1:]):
+            yield (slice(i0, i0 + 1),) + idx, i0 * inner + off, size
+        i0 += 1
+    if i1 > i0:
+        yield (slice(i0, i1),) + tuple(slice(0, n) for n in shape[1:]), i0 * inner, (i1 - i0) * inner
+    if r1:
+        for idx, off, size in hyperslabs(0, r1, shape[1:]):
+            yield (slice(i1, i1 + 1),) + idx, i1 * inner + off, size
+
+
+def _block_shape(index) -> tuple[int, ...]:
+    return tuple(s.stop - s.start for s in index)
+
+
+__all__ = ["run_design", "DesignOutcome", "hyperslabs", "parts_folder", "DiskFull"]

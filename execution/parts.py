@@ -1,0 +1,177 @@
+"""Results streamed to disk, one file per finished chunk, so that nothing finished is lost.
+
+A :class:`PartStore` is a folder (``results.csv.parts/`` beside the output) holding
+
+* ``manifest.json``: what the parts are results of (a fingerprint of the work: for a design its
+  model, factors, base scene and number of runs) and the columns of every part;
+* ``items-<first>-<last>.csv``: the rows of items ``first..last`` (0-based, inclusive), written to a
+  hidden temporary name and renamed when complete, so a part exists only whole (a kill while
+  writing leaves a ``.tmp`` file that the next open removes);
+* ``lock``: held (``flock``, exclusive) by the one process writing to the store; a second writer
+  is refused with one line.
+
+Opening a store whose manifest matches resumes it (the finished items are skipped); a manifest of
+other work is refused, naming the first difference. Floats are written with 17 significant digits:
+a part read back is bit-identical to what was computed.
+"""
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import json
+import os
+import re
+from pathlib import Path
+
+import pandas as pd
+
+from common.errors import InputError
+
+FORMAT = "labtool.parts"
+VERSION = 1
+_PART_RE = re.compile(r"^items-(\d{9,})-(\d{9,})\.csv$")
+
+
+class DiskFull(InputError):
+    """The disk filled up (or the folder became read-only) while writing; the message says what was kept."""
+
+
+def _is_disk_full(exc: OSError) -> bool:
+    return exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG)
+
+
+class PartStore:
+    """Parts of a chunked computation in ``folder`` (see the module docstring)."""
+
+    def __init__(self, folder: Path, fingerprint: dict, columns: list[str], fresh: bool = False):
+        self.folder = Path(folder)
+        self.fingerprint = json.loads(json.dumps(fingerprint, default=str))
+        self.columns = list(columns)
+        self._lock_fh = None
+        self._open(fresh)
+
+    # ---------------------------------------------------------------- opening, locking
+    def _open(self, fresh: bool) -> None:
+        try:
+            self.folder.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"cannot create {self.folder} for the finished chunks ({exc.strerror})") from None
+        self._lock()
+        manifest = self.folder / "manifest.json"
+        want = {"format": FORMAT, "version": VERSION, "work": self.fingerprint, "columns": self.columns}
+        if manifest.exists() and not fresh:
+            try:
+                have = json.loads(manifest.read_text())
+            except (OSError, ValueError):
+                have = None
+            if have != want:
+                raise InputError(f"{self.folder} holds finished chunks of other work "
+                                 f"({_first_difference(have, want)}); rerun the same command to finish "
+                                 f"that work, or pass --fresh to discard its chunks")
+        else:
+            for p in self.part_files():
+                p[2].unlink()
+            self._write_text(manifest, json.dumps(want, indent=1))
+        for tmp in self.folder.glob(".*.tmp"):       # a write killed half-way
+            tmp.unlink(missing_ok=True)
+
+    def _lock(self) -> None:
+        fh = open(self.folder / "lock", "a+")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.seek(0)
+            pid = fh.read().strip() or "?"
+            fh.close()
+            raise InputError(f"{self.folder} is being written by another process (pid {pid}); "
+                             "wait for it to finish or write to another output") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(str(os.getpid()))
+        fh.flush()
+        self._lock_fh = fh
+
+    def close(self) -> None:
+        if self._lock_fh is not None:
+            with contextlib.suppress(OSError):
+                fcntl.flock(self._lock_fh, fcntl.LOCK_UN)
+            self._lock_fh.close()
+            self._lock_fh = None
+
+    def remove(self) -> None:
+        """Delete the store (after its parts were assembled into the final outputs)."""
+        for p in self.part_files():
+            p[2].unlink(missing_ok=True)
+        for name in ("manifest.json", "lock"):
+            (self.folder / name).unlink(missing_ok=True)
+        self.close()
+        with contextlib.suppress(OSError):
+            self.folder.rmdir()
+
+    # ---------------------------------------------------------------- parts
+    def part_files(self) -> list[tuple[int, int, Path]]:
+        """(first, stop, path) of every finished part, by first item (stop exclusive)."""
+        out = []
+        for p in self.folder.iterdir():
+            m = _PART_RE.match(p.name)
+            if m:
+                out.append((int(m.group(1)), int(m.group(2)) + 1, p))
+        return sorted(out)
+
+    def done_ranges(self) -> list[tuple[int, int]]:
+        return [(a, b) for a, b, _ in self.part_files()]
+
+    def missing(self, n_items: int) -> list[tuple[int, int]]:
+        """The ranges [start, stop) of items 0..n_items-1 that no part holds."""
+        out, pos = [], 0
+        for a, b in self.done_ranges():
+            if a > pos:
+                out.append((pos, min(a, n_items)))
+            pos = max(pos, b)
+        if pos < n_items:
+            out.append((pos, n_items))
+        return [(a, b) for a, b in out if b > a]
+
+    def write(self, start: int, stop: int, frame: pd.DataFrame) -> Path:
+        """Write the rows of items [start, stop) as one part (atomically)."""
+        if len(frame) != stop - start:
+            raise ValueError(f"part {start}..{stop}: {len(frame)} rows")
+        path = self.folder / f"items-{start:09d}-{stop - 1:09d}.csv"
+        self._write_text(path, frame.reindex(columns=self.columns).to_csv(index=False, float_format="%.17g"))
+        return path
+
+    def read(self, path: Path) -> pd.DataFrame:
+        return pd.read_csv(path, keep_default_na=False, na_values=[""], dtype={"error": str})
+
+    def _write_text(self, path: Path, text: str) -> None:
+        tmp = path.with_name(f".{path.name}.tmp")
+        try:
+            with open(tmp, "w") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            if _is_disk_full(exc):
+                raise DiskFull(f"{exc.strerror} writing {path}") from None
+            raise InputError(f"cannot write {path} ({exc.strerror})") from None
+
+
+def _first_difference(have, want) -> str:
+    if not isinstance(have, dict):
+        return "its manifest.json is not readable"
+    for key in ("format", "version", "columns"):
+        if have.get(key) != want.get(key):
+            return f"{key} {have.get(key)!r}, not {want.get(key)!r}"
+    hw, ww = have.get("work") or {}, want["work"]
+    for key in sorted(set(hw) | set(ww)):
+        if hw.get(key) != ww.get(key):
+            return f"its {key} is {_short(hw.get(key))}, this run's is {_short(ww.get(key))}"
+    return "a different manifest"
+
+
+def _short(v) -> str:
+    text = json.dumps(v, default=str)
+    return text if len(text) <= 80 else text[:77] + "..."
