@@ -75,13 +75,7 @@ def fit(
             raise InputError(f"{name} must be a finite number, got {value}")
     if not (ka_gain > 0):
         raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
-    if figure is None and output is not None:
-        figure = output.with_suffix(".png")
-    outputs = [p for p in (output, figure) if p is not None]
-    if len({p.resolve() for p in outputs}) != len(outputs):
-        raise InputError("the JSON and the figure must be different files")
-    for p in outputs:
-        check_output_path(p, force)
+    figure = _outputs(output, figure, force)
     start_value = start if start in ("scan", "scene") else parse_assignments(start, "--start")
     overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
                  "restitution": restitution, "contact_damping": contact_damping,
@@ -111,6 +105,20 @@ def fit(
     wrote = [str(p) for p in (output, figure) if p is not None]
     if wrote:
         typer.echo("wrote " + ", ".join(wrote))
+
+
+def _outputs(output: Path | None, figure: Path | None, force: bool) -> Path | None:
+    """Check the output files before any work; the figure defaults to beside the JSON."""
+    from common.errors import InputError
+
+    if figure is None and output is not None:
+        figure = output.with_suffix(".png")
+    outputs = [p for p in (output, figure) if p is not None]
+    if len({p.resolve() for p in outputs}) != len(outputs):
+        raise InputError("the JSON and the figure must be different files")
+    for p in outputs:
+        check_output_path(p, force)
+    return figure
 
 
 def _num(v, fmt=".4g") -> str:
