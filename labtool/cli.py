@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "labtool.commands.simulate",
     "labtool.commands.demo",
     "labtool.commands.report",
+    "labtool.commands.fit",
     "labtool.commands.doe",
     "labtool.commands.acquire",
     "labtool.commands.devices",
@@ -57,6 +58,16 @@ def _register_all() -> None:
 
 
 _register_all()
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -130,6 +141,11 @@ def _run(argv) -> int:
                           "rename the file (e.g. with convmv) and run again")
         return _internal(exc)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        if isinstance(exc, SystemError) and _caused_by_interrupt(exc):
+            # Ctrl-C inside a numba-compiled loop surfaces as a chain of "returned a result with an
+            # exception set" with the KeyboardInterrupt at its root
+            typer.echo("labtool: interrupted (SIGINT); no output was left half-written", err=True)
+            return 128 + int(signal.SIGINT)
         code = disk_error(exc)
         if code is not None:      # HDF5 and zlib say "errno = 28" in a RuntimeError or ValueError
             name = getattr(exc, "filename", None)

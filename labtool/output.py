@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import time
 
 
 PIPE_WIDTH = 200   # columns of the tables written to a file or a pipe (a terminal keeps its own)
@@ -17,3 +18,28 @@ def console(stderr: bool = False):
     if not con.is_terminal and "COLUMNS" not in os.environ:
         con.width = PIPE_WIDTH
     return con
+
+
+class ProgressLines:
+    """Progress when stderr is not a terminal (a pipe, a CI log): the current step with the time
+    since the start, at most every ``period`` s and not before ``quiet`` s, so a long command is
+    never silent and a quick one (or one that ends in a bad-input line) prints nothing extra.
+    Used like rich's status: ``with ... as status: status.update(msg)``."""
+
+    def __init__(self, stream, name: str, quiet: float = 2.0, period: float = 5.0):
+        self.stream, self.name = stream, name
+        self.t0 = self.last = time.perf_counter()
+        self.quiet, self.period = quiet, period
+        self.printed = False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def update(self, msg: str) -> None:
+        now = time.perf_counter()
+        if now - self.t0 >= self.quiet and (not self.printed or now - self.last >= self.period):
+            print(f"{self.name}: {msg} ({now - self.t0:.0f} s)", file=self.stream, flush=True)
+            self.last, self.printed = now, True

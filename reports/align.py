@@ -120,6 +120,7 @@ def condition(fine: np.ndarray, cond: Conditioning) -> np.ndarray:
     return harmonic_lowpass(fine, cond.n_harmonics)[..., ::FINE_FACTOR]
 
 
+
 @dataclasses.dataclass
 class MeasuredCycles:
     """Whole measured revolutions on the report grid."""
@@ -503,7 +504,10 @@ def simulated_cycles(sim: xr.Dataset, names, cond: Conditioning, epsilon2_from_o
     theta, tu, data = u
     if any(n not in data for n in names if not (n == "epsilon2" and epsilon2_from_omega2)):
         return None
-    K = int(math.floor(theta[-1] / TWO_PI + 1e-9))
+    # a run that stops within 1.5 resampling steps of a revolution's end covers it (the uniform
+    # resampling ends up to one step before the run; the rigid model stops 3e-9 of a turn short)
+    slack = 1.5 * float(theta[-1] - theta[-2]) if theta.size > 1 else 0.0
+    K = int(math.floor((theta[-1] + slack) / TWO_PI))
     if K < 1 or theta[0] > 1e-6:
         return None
     period_n = int(round(TWO_PI / max(float(np.median(np.diff(theta))), 1e-12)))   # samples per revolution
@@ -547,3 +551,33 @@ def steady_cycles(revs: dict, grid: np.ndarray, tol: float = PERIODIC_TOL) -> Si
         note = (f"NOT periodic ({100 * change:.2g} % rms change between its last two revolutions): the model's "
                 f"cycle average over revolutions 2..{K} is compared, with its scatter")
     return SimulatedCycles(grid, revs, periodic, change, cyc, std, n_used, np.ones(grid.size, bool), note)
+
+
+def as_measured(signals: dict, ka_gain: float = 1.0, delay_rad: float = 0.0) -> dict:
+    """Conditioned revolutions (last axis = one period of phi1) as a chain with a Ka error and a
+    delay would show them: divided by ``ka_gain`` (true Ka / the Ka the processing used: the
+    measured accelerations, and omega2 integrated from them, are the truth over it) and delayed by
+    ``delay_rad`` of cam angle (omega1 times the channels' delay behind the tacho; > 0 late), i.e.
+    y(phi1 - delay_rad). The shift is exact for the band-limited conditioned signals (a phase
+    ramp on their harmonics)."""
+    out = {}
+    for name, y in signals.items():
+        y = np.asarray(y, float)
+        if delay_rad:
+            spec = np.fft.rfft(y, axis=-1)
+            spec *= np.exp(-1j * np.arange(spec.shape[-1]) * delay_rad)
+            y = np.fft.irfft(spec, n=y.shape[-1], axis=-1)
+        out[name] = y / ka_gain
+    return out
+
+
+def cycle_as_measured(cycle, ka_gain: float = 1.0, delay_rad: float = 0.0):
+    """A simulated cycle (``SimulatedCycles`` or ``SimulatedCycle``: its cycle, scatter and
+    revolutions) as a chain with a Ka error and a delay shows it (``as_measured``)."""
+    if ka_gain == 1.0 and delay_rad == 0.0:
+        return cycle
+    rep = {"signals": as_measured(cycle.signals, ka_gain, delay_rad)}
+    if isinstance(cycle, SimulatedCycles):
+        rep["std"] = as_measured(cycle.std, ka_gain, delay_rad)
+        rep["revolutions"] = as_measured(cycle.revolutions, ka_gain, delay_rad)
+    return dataclasses.replace(cycle, **rep)

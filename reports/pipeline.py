@@ -46,6 +46,7 @@ class SimRun:
     warning: str = ""         # what the reader must know (a stand-in level, a partial revolution)
     accuracy: str = "standard"
     events: dict | None = None   # predicted event statistics (reports.events.predicted)
+    op: dict | None = None       # its own operating point (an identified model's); None = the report's
 
     @property
     def steady(self) -> range:
@@ -57,7 +58,7 @@ class SimRun:
 
     @property
     def label(self) -> str:
-        name = self.requested if self.model == self.requested else f"{self.requested} (ran {self.model})"
+        name = self.requested if self.model == self.requested or self.op is not None else f"{self.requested} (ran {self.model})"
         return f"{name}, w1 = {'ct.' if self.omega1 == 'const' else 'var.'}"
 
 @dataclasses.dataclass
@@ -228,8 +229,19 @@ def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutio
         cycle = align.simulated_cycle(res.dataset, SIGNALS, cond, epsilon2_from_omega2=res.model == "rigid",
                                       time_filter=time_filter)
     warning = cycle.note if not cycle.covered.all() or not cycle.periodic else ""
-    return SimRun(requested, res.model, mode, res.dataset, res.indicators, cycle, time.perf_counter() - t0,
-                  cycle.note, revolutions, warning, accuracy)
+    return SimRun(requested, res.model, mode, res.dataset, res.indicators, chain_view(cycle, op),
+                  time.perf_counter() - t0, cycle.note, revolutions, warning, accuracy)
+
+
+CHAIN_KEYS = ("ka_gain", "delay_ms")   # measuring-side parameters of an operating point (labtool fit)
+
+
+def chain_view(cycle, op: dict):
+    """The simulated cycle as the measuring chain shows it when the operating point carries an
+    identified Ka gain (true Ka over the one processing used) or delay (ms, channels behind the
+    tacho): reports.align.cycle_as_measured; unchanged without them."""
+    gain, delay_ms = float(op.get("ka_gain", 1.0)), float(op.get("delay_ms", 0.0))
+    return align.cycle_as_measured(cycle, gain, delay_ms * 1e-3 * op["cam_speed_rpm"] * math.pi / 30.0)
 
 
 # --------------------------------------------------------------------------- comparison
@@ -312,12 +324,15 @@ def event_table(measured: dict | None, sims: list) -> list[dict]:
 def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Thresholds | None = None,
                  overrides: dict | None = None, accuracy: str = "standard", revolutions: float = DEFAULT_REVOLUTIONS,
                  cond: align.Conditioning | None = None, progress=None, stand_in_on_failure: bool = False,
-                 robustness: bool = True) -> Report:
+                 robustness: bool = True, fitted: list | None = None) -> Report:
     """Everything the report shows. ``progress(msg)`` is called before each long step.
 
     ``stand_in_on_failure`` (the demo): a model that fails is replaced by the kinematic level with a
     note, instead of ending the report (the CLI: exit 2 for a model's InputError/SolverError).
-    ``robustness``: also the verdict at the other preset and at half the simulated length."""
+    ``robustness``: also the verdict at the other preset and at half the simulated length.
+    ``fitted``: identified models (``labtool fit``) shown beside the nominal ones, each a dict with
+    ``model``, ``omega1``, ``operating_point`` (the report's keys, edge units, with the fitted
+    values and any ``ka_gain``/``delay_ms``) and ``note`` (what was identified, from where)."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     cond = cond or align.Conditioning()
@@ -342,9 +357,13 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
             if run.warning:
                 notes.append(f"{run.label}: {run.warning}")
             sims.append(run)
+    for fit in fitted or []:
+        say(f"simulating the fitted {fit['model']} model, omega1 {fit['omega1']}")
+        sims.append(fitted_run(fit, accuracy, revolutions, cond, time_filter))
+        notes.append(fit["note"])
     say("finding the measured impacts and jumps")
     det = detector_for(time_filter, ds)
-    meas_ev = _measured_events(cycles, det, op)
+    meas_ev = measured_events(cycles, det, op)
     for run in sims:
         if det is not None and meas_ev is not None and meas_ev.get("threshold_rad_s") is not None:
             run.events = events.predicted(run.dataset, run.steady, det, meas_ev["threshold_rad_s"], cam_program(op))
@@ -369,6 +388,19 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
                                                  for r in rep.robustness) + ")")
     rep.wall_s = time.perf_counter() - t0
     return rep
+
+
+def fitted_run(fit: dict, accuracy: str, revolutions: float, cond, time_filter) -> SimRun:
+    """An identified model (labtool fit) through the report's own comparison, labelled '<model> (fitted)'."""
+    op = fit["operating_point"]
+    try:
+        run = run_simulation(op, fit["model"], fit["omega1"], accuracy, revolutions, cond, time_filter)
+    except (ValueError, ArithmeticError) as exc:
+        if isinstance(exc, LabtoolError):
+            raise
+        raise InputError(f"the fitted {fit['model']} model cannot be simulated: {exc}") from None
+    run.requested, run.op = f"{fit['model']} (fitted)", op
+    return run
 
 
 def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
@@ -447,7 +479,9 @@ def cam_program(op: dict):
     return CamProgram.for_mechanism(Mechanism.default(), law=op["law"])
 
 
-def _measured_events(cycles, det, op) -> dict | None:
+def measured_events(cycles, det, op) -> dict | None:
+    """The measured impacts and jumps (reports.events.measured) at the operating point's cam law;
+    None without a detector (no processing low-pass recorded)."""
     if det is None:
         return None
     from models.mechanism import Mechanism
@@ -494,9 +528,12 @@ def robustness_rows(rep: Report, accuracy: str, revolutions: float, say) -> list
                 runs.append((run.label, run.cycle))
                 continue
             try:
-                r2 = _same_motion(done, run.model, run.omega1, acc) or run_simulation(
-                    rep.scene, run.model, run.omega1, acc, revolutions, rep.conditioning, rep.time_filter)
-                done.append(r2)
+                # a fitted run (run.op set) has its own parameters: never the same motion as a nominal one
+                same = _same_motion(done, run.model, run.omega1, acc) if run.op is None else None
+                r2 = same or run_simulation(run.op or rep.scene, run.model, run.omega1, acc, revolutions,
+                                            rep.conditioning, rep.time_filter)
+                if run.op is None:
+                    done.append(r2)
                 runs.append((run.label, r2.cycle))
             except LabtoolError as exc:
                 error = f"{run.label}: {exc}"

@@ -5,7 +5,8 @@ cam speeds, Ka, whole revolutions used and in the file, and ``events``: the meas
 jumps with ``impacts_per_rev``, ``jumps_per_rev``, ``first_impact_deg``, ``impact_angles_deg``, the
 detectability ``threshold_rad_s`` and the detector), ``operating_point`` (what the models
 simulated, edge units), ``conditioning``, ``simulations`` (per model and omega1 mode: level used,
-periodic or not, revolutions, note, wall time, indicators), ``comparisons`` (per model, mode and
+periodic or not, revolutions, note, wall time, indicators, and for a model identified by
+``labtool fit`` (``report --fit``, labelled "<model> (fitted)") its own ``operating_point``), ``comparisons`` (per model, mode and
 signal: ``overall`` metrics on the cycle average, with ``band_overlap`` and ``scatter_ratio``, and
 ``per_revolution``), ``headline``, ``closest`` (the simulation with the best mean ISO rating of
 omega2 and epsilon2), ``robustness`` (``rows``: preset, revolutions, closest, every model's grades;
@@ -30,14 +31,14 @@ from reports.pipeline import Report, closest, headline, robust_verdict
 FORMAT_VERSION = 2
 
 
-def _clean(obj):
-    """Plain JSON types; NaN/Inf -> None."""
+def plain_json(obj):
+    """Plain JSON types (also for labtool fit); NaN/Inf -> None."""
     if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
+        return {str(k): plain_json(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
+        return [plain_json(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
+        return plain_json(obj.tolist())
     if isinstance(obj, (bool, np.bool_)):
         return bool(obj)
     if isinstance(obj, (int, np.integer)):
@@ -118,6 +119,7 @@ def build_summary(report: Report) -> dict:
         "note": r.note, "wall_s": r.wall_s, "revolutions": r.revolutions, "accuracy": r.accuracy,
         "periodic": bool(r.cycle.periodic), "revolution_change": r.cycle.change,
         "revolutions_averaged": int(r.cycle.n_used),
+        "operating_point": r.op,     # an identified model's own (labtool fit); None: the report's
         "indicators": {k: v for k, v in r.indicators.items() if not isinstance(v, (np.ndarray, list))},
     } for r in report.sims]
     comps = []
@@ -147,7 +149,7 @@ def build_summary(report: Report) -> dict:
         "notes": report.notes,
         "wall_s": report.wall_s,
     }
-    return _clean(out)
+    return plain_json(out)
 
 
 def to_json(report: Report) -> str:

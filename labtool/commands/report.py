@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import math
 import sys
-import time
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -21,30 +20,6 @@ PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no e
 
 def register(app: typer.Typer) -> None:
     app.command("report")(report)
-
-
-class _Lines:
-    """Progress when stderr is not a terminal (a pipe, a CI log): the current step with the time
-    since the start, at most every ``period`` s and not before ``quiet`` s, so a long report is
-    never silent and a quick one (or one that ends in a bad-input line) prints nothing extra."""
-
-    def __init__(self, stream, quiet: float = 2.0, period: float = 5.0):
-        self.stream = stream
-        self.t0 = self.last = time.perf_counter()
-        self.quiet, self.period = quiet, period
-        self.printed = False
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    def update(self, msg: str) -> None:
-        now = time.perf_counter()
-        if now - self.t0 >= self.quiet and (not self.printed or now - self.last >= self.period):
-            print(f"report: {msg} ({now - self.t0:.0f} s)", file=self.stream, flush=True)
-            self.last, self.printed = now, True
 
 
 def _check_budget(models, modes, accuracy, revolutions, robustness, max_seconds) -> None:
@@ -96,13 +71,15 @@ def report(
     robustness: bool = typer.Option(True, help="also check the verdict at the other solver preset and half the length"),
     harmonics: int = typer.Option(60, help="low-pass of both sides: harmonics of the cam frequency kept [-]"),
     grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
+    fit: Optional[List[Path]] = typer.Option(None, "--fit", help="a 'labtool fit' result (fit.json): the identified "
+                                            "model is compared beside the nominal ones, as '<model> (fitted)'; repeatable"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
     max_seconds: float = typer.Option(budget.DEFAULT_MAX_SECONDS, help="refuse (on a terminal: ask) when the "
                                       "estimated run time of many --revolutions is longer [s]"),
 ) -> None:
     """Compare a measurement with the rigid and elastic models (omega1 constant and variable):
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
-    from labtool.output import console
+    from labtool.output import ProgressLines, console
 
     from common.errors import InputError
     from reports.align import Conditioning
@@ -114,6 +91,10 @@ def report(
     if revolutions > PROBE_ABOVE_REVOLUTIONS:
         _check_budget(_split(models), _split(omega1), accuracy, revolutions, robustness, max_seconds)
     th = load_thresholds(thresholds) if thresholds else None
+    fitted = None
+    if fit:
+        from identification.fit import load_fit
+        fitted = [load_fit(p) for p in fit]
     cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
     overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
                  "restitution": restitution, "contact_damping": contact_damping,
@@ -124,9 +105,9 @@ def report(
             raise InputError(f"{name} must be a finite number, got {value}")
     err = console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
-    with (err.status("report") if err.is_terminal else _Lines(sys.stderr)) as status:
+    with (err.status("report") if err.is_terminal else ProgressLines(sys.stderr, "report")) as status:
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
-                           progress=lambda msg: status.update(msg), robustness=robustness)
+                           progress=lambda msg: status.update(msg), robustness=robustness, fitted=fitted)
         status.update("drawing the figures")
         from reports.figures import all_figures, render
         from reports.html import render_html

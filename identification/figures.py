@@ -1,0 +1,87 @@
+"""The fit's figure: measured vs the model before and after the fit, and the profiles.
+
+Top rows: omega2 and epsilon2 over the cam angle (deg): the measured cycle average with its +-2
+sigma band, the model at the scene's values (before) and at the fitted ones (after); the y-range
+is the measurement's, a model beyond it is clipped and marked (reports.figures.plot_clipped).
+Bottom row: one panel per free parameter, the profiled objective at the checked points, its
+linear-theory parabola, the 95 % threshold and the interval.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from reports.figures import SIGNAL_LABEL, measured_limits, plot_clipped
+
+SIGNALS = ("omega2", "epsilon2")
+
+
+def fit_figure(outcome) -> Figure:
+    """The figure of ``identification.fit.FitOutcome``."""
+    s = outcome.summary
+    p = len(outcome.space.params)
+    fig = Figure(figsize=(11, 8.5), layout="constrained")
+    grid = fig.add_gridspec(3, max(p, 1))
+    cyc = outcome.target.cycles
+    deg = np.degrees(cyc.grid)
+    for row, sig in enumerate(SIGNALS):
+        ax = fig.add_subplot(grid[row, :])
+        sym, unit = SIGNAL_LABEL[sig]
+        mean, sd = cyc.mean(sig), cyc.std(sig)
+        lim = measured_limits(np.concatenate([mean + 2 * sd, mean - 2 * sd]))
+        ax.fill_between(deg, mean - 2 * sd, mean + 2 * sd, color="0.6", alpha=0.4, lw=0, label="measured ±2σ")
+        ax.plot(deg, mean, color="k", lw=1.4, label=f"measured (average of {len(cyc.revolutions)} revolutions)")
+        for ev, label, color in ((outcome.before, "before (the scene's values)", "tab:red"),
+                                 (outcome.after, "after the fit", "tab:blue")):
+            if ev.ok:
+                grade = (s["metrics_before"] if ev is outcome.before else s["metrics_after"])[sig]
+                plot_clipped(ax, deg, ev.cycle.signals[sig], lim, color=color, lw=1.0,
+                             label=f"{label}: ISO {grade['iso_rating']:.3f} ({grade['iso_grade']})")
+        ax.set_ylim(*lim)
+        ax.set_xlim(0, 360)
+        ax.set_ylabel(f"{sym} [{unit}]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+        if row == 0:
+            fitted = ", ".join(f"{k} = {v['value']:.4g}" for k, v in s["parameters"].items())
+            ax.set_title(f"{s['model']} model, ω1 {s['omega1']}, {s['accuracy']} preset: {fitted}", fontsize=9)
+        else:
+            ax.set_xlabel("cam angle φ1 [deg] (0 = start of the rise)")
+    for i, par in enumerate(outcome.space.params):
+        _profile_panel(fig.add_subplot(grid[2, i]), outcome, i, par)
+    return fig
+
+
+def _profile_panel(ax, outcome, i, par) -> None:
+    s = outcome.summary
+    entry = s["parameters"][par.key]
+    prof = s["profiles"][par.key]
+    x = np.array([np.nan if v is None else v for v in prof["values"]], float)
+    y = np.array(prof["objective"], float)
+    base = min(s["objective_after"], float(np.nanmin(y)))
+    lin = outcome.linear
+    ax.plot(x, y - base, "o-", color="tab:blue", ms=4, lw=1, label="profile (others re-fitted)")
+    # linear theory's parabola through the optimum
+    half = lin.t * lin.sd_u[i]
+    if math.isfinite(half) and half > 0:
+        u = np.linspace(max(lin.u[i] - 2.5 * half, 0.0), min(lin.u[i] + 2.5 * half, 1.0), 101)
+        xs = [outcome.space.value(i, v) for v in u]
+        ax.plot(xs, lin.threshold(i) * ((u - lin.u[i]) / half) ** 2, "--", color="0.4", lw=0.8, label="linear theory")
+    ax.axhline(prof["threshold"] - base, color="tab:red", lw=0.8, label="95 % threshold")
+    lo, hi = entry["ci95"]
+    if lo is not None and hi is not None:
+        ax.axvspan(lo, hi, color="tab:blue", alpha=0.12, label="95 % interval")
+    ax.axvline(entry["value"], color="tab:blue", lw=0.8)
+    if par.log:
+        ax.set_xscale("log")
+    unit = "" if par.unit == "-" else f" [{par.unit}]"
+    ax.set_xlabel(f"{par.name}{unit}")
+    ax.set_ylabel("objective − minimum")
+    ax.set_yscale("symlog", linthresh=max(prof["threshold"] - base, 1e-9))
+    ax.set_ylim(bottom=0.0)
+    verdict = "identifiable" if entry["identifiable"] else "NOT identifiable"
+    ax.set_title(f"{par.name}: {verdict}", fontsize=8)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=6, loc="best")

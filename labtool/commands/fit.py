@@ -1,0 +1,155 @@
+"""``labtool fit``: identify a model's parameters from a measurement (identification.fit).
+
+Prints the identified parameters with their 95 % intervals, whether this measurement identifies
+them, the objective and the grades before and after; ``-o fit.json`` writes the result (and the
+figure beside it, ``fit.png``, unless ``--figure`` names another file); ``--json`` prints the
+result as one JSON object on stdout. Exit 0: the fit ran (its notes say what it could not
+identify); exit 2: bad input or a model that fails everywhere, one line, nothing written.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from common.files import atomic_write, check_output_path
+
+
+def register(app: typer.Typer) -> None:
+    app.command("fit")(fit)
+
+
+def fit(
+    measured: Path = typer.Argument(..., help="measured.nc written by 'labtool process'"),
+    model: str = typer.Option(..., help="model to identify: rigid or elastic"),
+    free: str = typer.Option(..., help="parameters to identify, comma-separated: backlash [mm], restitution [-] (rigid), "
+                             "contact_damping [s/m], contact_length [mm] (elastic), ka_gain [-] (true Ka / the Ka "
+                             "processing used), delay [ms] (acceleration channels behind the tacho)"),
+    omega1: str = typer.Option("const", "--omega1", help="cam speed of the model: const (cam as input) or var (motor "
+                               "characteristic)"),
+    accuracy: str = typer.Option("standard", help="solver preset of the final evaluation: fast or standard (the search "
+                                 "always runs at fast)"),
+    bounds: Optional[str] = typer.Option(None, help="search bounds in edge units, e.g. backlash=0.02:0.4,restitution=0:1 "
+                                         "(default: backlash 0.01:0.6 mm, restitution 0:1, contact_damping 0:400 s/m, "
+                                         "contact_length 1:30 mm, ka_gain 0.5:2, delay -5:5 ms)"),
+    start: str = typer.Option("scan", help="scan (a coarse scan of the bounds, default), scene (the scene's values) or "
+                              "name=value,... (edge units): searched from first, beside the scan's best points"),
+    scan: bool = typer.Option(True, "--scan/--no-scan", help="also search from the coarse scan's best points (with "
+                              "--no-scan a given start alone: the answer may then depend on it)"),
+    rpm: Optional[float] = typer.Option(None, help="cam speed n1 to simulate [rpm] (default: the file's)"),
+    law: Optional[str] = typer.Option(None, help="motion law (default: the file's, else sine)"),
+    fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0)"),
+    jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt [-] (default: the file's, else 1)"),
+    backlash_mm: Optional[float] = typer.Option(None, help="backlash j [mm]: fixed, or the scene's start when free "
+                                                "(default: the file's, else 0.128)"),
+    restitution: Optional[float] = typer.Option(None, help="rigid restitution k [-], fixed or the scene's start (default 1)"),
+    contact_damping: Optional[float] = typer.Option(None, help="elastic contact damping [s/m], fixed or the scene's start "
+                                                    "(default 0)"),
+    contact_length_mm: Optional[float] = typer.Option(None, help="elastic contact length lw [mm], fixed or the scene's "
+                                                      "start (default 6)"),
+    elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
+    ka_gain: float = typer.Option(1.0, help="true Ka / the Ka processing used [-] when not free"),
+    delay_ms: float = typer.Option(0.0, help="delay of the acceleration channels behind the tacho [ms] when not free"),
+    revolutions: int = typer.Option(3, help="cam revolutions each model run simulates [-] (the first is the start-up)"),
+    max_runs: int = typer.Option(200, help="model runs the search may use before it stops [-]"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="fit result to write (JSON)"),
+    figure: Optional[Path] = typer.Option(None, help="figure of the fit and the profiles (PNG; default: beside -o)"),
+    as_json: bool = typer.Option(False, "--json", help="print the result as one JSON object on stdout"),
+    force: bool = typer.Option(False, help="overwrite existing output files"),
+) -> None:
+    """Identify backlash, restitution, contact damping/length, Ka gain or delay from a measurement:
+    least squares of the model's cycle statistics against the measured ones, with 95 % intervals."""
+    from common.errors import InputError
+    from identification.fit import FitRequest, identify
+    from identification.parameters import parse_assignments
+    from labtool.output import ProgressLines, console
+
+    for name, value in (("--restitution", restitution), ("--contact-damping", contact_damping),
+                        ("--contact-length-mm", contact_length_mm), ("--backlash-mm", backlash_mm),
+                        ("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
+        if value is not None and not math.isfinite(value):
+            raise InputError(f"{name} must be a finite number, got {value}")
+    if not (ka_gain > 0):
+        raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
+    figure = _outputs(output, figure, force)
+    start_value = start if start in ("scan", "scene") else parse_assignments(start, "--start")
+    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
+                 "restitution": restitution, "contact_damping": contact_damping,
+                 "contact_length_mm": contact_length_mm, "elastic_gap": elastic_gap}
+    req = FitRequest(measured, model, free, omega1, accuracy, revolutions,
+                     parse_assignments(bounds, "--bounds", ranges=True), start_value, overrides,
+                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs, scan=scan)
+    err = console(stderr=True)
+    with (err.status("fit") if err.is_terminal else ProgressLines(sys.stderr, "fit")) as status:
+        outcome = identify(req, progress=lambda msg: status.update(msg))
+        text = json.dumps(outcome.summary, indent=1, allow_nan=False)
+        fig = None
+        if figure is not None:
+            status.update("drawing the figure")
+            from identification.figures import fit_figure
+            fig = fit_figure(outcome)
+        # both outputs are ready before either is written (each atomically)
+        if output is not None:
+            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
+        if fig is not None:
+            atomic_write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    if as_json:
+        typer.echo(text)
+        return
+    for line in summary_lines(outcome.summary):
+        typer.echo(line)
+    wrote = [str(p) for p in (output, figure) if p is not None]
+    if wrote:
+        typer.echo("wrote " + ", ".join(wrote))
+
+
+def _outputs(output: Path | None, figure: Path | None, force: bool) -> Path | None:
+    """Check the output files before any work; the figure defaults to beside the JSON."""
+    from common.errors import InputError
+
+    if figure is None and output is not None:
+        figure = output.with_suffix(".png")
+    outputs = [p for p in (output, figure) if p is not None]
+    if len({p.resolve() for p in outputs}) != len(outputs):
+        raise InputError("the JSON and the figure must be different files")
+    for p in outputs:
+        check_output_path(p, force)
+    return figure
+
+
+def _num(v, fmt=".4g") -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def summary_lines(s: dict) -> list[str]:
+    """The result in plain lines: each parameter with its interval and verdict, then the fit."""
+    lines = [f"{s['model']} model, omega1 {s['omega1']}, {s['accuracy']} preset (search at {s['search_accuracy']}), "
+             f"{s['measured']['whole_revolutions']} measured revolutions"]
+    for key, p in s["parameters"].items():
+        lo, hi = p["ci95"]
+        bound = f", at its {p['bound']} bound" if p["bound_hit"] else ""
+        verdict = "identified" if p["identifiable"] else "NOT identifiable: " + "; ".join(p["notes"])
+        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % [{_num(lo)}, {_num(hi)}]{bound}  {verdict}")
+    names = list(s["correlation"])
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            lines.append(f"  correlation {a} / {b}: {_num(s['correlation'][a][b], '+.3f')}")
+    ob, oa = s["objective_before"], s["objective_after"]
+    lines.append(f"objective {_num(ob)} -> {_num(oa)} ({s['degrees_of_freedom']:.0f} effective degrees of freedom), "
+                 f"{s['evaluations']} model runs, {s['wall_s']:.1f} s")
+    for sig in ("omega2", "epsilon2"):
+        b, a = s["metrics_before"], s["metrics_after"]
+        before = "-" if b is None else f"{b[sig]['iso_rating']:.3f} ({b[sig]['iso_grade']})"
+        lines.append(f"  {sig:9s} ISO before {before}, after {a[sig]['iso_rating']:.3f} ({a[sig]['iso_grade']})")
+    ev = s["metrics_after"]["events"]
+    if ev.get("measured_impacts_per_rev") is not None:
+        lines.append(f"  events: measured {_num(ev['measured_impacts_per_rev'], '.2f')} visible impacts/rev, first at "
+                     f"{_num(ev['measured_first_impact_deg'], '.1f')} deg; fitted model {_num(ev['impacts_per_rev'], '.2f')}, "
+                     f"first at {_num(ev['first_impact_deg'], '.1f')} deg")
+    for n in s["notes"]:
+        lines.append(f"note: {n}")
+    return lines
