@@ -40,7 +40,11 @@ class PointRecord:
 
     @property
     def rpm(self) -> float:
-        return float(self.op.get("cam_speed_rpm", math.nan))
+        """The point's speed (rpm): the one the recording states (the plan's), else the simulated one
+        (the report runs its models at the measured mean speed, a few 1e-14 off a plan's 180)."""
+        op = self.op
+        stated = op.get("cam_speed_rpm_stated")
+        return float(stated if stated else op.get("cam_speed_rpm", math.nan))
 
     def group(self) -> tuple:
         """The operating point without the speed: points of one group form a curve against rpm."""
@@ -109,7 +113,7 @@ def table(records: list[PointRecord]) -> pd.DataFrame:
         for h in s.get("headline", []):
             ev = events.get(h.get("label"), {})
             row = {
-                "point": r.name, "rpm": op.get("cam_speed_rpm"), "rpm_measured": m.get("cam_speed_rpm_measured"),
+                "point": r.name, "rpm": r.rpm, "rpm_measured": m.get("cam_speed_rpm_measured"),
                 "law": op.get("law"), "Fu_N": op.get("Fu"), "backlash_mm": op.get("backlash_mm"),
                 "jt_factor": op.get("jt_factor"), "whole_revolutions": m.get("whole_revolutions"),
                 "model": h.get("requested_model"), "level_used": h.get("model"), "omega1": h.get("omega1"),

@@ -1,6 +1,6 @@
 """The cross-point figures (matplotlib object API), in the report's colours and labels
-(reports.figures): omega1 constant blue, variable red; the elastic model solid, rigid dashed,
-kinematic dotted.
+(reports.figures): omega1 constant blue, variable red (thinner, on top: a var run that is the
+const motion shows both); the elastic model solid, rigid dashed, kinematic dotted.
 
 - ISO/TS 18571 rating of omega2 and epsilon2 against the cam speed, per model and omega1 mode,
   the grade bands shaded and the closest model of each point ringed;
@@ -27,7 +27,11 @@ GRADE_SHADE = {"excellent": "#e3f4e3", "good": "#eef7e0", "fair": "#fff4d6", "po
 
 
 def _style(model: str, omega1: str) -> dict:
-    return {"color": COLORS.get(omega1, "k"), "ls": LINESTYLE.get(model, "-.")}
+    # omega1 var thinner and on top: where it is the const motion (elastic, kinematic: the report
+    # reuses that run) both curves still show
+    var = omega1 == "var"
+    return {"color": COLORS.get(omega1, "k"), "ls": LINESTYLE.get(model, "-."), "lw": 1.0 if var else 2.4,
+            "zorder": 3 if var else 2}
 
 
 def _series(df: pd.DataFrame):
@@ -59,7 +63,7 @@ def fig_ratings(df: pd.DataFrame):
         _grade_bands(ax)
         for (model, mode, gi), label, sub in _series(df):
             y = pd.to_numeric(sub[f"{sig}_iso_rating"], errors="coerce")
-            ax.plot(sub["rpm"], y, marker=MARKERS[gi % len(MARKERS)], ms=5, lw=1.2, label=label, **_style(model, mode))
+            ax.plot(sub["rpm"], y, marker=MARKERS[gi % len(MARKERS)], ms=5, label=label, **_style(model, mode))
         best = df[df["closest"].astype(bool)]
         ax.plot(best["rpm"], pd.to_numeric(best[f"{sig}_iso_rating"], errors="coerce"), "o", ms=13, mfc="none",
                 mec="k", mew=1.2, label="closest model of the point")
@@ -84,7 +88,7 @@ def fig_errors(df: pd.DataFrame):
             ax = axes[row, col]
             for (model, mode, gi), label, sub in _series(df):
                 y = pd.to_numeric(sub[f"{sig}_{metric}"], errors="coerce")
-                ax.plot(sub["rpm"], y, marker=MARKERS[gi % len(MARKERS)], ms=5, lw=1.2, label=label,
+                ax.plot(sub["rpm"], y, marker=MARKERS[gi % len(MARKERS)], ms=5, label=label,
                         **_style(model, mode))
             ax.set_title(f"{SIGNAL_LABEL[sig][0]}: {what} (0 = identical)", fontsize=9)
             ax.set_ylim(bottom=0)
@@ -114,7 +118,7 @@ def fig_overlays(records):
             ax.plot(deg, mean, color="k", lw=1.4, label="measured (cycle average)")
             for k in range(ds.sizes.get("sim", 0)):
                 model, mode = str(ds["sim_requested"].values[k]), str(ds["sim_omega1"].values[k])
-                ax.plot(deg, np.asarray(ds[f"sim_{sig}"].values[k], dtype=float), lw=1.0,
+                ax.plot(deg, np.asarray(ds[f"sim_{sig}"].values[k], dtype=float),
                         label=plain(str(ds["sim_label"].values[k])), **_style(model, mode))
             ax.set_xlim(0, 360)
             ax.set_ylabel(f"{sym} [{unit}]")
@@ -146,7 +150,7 @@ def fig_events(df: pd.DataFrame):
     for ax, (pred, meas, what) in zip(axes, EVENT_PANELS):
         for (model, mode, gi), label, sub in _series(df):
             ax.plot(sub["rpm"], pd.to_numeric(sub[pred], errors="coerce"), marker=MARKERS[gi % len(MARKERS)], ms=5,
-                    lw=1.0, label=f"{label}, predicted", **_style(model, mode))
+                    label=f"{label}, predicted", **_style(model, mode))
         m = df.drop_duplicates("point")
         ax.plot(m["rpm"], pd.to_numeric(m[meas], errors="coerce"), "k*", ms=11, label="measured")
         ax.set_xlabel("cam speed n1 [rpm]")

@@ -175,17 +175,15 @@ def _stylesheet() -> str:
 def render_html(rep: CampaignReport, files: dict | None = None, dpi: int = 90) -> str:
     import jinja2
 
-    from reports.figures import png_bytes
+    from reports.figures import render
     from reports.html import environment
 
     env = environment()
     env.loader = jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(TEMPLATES)), env.loader])
     figs = []
-    for title, fig in all_figures(rep.records, rep.table):
-        png = png_bytes(fig, dpi=dpi)
-        w, h = fig.get_size_inches() * dpi
-        figs.append({"title": title, "png_b64": base64.b64encode(png).decode("ascii"), "width": int(round(w)),
-                     "height": int(round(h))})
+    for r in render(all_figures(rep.records, rep.table), dpi=dpi):      # each figure drawn once (Agg)
+        h, w = r.rgba.shape[:2]
+        figs.append({"title": r.title, "png_b64": base64.b64encode(r.png).decode("ascii"), "width": w, "height": h})
     s = summary(rep, files)
     grades = {}
     for row in s["table"]:

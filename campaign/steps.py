@@ -177,11 +177,11 @@ def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dic
 def write_point_outputs(report, folder: Path, names: dict) -> None:
     """The per-point page (reports.html), its JSON summary and the overlay data, each atomically."""
     from common.files import atomic_write, write_netcdf
-    from reports.figures import all_figures
+    from reports.figures import all_figures, render
     from reports.html import render_html
     from reports.summary import to_json
 
-    html = render_html(report, all_figures(report))
+    html = render_html(report, render(all_figures(report)))
     atomic_write(folder / names["html"], lambda tmp: tmp.write_text(html, encoding="utf-8"))
     text = to_json(report)
     atomic_write(folder / names["summary"], lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))

@@ -161,6 +161,17 @@ class Evaluation:
         return float(self.residuals @ self.residuals)
 
 
+def _hashable(v):
+    """A cache-key form of an operating-point value (floats rounded; lists, e.g. the assumed keys, as tuples)."""
+    if isinstance(v, float):
+        return round(v, 12)
+    if isinstance(v, (list, tuple)):
+        return tuple(_hashable(x) for x in v)
+    if isinstance(v, dict):
+        return tuple(sorted((k, _hashable(x)) for k, x in v.items()))
+    return v
+
+
 class Evaluator:
     """The model side: residuals at a point of the search space, with a cache of model runs.
 
@@ -188,7 +199,7 @@ class Evaluator:
 
     def _scene_key(self, vals: dict, preset: str) -> tuple:
         keys = sorted(k for k in vals if k not in pipeline.CHAIN_KEYS + ("cam_speed_source",))
-        return (preset,) + tuple((k, round(vals[k], 12) if isinstance(vals[k], float) else vals[k]) for k in keys)
+        return (preset,) + tuple((k, _hashable(vals[k])) for k in keys)
 
     def _model_run(self, vals: dict, preset: str):
         key = self._scene_key(vals, preset)
