@@ -37,13 +37,14 @@ Time in s, states in the model's units; tolerances as in scipy (scale = atol + r
 """
 from __future__ import annotations
 
+import functools
 from collections import namedtuple
 
 import numpy as np
 from numba import types
-from numba.extending import overload
+from numba.extending import overload as _overload
 
-from models.dynamics.jit import jit
+from models.dynamics.jit import jit, kernel
 
 A = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0],
@@ -134,6 +135,10 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
     def ours(model):
         return isinstance(model, types.BaseNamedTuple) and model.instance_class is model_class
 
+    # the hooks called at every step allocate nothing: compiled without reference counting
+    # (models.dynamics.jit.kernel); a transition (once an event) may
+    overload = functools.partial(_overload, jit_options={"_nrt": False})
+
     @overload(rhs)
     def _rhs(model, ph, t, y, out):
         if ours(model):
@@ -159,7 +164,7 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
         if ours(model):
             return state_size_fn.py_func
 
-    @overload(transition)
+    @_overload(transition)
     def _transition(model, ph, which, t, y, ev, nev):
         if ours(model):
             return transition_fn.py_func
@@ -167,7 +172,7 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
 
 # ------------------------------------------------------------------ Dormand-Prince pieces
 
-@jit
+@kernel
 def stage_state(y, h, K, coeffs, n_stages, out):
     """out = y + h * sum_{j < n_stages} coeffs[j] K[j]."""
     for i in range(y.size):
@@ -177,7 +182,7 @@ def stage_state(y, h, K, coeffs, n_stages, out):
         out[i] = y[i] + h * acc
 
 
-@jit
+@kernel
 def error_norm(K, h, y, y_new, rtol, atol):
     """scipy's RMS error norm of the embedded 4th-order estimate (atol: array per component)."""
     acc = 0.0
@@ -192,7 +197,7 @@ def error_norm(K, h, y, y_new, rtol, atol):
     return np.sqrt(acc / n)
 
 
-@jit
+@kernel
 def dense_coeffs(K, out):
     """out (n, 4) = K.T @ P: the dense-output polynomial of the step just taken."""
     n = out.shape[0]
@@ -204,14 +209,14 @@ def dense_coeffs(K, out):
             out[i, c] = acc
 
 
-@jit
+@kernel
 def dense_eval(y0, h, Q, s, out):
     """out = y(t0 + s h) from the step's start y0 and coefficients Q (s in [0, 1])."""
     for i in range(y0.size):
         out[i] = y0[i] + h * s * (Q[i, 0] + s * (Q[i, 1] + s * (Q[i, 2] + s * Q[i, 3])))
 
 
-@jit
+@kernel
 def new_step_factor(err, rejected):
     """Step-size factor after a step with error norm ``err`` (scipy's controller)."""
     if err < 1.0:
@@ -233,7 +238,7 @@ def grow(a, n_new):
     return b
 
 
-@jit
+@kernel
 def rms(v, scale):
     acc = 0.0
     for i in range(v.size):
@@ -263,7 +268,7 @@ def first_step(model, ph, t0, y0, f0, t_bound, max_step, rtol, atol, y1, f1):
     return min(100.0 * h0, h1, t_bound - t0, max_step)
 
 
-@jit
+@kernel
 def attempt(model, ph, t, y, h_abs, ctl, atol, K, y_new, tmp):
     """One accepted step from (t, y) with K[0] = f(t, y): (status, t_new, h, next h_abs, rhs calls).
 
@@ -301,12 +306,12 @@ def attempt(model, ph, t, y, h_abs, ctl, atol, K, y_new, tmp):
         rejected = True
 
 
-@jit
+@kernel
 def _fires(g0, g1, dirn):
     return (g0 <= 0.0 and g1 >= 0.0 and dirn > 0) or (g0 >= 0.0 and g1 <= 0.0 and dirn < 0)
 
 
-@jit
+@kernel
 def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     """Step fraction in (lo, hi] where event ``which`` changes sign (bisection on the dense output)."""
     for _ in range(60):
@@ -322,7 +327,7 @@ def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     return hi
 
 
-@jit
+@kernel
 def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     """First step fraction s in (0, 1] where event ``which`` changes sign in its direction, 2.0 if
     none; the sign is read at ``nsub`` points of the step (its end value g1 given)."""
