@@ -127,10 +127,24 @@ def transition(model, ph, which, t, y, ev, nev):
     raise NotImplementedError
 
 
-def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_size_fn, transition_fn):
+def event_offset(model, ph, which):
+    """The state component c when event ``which`` is y[c] minus a constant, else -1: then the
+    driver skips its sub-step sign checks in a step whose dense output cannot move y[c] by as much
+    as the event's distance from zero (an exact bound: no event missed)."""
+    raise NotImplementedError
+
+
+@kernel
+def _no_offset(model, ph, which):
+    return -1
+
+
+def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_size_fn, transition_fn,
+             event_offset_fn=None):
     """Make ``model_class`` (a namedtuple class) drivable by ``run``: its structs dispatch the hooks
     above to the model's functions (``jit`` functions with the hooks' parameter names; their Python
-    source is compiled in place of the hook, so a hook costs no extra call)."""
+    source is compiled in place of the hook, so a hook costs no extra call). ``event_offset_fn``
+    (optional): see ``event_offset``."""
 
     def ours(model):
         return isinstance(model, types.BaseNamedTuple) and model.instance_class is model_class
@@ -168,6 +182,11 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
     def _transition(model, ph, which, t, y, ev, nev):
         if ours(model):
             return transition_fn.py_func
+
+    @overload(event_offset)
+    def _event_offset(model, ph, which):
+        if ours(model):
+            return event_offset_fn.py_func if event_offset_fn is not None else _no_offset.py_func
 
 
 # ------------------------------------------------------------------ Dormand-Prince pieces
@@ -346,11 +365,71 @@ def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     return 2.0
 
 
+@kernel
+def _out_of_reach(g0, g1, y0c, h, Q, c):
+    """Can the dense output of the step (y0c + h s (Q0 + s (Q1 + s (Q2 + s Q3))), s in [0, 1])
+    not bring an event g = y[c] - const from g0 to zero? |y(s) - y0c| <= |h| sum |Q_k|; the margin
+    covers the rounding of the dense evaluation (~1e-16 relative) a millionfold."""
+    reach = abs(h) * (abs(Q[c, 0]) + abs(Q[c, 1]) + abs(Q[c, 2]) + abs(Q[c, 3]))
+    margin = 1e-12 * (abs(y0c) + abs(g0 - y0c)) + 1e-9 * reach
+    return g0 != 0.0 and (g0 > 0.0) == (g1 > 0.0) and abs(g0) > reach + margin
+
+
 @jit
 def event_many(model, ph, which, ts, Y, out):
     """Event ``which`` at many instants ts (s), states Y (len(ts), n): for the scipy reference loop."""
     for i in range(ts.size):
         out[i] = event(model, ph, which, ts[i], Y[i])
+
+
+@kernel
+def _steps(model, ctl, ph, n, ne, atol, t, yv, y_new, tmp, Q, K, h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst):
+    """Steps of one phase from (t, yv) (K[0] = f(t, yv), g_old its event values) until an event
+    fires (yv is then the state at it), the time bound, a failure or the step cap, storing each
+    step; it returns early, ``full``, when the step store is full (``run`` enlarges it and calls
+    again: the state, K[0], g_old and h_abs carry over). Allocates nothing (no reference counts
+    in the per-step work). Returns (status, full, t, h_abs, nst, rhs calls, event hit or -1)."""
+    nfev = 0
+    while t < ctl.t_bound:
+        if nst >= ctl.max_steps:
+            return TOO_MANY_STEPS, False, t, h_abs, nst, nfev, -1
+        if nst == st_t.size:
+            return OK, True, t, h_abs, nst, nfev, -1
+        status, t_new, h, h_abs, calls = attempt(model, ph, t, yv, h_abs, ctl, atol, K, y_new, tmp)
+        nfev += calls
+        if status != OK:
+            return status, False, t, h_abs, nst, nfev, -1
+        dense_coeffs(K, Q)
+        st_t[nst] = t
+        st_h[nst] = h
+        for i in range(n):            # element loops: numba's slice copies cost more per step
+            st_y[nst, i] = yv[i]
+            for c in range(4):
+                st_Q[nst, i, c] = Q[i, c]
+        nst += 1
+        best = 2.0
+        hit = -1
+        for e in range(ne):
+            g_new[e] = event(model, ph, e, t_new, y_new)
+            c = event_offset(model, ph, e)
+            if c >= 0 and _out_of_reach(g_old[e], g_new[e], yv[c], h, Q, c):
+                continue                               # no sign change is possible in this step
+            s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], ctl.nsub, tmp)
+            if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
+                best = s
+                hit = e
+        if hit >= 0:
+            dense_eval(yv, h, Q, best, tmp)
+            for i in range(n):
+                yv[i] = tmp[i]
+            return OK, False, t + best * h, h_abs, nst, nfev, hit
+        t = t_new
+        for i in range(n):
+            yv[i] = y_new[i]
+            K[0, i] = K[6, i]
+        for e in range(ne):
+            g_old[e] = g_new[e]
+    return OK, False, t, h_abs, nst, nfev, -1
 
 
 @jit
@@ -404,44 +483,14 @@ def run(model, ctl, ph0, y0, t0):
         for e in range(ne):
             g_old[e] = event(model, ph, e, t, yv)
         hit = -1
-        while t < ctl.t_bound:
-            if nst >= ctl.max_steps:
-                status = TOO_MANY_STEPS
-                break
-            status, t_new, h, h_abs, calls = attempt(model, ph, t, yv, h_abs, ctl, atol, K, y_new, tmp)
+        while True:
+            status, full, t, h_abs, nst, calls, hit = _steps(model, ctl, ph, n, ne, atol, t, yv, y_new, tmp, Q, K,
+                                                            h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst)
             nfev += calls
-            if status != OK:
+            if not full:
                 break
-            dense_coeffs(K, Q)
-            if nst == st_t.size:
-                cap = min(2 * st_t.size, ctl.max_steps)
-                st_t, st_h, st_y, st_Q = grow(st_t, cap), grow(st_h, cap), grow(st_y, cap), grow(st_Q, cap)
-            st_t[nst] = t
-            st_h[nst] = h
-            for i in range(n):            # element loops: numba's slice copies cost more per step
-                st_y[nst, i] = yv[i]
-                for c in range(4):
-                    st_Q[nst, i, c] = Q[i, c]
-            nst += 1
-            best = 2.0
-            for e in range(ne):
-                g_new[e] = event(model, ph, e, t_new, y_new)
-                s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], ctl.nsub, tmp)
-                if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
-                    best = s
-                    hit = e
-            if hit >= 0:
-                dense_eval(yv, h, Q, best, tmp)
-                for i in range(n):
-                    yv[i] = tmp[i]
-                t = t + best * h
-                break
-            t = t_new
-            for i in range(n):
-                yv[i] = y_new[i]
-                K[0, i] = K[6, i]
-            for e in range(ne):
-                g_old[e] = g_new[e]
+            cap = min(2 * st_t.size, ctl.max_steps)     # the step store is full: double it, go on
+            st_t, st_h, st_y, st_Q = grow(st_t, cap), grow(st_h, cap), grow(st_y, cap), grow(st_Q, cap)
         if status != OK:
             break
         ph_t1[nph] = t

@@ -101,6 +101,12 @@ def event(model, ph, which, t, y):
 
 
 @kernel
+def event_offset(model, ph, which):
+    """Both events are x minus a constant (0 or j): state component 0 (dopri5.event_offset)."""
+    return 0
+
+
+@kernel
 def n_events(model, ph):
     return 2 if int(ph[0]) == FLIGHT else 1
 
@@ -197,4 +203,4 @@ def forces(m, phases, x, v, out):
         out[i] = force(m, phases[i], x[i], v[i])
 
 
-dp.register(ElasticModel, rhs, event, n_events, direction, state_size, transition)
+dp.register(ElasticModel, rhs, event, n_events, direction, state_size, transition, event_offset)
