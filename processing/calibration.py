@@ -300,7 +300,7 @@ def fit_recording_channel(rec, channel: str, reference: ReferenceSpec) -> Channe
     fit = fit_sine(x, rec.sample_rate_hz, reference.freq_hz, t=t, where=where)
     check_distortion(fit, where)
     ka, std_fit, _ = ka_from_fit(fit, reference.accel_m_s2, reference.convention, reference.rel_uncertainty)
-    return ChannelFit(channel, rec.source, ka, std_fit, fit)
+    return ChannelFit(channel, shown(rec.source), ka, std_fit, fit)   # a non-UTF-8 byte as \\xff (TOML holds text)
 
 
 def pair_channels(recordings, channels) -> list[tuple[str, str]]:
