@@ -30,8 +30,25 @@ STANDARD_NAMES = {"time": "time"}
 
 
 def udunits(units: str) -> str:
-    """labtool's unit text in UDUNITS syntax (unknown text passes unchanged)."""
-    return _UNITS.get(str(units).strip(), str(units).strip())
+    """labtool's unit text in UDUNITS syntax: the table above, else a product of powers written
+    ``a b^2/c d^3`` becomes ``a b2 c-1 d-3`` (other text passes unchanged)."""
+    text = str(units).strip()
+    if text in _UNITS:
+        return _UNITS[text]
+    if "(" in text or text.count("/") > 1 or not ("/" in text or "^" in text):
+        return text
+    num, _, den = text.partition("/")
+
+    def powers(part: str, sign: int) -> list[str]:
+        out = []
+        for tok in part.replace("*", " ").split():
+            base, _, exp = tok.partition("^")
+            n = sign * (int(exp) if exp.lstrip("-").isdigit() else 1)
+            out.append(base if n == 1 else f"{base}{n}")
+        return out
+
+    top = [t for t in powers(num, 1) if t != "1"]
+    return " ".join(top + powers(den, -1)) or text
 
 
 def start_time(text) -> _dt.datetime | None:
@@ -106,6 +123,8 @@ def apply(ds, title: str, source: str, history: str = "", start=None):
             continue
         v.attrs["units"] = udunits(v.attrs.get("units", "1"))
         v.attrs.setdefault("long_name", name)
+        if name == "time" and v.dims == ("time",):      # a simulation's elapsed time: still the T axis
+            v.attrs.setdefault("axis", "T")
         if name in STANDARD_NAMES:
             v.attrs.setdefault("standard_name", STANDARD_NAMES[name])
     for dim in ds.dims:

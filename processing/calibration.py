@@ -32,7 +32,7 @@ import numpy as np
 from scipy import optimize
 
 from common.errors import FileFormatError, InputError
-from common.names import shown
+from common.names import shown, utf8_text
 
 MAX_FIT_SAMPLES = 2_000_000     # 200 s at 10 kHz: more adds nothing to a sine fit but memory
 MAX_HARMONIC_DISTORTION = 0.05  # (2f, 3f) / fundamental above which the reference is not a clean sine
@@ -300,7 +300,7 @@ def fit_recording_channel(rec, channel: str, reference: ReferenceSpec) -> Channe
     fit = fit_sine(x, rec.sample_rate_hz, reference.freq_hz, t=t, where=where)
     check_distortion(fit, where)
     ka, std_fit, _ = ka_from_fit(fit, reference.accel_m_s2, reference.convention, reference.rel_uncertainty)
-    return ChannelFit(channel, rec.source, ka, std_fit, fit)
+    return ChannelFit(channel, utf8_text(rec.source), ka, std_fit, fit)   # a non-UTF-8 byte as \xff (TOML holds text)
 
 
 def pair_channels(recordings, channels) -> list[tuple[str, str]]:

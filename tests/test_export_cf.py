@@ -52,6 +52,38 @@ def test_cf_apply_on_a_dataset():
     assert "event" in ds.coords and ds.cf.axes["T"] == ["time"]
 
 
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--model", "elastic", "--accuracy", "fast", "--rpm", "300"],
+    ["simulate", "--model", "rigid", "--accuracy", "fast", "--backlash-mm", "0.128", "--restitution", "0.5"],
+    ["kinematics", "--points", "720"],
+])
+def test_simulate_and_kinematics_outputs_are_cf(argv, tmp_path, capsys):
+    out = tmp_path / "o.nc"
+    assert main([*argv, "-o", str(out)]) == 0
+    ds = xr.open_dataset(out, engine="h5netcdf", decode_times=False)
+    assert ds.attrs["Conventions"] == "CF-1.10" and ds.attrs["title"].startswith("labtool")
+    assert f"labtool {argv[0]} " in ds.attrs["history"]        # the command line, after the date and version
+    for dim in ds.dims:
+        assert dim in ds.coords, dim
+    for name, v in ds.variables.items():
+        if v.dtype.kind in "fiu":
+            assert v.attrs.get("units"), name
+            assert "^" not in v.attrs["units"] and "/" not in v.attrs["units"], (name, v.attrs["units"])
+    if "time" in ds.dims:
+        assert ds.cf.axes["T"] == ["time"]
+    # cf_xarray finds the quantities by their CF attributes
+    assert "rad s-1" in {v.attrs.get("units") for v in ds.variables.values()}
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("kg m^2/rad", "kg m2 rad-1"), ("m/s^2", "m s-2"), ("N m/rad", "N m rad-1"), ("1/s", "s-1"),
+    ("rad/s^3", "rad s-3"), ("m^2", "m2"), ("(m/s^2)^2/Hz", "m2 s-4 Hz-1"), ("kg*m^2", "kg m2"), ("N", "N"),
+])
+def test_udunits_spelling(text, expected):
+    from common.cf import udunits
+    assert udunits(text) == expected
+
+
 def test_export_csv_cycles_and_series(measured, tmp_path, capsys):
     prefix = tmp_path / "m"
     assert main(["export", str(measured), "--csv", "-o", str(prefix)]) == 0

@@ -97,14 +97,19 @@ def simulate(
     else:
         _print(result, scene)
     if output is not None:
+        from common import cf
+
         ds = result.dataset
-        ds.attrs["history"] = " ".join([
+        command = " ".join([
             f"labtool simulate --model {model} --law {law} --rpm {rpm!r} --fu {fu!r}",
             f"--backlash-mm {backlash_mm!r} --jt-factor {jt_factor!r} --omega1 {omega1} --accuracy {accuracy}",
             f"--restitution {restitution!r} --revolutions {revolutions!r} --contact-length-mm {contact_length_mm!r}",
             f"--kc-factor {kc_factor!r} --contact-damping {contact_damping!r} --elastic-gap {elastic_gap}",
             "--rise-only" if rise_only else "--full-cycle",
             *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
+        # CF-1.10 (common.cf): UDUNITS units, Conventions/title/source; the command line in history
+        cf.apply(ds, title=f"labtool simulation, {result.model} model", source=f"labtool {result.model} model",
+                 history=command)
         write_netcdf(ds, output)
         typer.echo(f"wrote {output}", err=as_json)
 
