@@ -341,8 +341,8 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     return SimulationResult(ds, ind, "elastic", warnings=warnings)
 
 
-def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str | None = None, preset: dict | None = None,
-               stats: dict | None = None) -> dict:
+def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str | None = None,
+                        preset: dict | None = None, stats: dict | None = None) -> dict:
     """The paper's Table 3 indicators of ``simulate`` (result.INDICATORS; those this model does not
     compute None), without its Dataset: the same loop, the same output instants and the same
     values (MR13D and x_el extremes, jumps, impacts), from numpy arrays. The refusals of
