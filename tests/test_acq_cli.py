@@ -12,6 +12,7 @@ from acquisition.recorder import read_recording
 from labtool.cli import main
 
 
+@pytest.mark.slow
 def test_must_show_sim_180_rpm_10_s_fast_writes_a_valid_v1_file(tmp_path, capsys):
     out = tmp_path / "r.h5"
     assert main(["acquire", "--device", "sim", "--rpm", "180", "--duration", "10", "--fast", "-o", str(out)]) == 0

@@ -336,6 +336,7 @@ def test_a_calibration_ten_times_the_recordings_ka_is_said(tmp_path, capsys):
     assert len(warn) == 1 and "aE_t" in warn[0] and "10 x" in warn[0]
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("hang")
 @pytest.mark.parametrize("keep_bytes", [100, 512, 2048, 4096])
 def test_a_reference_cut_to_its_first_bytes_does_not_hang_calibrate(tmp_path, keep_bytes):

@@ -123,6 +123,7 @@ def test_bad_report_inputs_are_one_line(tmp_path, capsys, measured):
     assert not list(tmp_path.glob("[abc].*"))
 
 
+@pytest.mark.slow
 @pytest.mark.browser
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt-get install chromium)")
 def test_the_page_in_a_real_browser(page, tmp_path):

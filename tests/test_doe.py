@@ -157,6 +157,7 @@ def _in_process(d, name="one.csv"):
     return pd.read_csv(d / name)
 
 
+@pytest.mark.slow
 def test_doe_run_in_process_equals_process_pool(kinematic_2x3, capsys):
     _, d = kinematic_2x3
     one = _in_process(d)
@@ -165,6 +166,7 @@ def test_doe_run_in_process_equals_process_pool(kinematic_2x3, capsys):
     pd.testing.assert_frame_equal(one, pooled)
 
 
+@pytest.mark.slow
 def test_doe_run_on_a_local_dask_cluster(tmp_path):
     """A Dask distributed cluster on loopback (one in-process worker thread), closed by the test."""
     distributed = pytest.importorskip("distributed")

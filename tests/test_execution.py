@@ -279,6 +279,50 @@ def test_finished_chunks_of_another_design_are_not_mixed_in(tmp_path, capsys):
     assert "base_scene" in err[-1] and not (tmp_path / "r.csv").exists()
 
 
+@pytest.mark.hostile("silent_wrong")
+def test_chunks_finished_by_other_code_are_not_mixed_in(tmp_path, capsys, monkeypatch):
+    """A run killed, labtool upgraded (the models' source changed), the run resumed: refused."""
+    (tmp_path / "f.csv").write_text(FACTORS_100)
+    from models.dynamics import provenance
+    from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    before = design.fingerprint()
+    monkeypatch.setattr(provenance, "models_source_sha256", lambda: "0" * 64)
+    after = design.fingerprint()
+    assert before["labtool"] != after["labtool"] and {k: v for k, v in before.items() if k != "labtool"} == \
+        {k: v for k, v in after.items() if k != "labtool"}
+    store = PartStore(parts_folder(tmp_path / "r.csv"), after, design.columns + ["wall_s", "error"])
+    store.write(0, 2, pd.DataFrame([design.row(0), design.row(1)]))
+    store.close()
+    monkeypatch.undo()
+    rc = main(["doe", "run", "--model", "kinematic", "--accuracy", "fast", "--factors", str(tmp_path / "f.csv"),
+               "-o", str(tmp_path / "r.csv")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and "holds finished chunks of other work" in err[-1] and "models source sha256" in err[-1]
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_the_models_source_hash_follows_the_files(tmp_path):
+    """An edited constant changes the hash; a compiled cache beside the sources does not."""
+    import shutil
+
+    from models.dynamics import provenance
+    src = Path(provenance.__file__).resolve().parents[1]
+    copy = tmp_path / "models"
+    shutil.copytree(src, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    h0 = provenance.tree_sha256(copy)
+    assert h0 == provenance.models_source_sha256()
+    (copy / "dynamics" / "__pycache__").mkdir(exist_ok=True)
+    (copy / "dynamics" / "__pycache__" / "x.nbi").write_bytes(b"cache")
+    assert provenance.tree_sha256(copy) == h0
+    dopri = copy / "dynamics" / "kernels" / "dopri5.py"
+    text = dopri.read_text()
+    assert "SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9," in text
+    dopri.write_text(text.replace("SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9,", "SAFETY, MIN_FACTOR, MAX_FACTOR = 0.5,"))
+    assert provenance.tree_sha256(copy) != h0
+
+
 @pytest.mark.slow
 @pytest.mark.hostile("hang")
 def test_a_design_of_a_million_runs_gives_an_estimate_and_needs_yes(tmp_path):

@@ -11,6 +11,9 @@ import pytest
 
 from hostile import REFERENCE, REPORT_FAST, SAMPLE, hidden, measured_nc, one_error_line, run  # noqa: F401
 
+# real child processes, tmpfs mounts and kills: seconds each (make test runs them)
+pytestmark = pytest.mark.slow
+
 
 def _listing(folder):
     return sorted(p.name for p in folder.iterdir() if p.name != "fill")

@@ -27,6 +27,7 @@ def _cli(*args):
                            *map(str, args)], capture_output=True, text=True, timeout=BOUND_S)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("hang")
 @pytest.mark.parametrize("size", [100, 512, 2048, 4096])
 def test_process_of_a_cut_recording_ends_with_one_line(recording, tmp_path, size):

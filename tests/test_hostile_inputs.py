@@ -92,6 +92,7 @@ def test_demo_onto_an_existing_file(tmp_path, capsys):
     assert target.read_text() == "not a folder" and os.listdir(tmp_path) == ["results"]
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 def test_non_utf8_file_names_in_report(tmp_path, capsys, measured_nc):
     src = tmp_path / os.fsdecode(b"mesur\xe9.nc")
@@ -113,6 +114,7 @@ def test_non_utf8_file_names_in_calibrate(tmp_path, capsys):
     assert tomllib.loads(out.read_text(encoding="utf-8"))["source"].endswith("r\\xe9f\\xe9rence.h5")
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 def test_non_utf8_file_names_in_doe_analyze_plot(tmp_path, capsys):
     src = tmp_path / os.fsdecode(b"r\xe9sultats.csv")
@@ -127,6 +129,7 @@ _values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(
                     st.text(alphabet="0123456789.-einfa", max_size=8))
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(rpm=_values, points=st.integers(-5, 60_000), jt=_values)
@@ -182,6 +185,7 @@ def test_any_value_in_any_line_of_the_mechanism_file(line, value):
     assert all(math.isfinite(getattr(mech, f)) for f in ("xD", "yD", "l", "DE", "R", "m2", "J2", "Pn"))
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(raw=st.binary(max_size=200))
@@ -249,6 +253,7 @@ def test_scene_values_that_were_rounded_or_taken_as_numbers(tmp_path, capsys, st
     assert fragment in one_error_line(code, err)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("umask", [0o022, 0o002])
 def test_outputs_follow_the_users_umask(tmp_path, capsys, umask, measured_nc):
@@ -282,6 +287,7 @@ def test_a_newline_and_a_table_in_a_mechanism_name(tmp_path, capsys):
     assert "name = " in one_error_line(*cli(["kinematics", "--mechanism", path], capsys))
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("injection")
 def test_mathtext_and_markup_in_file_names_are_text(tmp_path, capsys, measured_nc):
     src = tmp_path / "a$x^$[red].csv"

@@ -13,6 +13,9 @@ import xarray as xr
 
 from hostile import REPORT_FAST, hidden, measured_nc, one_error_line, run, start, wait_for  # noqa: F401
 
+# real child processes, tmpfs mounts and kills: seconds each (make test runs them)
+pytestmark = pytest.mark.slow
+
 
 # --- hang ------------------------------------------------------------------------------------
 @pytest.mark.hostile("hang")

@@ -45,6 +45,7 @@ def test_iso_scores_equal_the_independent_implementation(shift, scale, noise, se
         assert ours[k] == pytest.approx(peer[k], abs=1e-9), k
 
 
+@pytest.mark.slow
 def test_batched_rows_equal_the_single_pair_and_the_peer():
     """iso18571_rows (one FFT lag scan for all rows) gives the single-pair and the peer's scores."""
     rng = np.random.default_rng(3)

@@ -112,6 +112,7 @@ _toml_values = st.recursive(
     max_leaves=8)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(doc=st.dictionaries(st.sampled_from(["name", "frame", "flags", "levels", "channels", "limit", "x"]),
                            _toml_values, max_size=5))

@@ -28,6 +28,28 @@ def labtool_version() -> str:
         return "unknown (not installed)"
 
 
+@functools.lru_cache(maxsize=1)
+def models_source_sha256() -> str:
+    """SHA-256 of every Python source and data file of the ``models`` package: what a sweep's
+    results depend on besides its inputs. labtool's version alone does not change in a checkout,
+    and the kernels' hash (models.dynamics.jit) covers compiled code only."""
+    from pathlib import Path
+    return tree_sha256(Path(__file__).resolve().parents[1])
+
+
+def tree_sha256(root) -> str:
+    """SHA-256 of the .py, .toml and .csv files below ``root`` (relative paths and contents, sorted;
+    caches such as __pycache__ do not count)."""
+    import hashlib
+    from pathlib import Path
+
+    root = Path(root)
+    h = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*") if p.suffix in (".py", ".toml", ".csv") and p.is_file()):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def mechanism_attributes(mech) -> dict:
     """The mechanism's name, source (a file path, or built-in) and the SHA-256 of its TOML text."""
     return {"mechanism": mech.name, "mechanism_source": mech.source, "mechanism_sha256": mech.source_sha256}

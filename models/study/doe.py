@@ -354,11 +354,15 @@ class Design:
         return out
 
     def fingerprint(self) -> dict:
-        """What identifies the design's results (a resumed run must match it exactly)."""
+        """What identifies the design's results (a resumed run must match it exactly): the model,
+        the factors, the base scene and the code that computes them (an upgrade between a kill and
+        the resume would otherwise mix two versions' results in one table)."""
+        from models.dynamics.provenance import labtool_version, models_source_sha256
         return {"model": self.model,
                 "factors": [dataclasses.asdict(f) for f in self.factors],
                 "base_scene": repr(self.base) + f" mechanism={self.base.mechanism!r}",
-                "runs": len(self)}
+                "runs": len(self),
+                "labtool": f"{labtool_version()}, models source sha256 {models_source_sha256()[:16]}"}
 
     def coordinate_attrs(self, f: Factor) -> dict:
         """CF attributes of a factor's coordinate in the design's NetCDF."""
