@@ -2,15 +2,17 @@
 
 On a 4096-run design (Fu 16 levels x n1 16 x j 4 x Jt 4, sine law, omega1 variable, standard):
 
-* ``direct``: ``simulate(scene, model)`` in a plain loop in this process (warm), per run: the floor
-  that the runner's overhead is measured against;
+* ``direct``: ``models.dynamics.simulate.indicators(scene, model)`` (the Dataset-free path that
+  ``doe run`` calls, issue 17) in a plain loop in this process (warm), per run: the floor that the
+  runner's overhead is measured against; ``direct_dataset``: ``simulate(scene, model)`` on the same
+  runs, interleaved (what a run cost before the indicator path);
 * ``doe run --workers 1``: the whole command (a new process: imports, the runs, the CSV and
   NetCDF) divided by the number of runs, and the runner's own per-run cost it prints;
 * Dask: ``doe run --scheduler`` against a LocalCluster of 1 and of 2 worker processes (one thread
   each, started and warmed before timing), interleaved repeats, medians; the ratio of their
   throughputs.
 
-Run: ``.venv/bin/python benchmarks/bench_doe.py [--models elastic,rigid] [--repeats 2]``. Writes
+Run: ``.venv/bin/python benchmarks/bench_doe.py [--models elastic,rigid] [--repeats 2] [--no-dask]``. Writes
 ``benchmarks/results/doe_scaling.json``. No assertion (speed is measured here, never in tests).
 """
 from __future__ import annotations
@@ -48,19 +50,27 @@ def doe_run(args: list[str], out: pathlib.Path) -> tuple[float, str]:
     return wall, proc.stdout.strip().splitlines()[-1 if "note:" not in proc.stdout else -2]
 
 
-def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> float:
+def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[float, float]:
+    """(indicator path, dataset path) seconds per run over a random sample of the design's runs,
+    interleaved run by run."""
     from models.dynamics.scene import Scene
-    from models.dynamics.simulate import simulate
+    from models.dynamics.simulate import indicators, simulate
     from models.study.doe import Design, read_factors
     design = Design(tuple(read_factors(factors_csv)), Scene(), model)
     # a random sample: every 16th run would always hit the same levels of the fastest factors
     import numpy as np
     idx = sorted(np.random.default_rng(0).choice(len(design), size=min(sample, len(design)), replace=False))
     simulate(design.scene(0), model)                     # compile / load the cache, build the tables
-    t0 = time.perf_counter()
+    indicators(design.scene(0), model)
+    lean = full = 0.0
     for i in idx:
-        simulate(design.scene(int(i)), model)
-    return (time.perf_counter() - t0) / len(idx)
+        scene = design.scene(int(i))
+        t0 = time.perf_counter()
+        indicators(scene, model)
+        t1 = time.perf_counter()
+        simulate(scene, model)
+        lean, full = lean + t1 - t0, full + time.perf_counter() - t1
+    return lean / len(idx), full / len(idx)
 
 
 def _warm(model: str) -> int:
@@ -75,6 +85,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--models", default="elastic,rigid")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--sample", type=int, default=256, help="runs of the direct loop")
+    ap.add_argument("--no-dask", action="store_true", help="only the direct loop and doe run --workers 1")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore", RuntimeWarning)
     from distributed import Client, LocalCluster
@@ -83,39 +94,44 @@ def main(argv=None) -> dict:
     factors = tmp / "factors_4096.csv"
     factors.write_text(FACTORS_4096)
     n_runs = 4096
-    out: dict = {"runs": n_runs, "machine": {"nproc": os.cpu_count()}, "models": {}}
-    clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                dashboard_address=None) for n in (1, 2)}
+    out: dict = {"runs": n_runs, "machine": {"nproc": os.cpu_count(), "loadavg_start": os.getloadavg()},
+                 "models": {}}
+    clusters = {} if args.no_dask else {
+        n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
+        for n in (1, 2)}
     try:
         for model in args.models.split(","):
             for c in clusters.values():
                 with Client(c.scheduler_address) as client:
                     client.run(_warm, model)
-            direct = direct_per_run(model, factors, args.sample)
-            rec = {"direct_ms_per_run": direct * 1e3, "in_process": [], "dask_1": [], "dask_2": []}
+            direct, direct_dataset = direct_per_run(model, factors, args.sample)
+            rec = {"direct_ms_per_run": direct * 1e3, "direct_dataset_ms_per_run": direct_dataset * 1e3,
+                   "in_process": [], "dask_1": [], "dask_2": []}
             base = ["--model", model, "--factors", str(factors), "--yes"]
             for rep in range(args.repeats):
                 wall, line = doe_run(base + ["--workers", "1"], tmp / "w1.csv")
                 rec["in_process"].append(wall)
                 print(f"{model} in-process     {wall:7.2f} s  {wall / n_runs * 1e3:6.2f} ms/run  | {line}", flush=True)
-                for n in (1, 2):
+                for n in clusters:
                     wall, line = doe_run(base + ["--scheduler", clusters[n].scheduler_address], tmp / f"d{n}.csv")
                     rec[f"dask_{n}"].append(wall)
                     print(f"{model} Dask {n} worker(s) {wall:7.2f} s  {wall / n_runs * 1e3:6.2f} ms/run  | {line}",
                           flush=True)
-            med = {k: statistics.median(rec[k]) for k in ("in_process", "dask_1", "dask_2")}
-            rec.update(
-                doe_run_ms_per_run=med["in_process"] / n_runs * 1e3,
-                overhead_ms_per_run=(med["in_process"] / n_runs - direct) * 1e3,
-                dask_1_ms_per_run=med["dask_1"] / n_runs * 1e3, dask_2_ms_per_run=med["dask_2"] / n_runs * 1e3,
-                dask_2_over_1_throughput=med["dask_1"] / med["dask_2"])
+            med = {k: statistics.median(rec[k]) for k in ("in_process", "dask_1", "dask_2") if rec[k]}
+            rec.update(doe_run_ms_per_run=med["in_process"] / n_runs * 1e3,
+                       overhead_ms_per_run=(med["in_process"] / n_runs - direct) * 1e3)
+            if clusters:
+                rec.update(dask_1_ms_per_run=med["dask_1"] / n_runs * 1e3, dask_2_ms_per_run=med["dask_2"] / n_runs * 1e3,
+                           dask_2_over_1_throughput=med["dask_1"] / med["dask_2"])
             out["models"][model] = rec
-            print(f"{model}: direct {direct * 1e3:.2f} ms/run, whole doe run {rec['doe_run_ms_per_run']:.2f} ms/run "
-                  f"(overhead {rec['overhead_ms_per_run']:+.2f} ms), Dask 2 workers / 1 worker throughput "
-                  f"{rec['dask_2_over_1_throughput']:.2f}x", flush=True)
+            print(f"{model}: direct {direct * 1e3:.2f} ms/run (dataset path {direct_dataset * 1e3:.2f}), whole doe run "
+                  f"{rec['doe_run_ms_per_run']:.2f} ms/run (overhead {rec['overhead_ms_per_run']:+.2f} ms)"
+                  + (f", Dask 2 workers / 1 worker throughput {rec['dask_2_over_1_throughput']:.2f}x" if clusters else ""),
+                  flush=True)
     finally:
         for c in clusters.values():
             c.close()
+    out["machine"]["loadavg_end"] = os.getloadavg()
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "doe_scaling.json").write_text(json.dumps(out, indent=1))
     return out

@@ -175,7 +175,10 @@ def test_start_on_a_flank_at_a_later_time_continues_the_run():
     t_a = 0.3 * ph[0].t1
     phi1, omega1 = ph[0].sol(t_a)
     ph2, _ = rigid.integrate(model0, w0, preset, tr, start=("contact", phi1, omega1, rigid.INNER), t_start=t_a)
-    assert ph2[0].t0 == t_a and ph2[-1].t1 == pytest.approx(ph[0].t1, abs=1e-12)
+    # the end event is located on another sequence of steps: to the dense output's accuracy (2.3e-12 s
+    # apart at the standard preset's rise/20 step cap; the preset's event times are good to 1e-9 s)
+    assert ph2[0].t0 == t_a and ph2[-1].t1 == pytest.approx(ph[0].t1, abs=1e-10)
     tt = np.linspace(t_a, ph[0].t1, 30)
-    np.testing.assert_allclose(ph2[0].sol(tt), ph[0].sol(tt), rtol=1e-9)
+    # two solutions at rtol 1e-9 on different step sequences: 2.3e-9 apart (relative) at rise/20
+    np.testing.assert_allclose(ph2[0].sol(tt), ph[0].sol(tt), rtol=1e-8)
     assert math.isfinite(ph2[0].sol(tt).sum())

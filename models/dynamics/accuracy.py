@@ -53,10 +53,13 @@ REFERENCE_METHOD = "DOP853"
 # tests fail when a model's preset changes, so that the figures are measured again.
 MEASURED: dict = {
     "rigid": {
-        "fast": dict(tolerances=dict(method="RK45", rtol=1e-6, max_step=1 / 250, samples=1000),
-                     err_omega2=3.8e-6, err_MR13D=5.9e-13, err_event_time=2.6e-11, d_events=0, err_indicators=2.3e-3),
-        "standard": dict(tolerances=dict(method="RK45", rtol=1e-9, max_step=1 / 1000, samples=4000),
-                         err_omega2=1.5e-8, err_MR13D=4.4e-13, err_event_time=6.0e-11, d_events=0, err_indicators=8.7e-4),
+        # step caps relaxed (issue 17; 2026-12-02, accuracy.compare over Table 1, docs/performance.md):
+        # fast rise/250 -> rise/50 (was 3.8e-6, 5.9e-13, 2.6e-11 s), standard rise/1000 -> rise/20
+        # (was 1.5e-8, 4.4e-13, 6.0e-11 s); the indicators' error is the output sampling, unchanged
+        "fast": dict(tolerances=dict(method="RK45", rtol=1e-6, max_step=1 / 50, samples=1000),
+                     err_omega2=6.1e-6, err_MR13D=8.6e-10, err_event_time=8.7e-9, d_events=0, err_indicators=2.3e-3),
+        "standard": dict(tolerances=dict(method="RK45", rtol=1e-9, max_step=1 / 20, samples=4000),
+                         err_omega2=1.9e-8, err_MR13D=1.1e-8, err_event_time=9.7e-10, d_events=0, err_indicators=8.7e-4),
         # the reference preset is the reference solution (DOP853 rtol 1e-12): 0 against itself;
         # the DOP853 ladder agrees with it to 5e-10 in omega2 at rtol 1e-10 (the comparison's floor)
         "reference": dict(tolerances=dict(method="DOP853", rtol=1e-12, max_step=1 / 4000, samples=16000),

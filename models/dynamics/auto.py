@@ -117,7 +117,8 @@ class SharedPrefixLoop:
         ts = ph.sol.t
         y = np.ascontiguousarray(ph.sol(ts))
         terms = np.empty((len(rigid.SAMPLED), ts.size))
-        rigid_nb.derived(model0, rigid.CONTACT, rigid.INNER, y, terms)
+        rigid_nb.derived(model0, np.full(ts.size, rigid.CONTACT, dtype=np.int64),
+                         np.full(ts.size, rigid.INNER, dtype=np.int64), y, terms)
         lam = np.where(y[0] <= model.phi1_end, terms[rigid.SAMPLED.index("R13n")], np.inf)   # inside the span
         low = np.flatnonzero(lam <= 0.0)
         if not low.size:

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from common.errors import InputError
-from models.dynamics.jit import jit
+from models.dynamics.jit import jit, kernel
 
 N_EXP = 10.0 / 9.0                     # Palmgren exponent n of eq. (12)-(15)
 PALMGREN_MM = 8.05e4                   # N / mm^(10/9) per mm^(8/9) of contact length (eq. 15)
@@ -43,7 +43,7 @@ def contact_stiffness(contact_length: float, kc_factor: float = 1.0) -> float:
     return kc_factor * PALMGREN_MM * lw_mm ** (8.0 / 9.0) * MM_TO_SI
 
 
-@jit
+@kernel
 def normal_force(penetration, rate, kc, damping):
     """Contact force (N, >= 0) at a penetration (m) growing at ``rate`` (m/s): Kc p^(10/9) times
     (1 + damping * rate) with Hunt-Crossley damping (s/m, 0 = purely elastic), clipped at 0."""

@@ -56,7 +56,8 @@ from models.dynamics.kernels import elastic_nb as eq
 from models.dynamics.kinematic import cam_speed
 from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
-from models.mechanism.cam_tables import angle_terms, grid_terms
+from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms
+from models.mechanism.memo import cached
 from models.mechanism.motor import cam_inertia, transmission_ratio
 
 INTERIOR, FLIGHT, EXTERIOR = eq.INTERIOR, eq.FLIGHT, eq.EXTERIOR
@@ -330,6 +331,49 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     ``solver`` ("compiled" or "scipy") and ``preset`` (a dict like PRESETS[...]) override what
     ``scene.accuracy`` selects; ``stats`` (dict) receives nfev, n_steps and loop_s (s in the loop).
     """
+    run = _solve(scene, reading, solver, preset, stats)
+    complete_events(run.rows, run.segments, run.model, run.tab)
+    record = events.from_rows(run.rows)
+    ds, cols = _dataset(scene, run, reading, record, _outputs(run.tab, run.segments))
+    ind = _indicators(scene, cols, events.columns(record), run.segments, reading, run.kc)
+    warnings = run.warnings + validity.elastic_after(scene, cols, ind)
+    ds.attrs["validity_warnings"] = validity.attribute(warnings)
+    return SimulationResult(ds, ind, "elastic", warnings=warnings)
+
+
+def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str | None = None,
+                        preset: dict | None = None, stats: dict | None = None) -> dict:
+    """The paper's Table 3 indicators of ``simulate`` (result.INDICATORS; those this model does not
+    compute None), without its Dataset: the same loop, the same output instants and the same
+    values (MR13D and x_el extremes, jumps, impacts), from numpy arrays. The refusals of
+    ``simulate`` are the same (validity.elastic_after on the deformation); the energy-balance
+    warning, which needs the contact force and the geometry at every output instant, is not made."""
+    run = _solve(scene, reading, solver, preset, stats)
+    t, x, _, phase, grid_index = _outputs(run.tab, run.segments)
+    terms = output_terms(scene, run.tab, t, grid_index, geometry=False)
+    m_static = terms.at_speed(run.tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
+    cols = {"deformation": _deformation(x, run.model.gap), "contact_phase": phase, "phi1": run.tab.omega1 * t}
+    ev = events.columns(events.from_rows(run.rows))
+    ind = empty_indicators()
+    ind.update(_table3(x, m_static, ev))
+    validity.elastic_after(scene, cols, ind)
+    return ind
+
+
+@dataclass(frozen=True)
+class _Run:
+    """What the compiled loop made of a scene, before any output."""
+
+    tab: Tables
+    model: eq.ElasticModel
+    segments: list
+    rows: np.ndarray
+    kc: float
+    warnings: list
+
+
+def _solve(scene: Scene, reading: str, solver, preset, stats) -> _Run:
+    """The tables, the loop and its event rows (impact columns not yet completed)."""
     if reading not in READINGS:
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
     warnings = validity.check_scene(scene)
@@ -353,13 +397,23 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
                                max_step=period / preset["steps_per_period"], solver=solver,
                                method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats, model=model)
     loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
-    complete_events(rows, segments, model, tab)
-    record = events.from_rows(rows)
-    ds, cols = _dataset(scene, tab, segments, model, reading, record)
-    ind = _indicators(scene, cols, events.columns(record), segments, reading, kc)
-    warnings += validity.elastic_after(scene, cols, ind)
-    ds.attrs["validity_warnings"] = validity.attribute(warnings)
-    return SimulationResult(ds, ind, "elastic", warnings=warnings)
+    return _Run(tab, model, segments, rows, kc, warnings)
+
+
+def _table3(x, m_static, ev: dict) -> dict:
+    """Table 3's indicators from the output samples of x_el (m) and the kinetostatic MR13D (N m)
+    and the event record's columns (one definition for both paths)."""
+    return dict(
+        MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
+        xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
+        # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
+        jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
+    )
+
+
+def _deformation(x, gap: float):
+    """Deformation (m) of the flank in contact at relative displacements x (m), gap j (m)."""
+    return np.where(x < 0, -x, np.where(x > gap, x - gap, 0.0))
 
 
 def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: float) -> dict:
@@ -367,10 +421,7 @@ def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: 
     x, m_static, m_contact = (cols[k] for k in ("x_el", "MR13D_static", "MR13D"))
     ind = empty_indicators()
     ind.update(
-        MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
-        xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
-        # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
-        jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
+        **_table3(x, m_static, ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
@@ -411,30 +462,81 @@ def _sample(segments, times):
     return np.concatenate(out, axis=1)
 
 
-def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, record: dict):
-    """Sample every phase on a uniform time grid (plus the solver's own steps) into a Dataset:
-    (dataset, its time series as numpy arrays by name, 'time' included)."""
-    t_end = tab.t[-1]
-    n = max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2)
-    t_uniform = np.linspace(0.0, t_end, n)
-    times = []
-    for k, (phase, run) in enumerate(segments):
-        lo, hi = run.t[0], run.t[-1]
-        a = np.searchsorted(t_uniform, lo, side="left")
-        b = np.searchsorted(t_uniform, hi, side="right" if k == len(segments) - 1 else "left")
-        times.append(np.concatenate([t_uniform[a:b], run.t]))   # the solver's steps: extremes are not lost
-    y = _sample(segments, times)
-    t = np.concatenate(times)
-    phase = np.repeat([ph for ph, _ in segments], [tt.size for tt in times])
-    # in time order; an instant shared by two phases (an event) keeps the value of the phase that ends
-    order = np.argsort(t, kind="stable")
-    t, x, v, phase = t[order], y[0][order], y[1][order], phase[order]
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    t, x, v, phase = t[keep], x[keep], v[keep], phase[keep]
+def _outputs(tab: Tables, segments):
+    """The output instants (a uniform grid of OUTPUT_STEP, plus the solver's own steps: extremes
+    are not lost) and the state there: (t s, x m, x' m/s, phase, grid index or -1 at a step time),
+    in time order; an instant shared by two phases (an event) keeps the value of the phase that
+    ends. One compiled pass (kernels.dopri5.merge_outputs); a phase that is not a compiled run (at
+    rest, or scipy's) is evaluated by itself at its instants afterwards."""
+    t_uniform = output_grid(tab)
+    n_seg = len(segments)
+    starts, ends = np.empty(n_seg), np.empty(n_seg)
+    first, last = np.empty(n_seg, dtype=np.int64), np.empty(n_seg, dtype=np.int64)
+    parts, count = [], 0
+    for k, (_, run) in enumerate(segments):
+        starts[k], ends[k] = run.t[0], run.t[-1]
+        if isinstance(run, dp.DenseRun):
+            parts.append((run.t0s, run.hs, run.y0s, run.Qs))
+        else:                                   # its step times only, values filled in below
+            n = run.t.size - 1
+            parts.append((run.t[:-1], np.zeros(n), np.zeros((n, 2)), np.zeros((n, 2, 4))))
+        first[k], last[k] = count, count + parts[-1][0].size - 1
+        count += parts[-1][0].size
+    t0s, hs, y0s, Qs = (np.ascontiguousarray(np.concatenate([p[i] for p in parts])) for i in range(4))
+    size = t_uniform.size + count + n_seg
+    out_t, out_y = np.empty(size), np.empty((2, size))
+    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+    m = dp.merge_outputs(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid)
+    t, y, seg = out_t[:m], out_y[:, :m], out_seg[:m]
+    for k, (_, run) in enumerate(segments):
+        if not isinstance(run, dp.DenseRun):
+            sel = seg == k
+            y[:, sel] = np.asarray(run(t[sel]), dtype=float).reshape(2, -1)
+    phases = np.array([ph for ph, _ in segments], dtype=np.int64)
+    return t, y[0], y[1], phases[seg], out_grid[:m]
 
+
+def output_grid(tab: Tables) -> np.ndarray:
+    """The uniform output instants (s) of a run over tab's span: OUTPUT_STEP or finer."""
+    t_end = tab.t[-1]
+    return np.linspace(0.0, t_end, max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2))
+
+
+_TERMS = ("psi", "dpsi", "ddpsi", "phi2", "J0", "dJ0", "M_gravity", "m_load", "alpha", "Db1", "Db2")
+_MOMENT_TERMS = ("dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load")      # what at_speed reads
+
+
+def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True):
+    """The kinematic terms (cam_tables.angle_terms, the linkage from its stroke spline) at the output
+    instants t (s) of ``_outputs``: those on the uniform output grid (grid_index >= 0) from a
+    per-process table shared by every run of the same mechanism, law, cam speed and span (a sweep
+    over the load, Jt, j or Kc reuses it), the solver's step instants computed; elementwise the
+    same functions of the same angles. ``geometry=False``: what the kinetostatic moment alone needs
+    (``AngleTerms.at_speed``): the contact geometry and phi2 are left out (None)."""
+    mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
+    grid = output_grid(tab)
+    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene))
+    on_grid = cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), linkage="spline"))
+    at_grid = np.flatnonzero(grid_index >= 0)
+    at_step = np.flatnonzero(grid_index < 0)
+    at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)
+    fields = dict.fromkeys(_TERMS)
+    for name in _TERMS if geometry else _MOMENT_TERMS:
+        out = np.empty(t.size)
+        out[at_grid] = getattr(on_grid, name)[grid_index[at_grid]]
+        out[at_step] = getattr(at_steps, name)
+        fields[name] = out
+    return AngleTerms(phi1=omega1 * t, **fields)
+
+
+def _dataset(scene, run: _Run, reading, record: dict, outputs):
+    """The Dataset of a run sampled at ``outputs`` (``_outputs``): (dataset, its time series as
+    numpy arrays by name, 'time' included)."""
+    tab, model = run.tab, run.model
+    t, x, v, phase, grid_index = outputs
     # kinematics at the output instants, not interpolated in time (the linkage from its stroke
     # spline, accurate to rounding)
-    exact = build_tables(scene, t_end, t=t, linkage="spline")
+    exact = _tables(scene, output_terms(scene, tab, t, grid_index), t, tab.omega1)
     arm, R31, M = exact.arm, exact.R31, exact.M
     F = np.empty(t.size)
     eq.forces(model, phase.astype(np.int64), x, v, F)
@@ -445,7 +547,7 @@ def _dataset(scene, tab: Tables, segments, model: eq.ElasticModel, reading, reco
     omega2 = exact.omega2 + v / arm                                       # eq. (19)
     epsilon2 = exact.epsilon2 + a / arm - v * darm / arm**2               # d/dt of eq. (19)
     gap = model.gap
-    deformation = np.where(x < 0, -x, np.where(x > gap, x - gap, 0.0))
+    deformation = _deformation(x, gap)
 
     cols = {"time": t}
 

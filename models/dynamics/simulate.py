@@ -6,6 +6,10 @@ Levels (DESIGN.md, fidelity ladder): ``kinematic`` (cam as input), ``rigid`` (eq
 load numba; a kinematic run does not), always downwards: no level imports this module.
 Every result's dataset gets the scene's provenance (models.dynamics.provenance) and the level
 that ran, and why.
+
+``indicators(scene, model)`` is the path for sweeps and fits that need the paper's indicators
+only: the same loops and the same values as ``simulate(...).indicators`` (tests/test_indicators.py),
+without building a Dataset (issue 17: the Dataset and its output kinematics cost 2-5x the loop).
 """
 from __future__ import annotations
 
@@ -40,6 +44,20 @@ def _auto(scene: Scene, **options) -> SimulationResult:
 LEVELS = {"kinematic": _kinematic, "rigid": _rigid, "elastic": _elastic}
 
 
+def _rigid_indicators(scene: Scene, **options) -> dict:
+    from models.dynamics import rigid
+    return rigid.simulate_indicators(scene, **options)
+
+
+def _elastic_indicators(scene: Scene, **options) -> dict:
+    from models.dynamics import elastic
+    return elastic.simulate_indicators(scene, **options)
+
+
+# levels with a Dataset-free indicator path; the others (kinematic, auto) read simulate()'s
+INDICATOR_PATHS = {"rigid": _rigid_indicators, "elastic": _elastic_indicators}
+
+
 def simulate(scene: Scene, model: str = "auto", **options) -> SimulationResult:
     """Run ``model`` (or the cheapest level the scene needs, for ``auto``) on ``scene``.
 
@@ -57,3 +75,18 @@ def simulate(scene: Scene, model: str = "auto", **options) -> SimulationResult:
     result.dataset.attrs.update(model=result.model, model_reason=result.reason)
     result.dataset.attrs.setdefault("validity_warnings", "[]")
     return result
+
+
+def indicators(scene: Scene, model: str = "auto", **options) -> dict:
+    """The indicators of ``simulate(scene, model, **options)`` (its ``indicators`` dict: the keys of
+    result.INDICATORS, None where the level does not compute one, and the level's own), plus
+    ``model`` (the level that ran) and ``wall_s``; for rigid and elastic without building the
+    Dataset (same loops, same samples, same values; the same refusals and SolverErrors)."""
+    t0 = time.perf_counter()
+    if model in INDICATOR_PATHS:
+        ind = dict(INDICATOR_PATHS[model](scene, **options))
+    else:
+        result = simulate(scene, model, **options)
+        ind, model = dict(result.indicators), result.model
+    ind.update(model=model, wall_s=time.perf_counter() - t0)
+    return ind

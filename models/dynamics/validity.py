@@ -177,13 +177,14 @@ def elastic_after(scene, cols, ind) -> list[str]:
     return warnings
 
 
-def rigid_after(scene, ds, ind) -> list[str]:
-    """The motor's operating range in a rigid run (omega1 var)."""
+def rigid_after(scene, cols, ind) -> list[str]:
+    """The motor's operating range in a rigid run (omega1 var); ``cols``: the dataset or its
+    columns (omega1)."""
     if scene.omega1_mode != "var":
         return []
     mech = scene.mechanism
     it = transmission_ratio(mech, scene.omega1_nominal)
-    omega1 = ds["omega1"].values
+    omega1 = np.asarray(cols["omega1"])
     if np.nanmin(omega1) <= 0:
         raise SolverError("rigid model: the cam stopped (omega1 <= 0): the motor stalls under this load")
     slip = 1.0 - float(np.nanmin(omega1)) * it / mech.omega_sync_motor

@@ -47,9 +47,9 @@ class AngleTerms:
     dJ0: np.ndarray         # kg m^2/rad, dJ''red/dphi2 at Jt = 1
     M_gravity: np.ndarray   # N m, moment of gravity on elements 2-5 about D
     m_load: np.ndarray      # N m per N, moment about D of the load per N of Fu (signed)
-    alpha: np.ndarray       # rad, pressure angle
-    Db1: np.ndarray         # m
-    Db2: np.ndarray         # m
+    alpha: np.ndarray       # rad, pressure angle (None: computed without the contact geometry)
+    Db1: np.ndarray         # m (None: without the contact geometry)
+    Db2: np.ndarray         # m (None: without the contact geometry)
 
     def at_speed(self, omega1: float, Fu: float, jt_factor: float) -> dict:
         """The operating point's kinematics at these angles (cam at constant omega1 rad/s, load Fu
@@ -63,7 +63,7 @@ class AngleTerms:
 
 
 def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None = None,
-                linkage: str = "exact") -> AngleTerms:
+                linkage: str = "exact", geometry: bool = True) -> AngleTerms:
     """The terms at any cam angles ``phi1`` (rad).
 
     ``until`` (rad): every term is taken at min(phi1, until) (``phi1`` itself is kept), so that a
@@ -73,6 +73,8 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None 
     and the load's arm from a cubic spline over the follower's stroke (``stroke_spline``: the
     linkage depends on phi2 alone, analytically; 1e-13 relative, 1e-11 for dJ0), 4x cheaper for
     thousands of arbitrary instants. The motion law and the contact geometry are always exact.
+    ``geometry=False`` leaves the contact geometry out (alpha, Db1, Db2 None): what the kinetostatic
+    moment alone needs (``at_speed``), half the cost (models.dynamics.elastic's indicator path).
     """
     phi1 = np.asarray(phi1, dtype=float)
     at = phi1 if until is None else np.minimum(phi1, until)
@@ -87,7 +89,8 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None 
     # models.mechanism.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
     # arm (the x velocity coefficient of N)
     m_load = np.sign(slide) * program.direction(at) * vNx
-    geo = contact_geometry(mech, program, at, sense=cached_sense(mech, program), motion=motion)
+    geo = (contact_geometry(mech, program, at, sense=cached_sense(mech, program), motion=motion) if geometry
+           else dict.fromkeys(("pressure_angle", "Db1", "Db2")))
     return AngleTerms(phi1=phi1, psi=psi, dpsi=dpsi, ddpsi=ddpsi, phi2=phi2, J0=J0, dJ0=dJ0,
                       M_gravity=M_gravity, m_load=m_load, alpha=geo["pressure_angle"],
                       Db1=geo["Db1"], Db2=geo["Db2"])

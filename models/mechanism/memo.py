@@ -10,7 +10,8 @@ import threading
 
 import numpy as np
 
-CACHE_SIZE = 16         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB)
+CACHE_SIZE = 40         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB; the elastic
+                        # output grid of one cam speed 0.2-0.6 MB: a sweep over 16+ speeds keeps them all)
 
 _cache: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
 _lock = threading.Lock()

@@ -36,7 +36,8 @@ class Law:
 
 def _cycloidal(u):
     w = TWO_PI * u
-    return u - np.sin(w) / TWO_PI, 1.0 - np.cos(w), TWO_PI * np.sin(w), TWO_PI**2 * np.cos(w)
+    sin_w, cos_w = np.sin(w), np.cos(w)
+    return u - sin_w / TWO_PI, 1.0 - cos_w, TWO_PI * sin_w, TWO_PI**2 * cos_w
 
 
 def _harmonic(u):
@@ -238,17 +239,22 @@ class CamProgram:
         for seg in self.segments:
             end = start + seg.beta
             mask = (phi >= start) & (phi < end) if end < TWO_PI else (phi >= start)
+            # the angles of this segment: all of them (a run over one rise: no masked copies), none
+            # (nothing to evaluate), or some
+            sel = Ellipsis if mask.all() else mask if mask.any() else None
             if seg.kind == "dwell":
-                out[0][mask] = level
+                if sel is not None:
+                    out[0][sel] = level
             else:
-                u = (phi[mask] - start) / seg.beta
-                s, v, a, j = seg.law(u)
-                sign = 1.0 if seg.kind == "rise" else -1.0
-                base = 0.0 if seg.kind == "rise" else 1.0
-                out[0][mask] = self.stroke * (base + sign * s)
-                out[1][mask] = sign * self.stroke * v / seg.beta
-                out[2][mask] = sign * self.stroke * a / seg.beta**2
-                out[3][mask] = sign * self.stroke * j / seg.beta**3
+                if sel is not None:
+                    u = (phi[sel] - start) / seg.beta
+                    s, v, a, j = seg.law(u)
+                    sign = 1.0 if seg.kind == "rise" else -1.0
+                    base = 0.0 if seg.kind == "rise" else 1.0
+                    out[0][sel] = self.stroke * (base + sign * s)
+                    out[1][sel] = sign * self.stroke * v / seg.beta
+                    out[2][sel] = sign * self.stroke * a / seg.beta**2
+                    out[3][sel] = sign * self.stroke * j / seg.beta**3
                 level = 1.0 * self.stroke if seg.kind == "rise" else 0.0
             start = end
         return tuple(out)

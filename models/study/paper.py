@@ -11,7 +11,7 @@ from importlib import resources
 import pandas as pd
 
 from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from models.dynamics.simulate import indicators
 
 FACTOR_LEVELS = {  # Table 1, in the units of the table
     "Fu_N": (0.0, 65.0),
@@ -53,7 +53,7 @@ def kinematic_vs_table3(no_load_speed: bool = True) -> pd.DataFrame:
     for run, r3 in zip(table1_runs().itertuples(), t3.itertuples()):
         scene = Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3,
                       jt_factor=run.Jt_factor, omega1_mode="var" if no_load_speed else "const")
-        ind = simulate(scene, "kinematic").indicators
+        ind = indicators(scene, "kinematic")
         mx, mn = ind["MR13D_max_Nm"], ind["MR13D_min_Nm"]
         rows.append({
             "run": run.run, "Fu_N": run.Fu_N, "j_mm": run.j_mm, "n1_rpm": run.n1_rpm, "Jt_factor": run.Jt_factor,
@@ -96,7 +96,7 @@ def rigid_vs_table2(accuracy: str = "standard", law: str = "sine", omega1_mode: 
     t2 = read_reference("table2_rigid")
     rows = []
     for run, paper in zip(table1_runs().itertuples(), t2.itertuples()):
-        ind = simulate(_table1_scene(run, law=law, omega1_mode=omega1_mode, accuracy=accuracy), "rigid").indicators
+        ind = indicators(_table1_scene(run, law=law, omega1_mode=omega1_mode, accuracy=accuracy), "rigid")
         row = {"run": run.run, "Fu_N": run.Fu_N, "j_mm": run.j_mm, "n1_rpm": run.n1_rpm, "Jt_factor": run.Jt_factor,
                "A": int(paper.A_Fu_level), "B": int(paper.B_j_level), "C": int(paper.C_n1_level), "D": int(paper.D_Jt_level)}
         for key in TABLE2_KEYS:
@@ -135,7 +135,7 @@ def compare_table3(accuracy: str = "standard", contact_length: float | None = No
     rows = []
     for run, ref in zip(table1_runs().itertuples(), t3.itertuples()):
         scene = _table1_scene(run, law=law, omega1_mode="var", accuracy=accuracy, elastic_gap=elastic_gap, **extra)
-        ind = simulate(scene, "elastic").indicators
+        ind = indicators(scene, "elastic")
         rows.append({
             "run": run.run, "Fu_N": run.Fu_N, "j_mm": run.j_mm, "n1_rpm": run.n1_rpm, "Jt": run.Jt_factor,
             "MR13D_max": ind["MR13D_max_Nm"], "paper_MR13D_max": ref.MR13D_max_Nm,

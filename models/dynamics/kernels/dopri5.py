@@ -37,13 +37,14 @@ Time in s, states in the model's units; tolerances as in scipy (scale = atol + r
 """
 from __future__ import annotations
 
+import functools
 from collections import namedtuple
 
 import numpy as np
 from numba import types
-from numba.extending import overload
+from numba.extending import overload as _overload
 
-from models.dynamics.jit import jit
+from models.dynamics.jit import jit, kernel
 
 A = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0],
@@ -126,13 +127,31 @@ def transition(model, ph, which, t, y, ev, nev):
     raise NotImplementedError
 
 
-def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_size_fn, transition_fn):
+def event_offset(model, ph, which):
+    """The state component c when event ``which`` is y[c] minus a constant, else -1: then the
+    driver skips its sub-step sign checks in a step whose dense output cannot move y[c] by as much
+    as the event's distance from zero (an exact bound: no event missed)."""
+    raise NotImplementedError
+
+
+@kernel
+def _no_offset(model, ph, which):
+    return -1
+
+
+def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_size_fn, transition_fn,
+             event_offset_fn=None):
     """Make ``model_class`` (a namedtuple class) drivable by ``run``: its structs dispatch the hooks
     above to the model's functions (``jit`` functions with the hooks' parameter names; their Python
-    source is compiled in place of the hook, so a hook costs no extra call)."""
+    source is compiled in place of the hook, so a hook costs no extra call). ``event_offset_fn``
+    (optional): see ``event_offset``."""
 
     def ours(model):
         return isinstance(model, types.BaseNamedTuple) and model.instance_class is model_class
+
+    # the hooks called at every step allocate nothing: compiled without reference counting
+    # (models.dynamics.jit.kernel); a transition (once an event) may
+    overload = functools.partial(_overload, jit_options={"_nrt": False})
 
     @overload(rhs)
     def _rhs(model, ph, t, y, out):
@@ -159,15 +178,20 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
         if ours(model):
             return state_size_fn.py_func
 
-    @overload(transition)
+    @_overload(transition)
     def _transition(model, ph, which, t, y, ev, nev):
         if ours(model):
             return transition_fn.py_func
 
+    @overload(event_offset)
+    def _event_offset(model, ph, which):
+        if ours(model):
+            return event_offset_fn.py_func if event_offset_fn is not None else _no_offset.py_func
+
 
 # ------------------------------------------------------------------ Dormand-Prince pieces
 
-@jit
+@kernel
 def stage_state(y, h, K, coeffs, n_stages, out):
     """out = y + h * sum_{j < n_stages} coeffs[j] K[j]."""
     for i in range(y.size):
@@ -177,7 +201,7 @@ def stage_state(y, h, K, coeffs, n_stages, out):
         out[i] = y[i] + h * acc
 
 
-@jit
+@kernel
 def error_norm(K, h, y, y_new, rtol, atol):
     """scipy's RMS error norm of the embedded 4th-order estimate (atol: array per component)."""
     acc = 0.0
@@ -192,7 +216,7 @@ def error_norm(K, h, y, y_new, rtol, atol):
     return np.sqrt(acc / n)
 
 
-@jit
+@kernel
 def dense_coeffs(K, out):
     """out (n, 4) = K.T @ P: the dense-output polynomial of the step just taken."""
     n = out.shape[0]
@@ -204,14 +228,14 @@ def dense_coeffs(K, out):
             out[i, c] = acc
 
 
-@jit
+@kernel
 def dense_eval(y0, h, Q, s, out):
     """out = y(t0 + s h) from the step's start y0 and coefficients Q (s in [0, 1])."""
     for i in range(y0.size):
         out[i] = y0[i] + h * s * (Q[i, 0] + s * (Q[i, 1] + s * (Q[i, 2] + s * Q[i, 3])))
 
 
-@jit
+@kernel
 def new_step_factor(err, rejected):
     """Step-size factor after a step with error norm ``err`` (scipy's controller)."""
     if err < 1.0:
@@ -233,7 +257,7 @@ def grow(a, n_new):
     return b
 
 
-@jit
+@kernel
 def rms(v, scale):
     acc = 0.0
     for i in range(v.size):
@@ -263,7 +287,7 @@ def first_step(model, ph, t0, y0, f0, t_bound, max_step, rtol, atol, y1, f1):
     return min(100.0 * h0, h1, t_bound - t0, max_step)
 
 
-@jit
+@kernel
 def attempt(model, ph, t, y, h_abs, ctl, atol, K, y_new, tmp):
     """One accepted step from (t, y) with K[0] = f(t, y): (status, t_new, h, next h_abs, rhs calls).
 
@@ -301,12 +325,12 @@ def attempt(model, ph, t, y, h_abs, ctl, atol, K, y_new, tmp):
         rejected = True
 
 
-@jit
+@kernel
 def _fires(g0, g1, dirn):
     return (g0 <= 0.0 and g1 >= 0.0 and dirn > 0) or (g0 >= 0.0 and g1 <= 0.0 and dirn < 0)
 
 
-@jit
+@kernel
 def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     """Step fraction in (lo, hi] where event ``which`` changes sign (bisection on the dense output)."""
     for _ in range(60):
@@ -322,7 +346,7 @@ def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     return hi
 
 
-@jit
+@kernel
 def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     """First step fraction s in (0, 1] where event ``which`` changes sign in its direction, 2.0 if
     none; the sign is read at ``nsub`` points of the step (its end value g1 given)."""
@@ -341,11 +365,71 @@ def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     return 2.0
 
 
+@kernel
+def _out_of_reach(g0, g1, y0c, h, Q, c):
+    """Can the dense output of the step (y0c + h s (Q0 + s (Q1 + s (Q2 + s Q3))), s in [0, 1])
+    not bring an event g = y[c] - const from g0 to zero? |y(s) - y0c| <= |h| sum |Q_k|; the margin
+    covers the rounding of the dense evaluation (~1e-16 relative) a millionfold."""
+    reach = abs(h) * (abs(Q[c, 0]) + abs(Q[c, 1]) + abs(Q[c, 2]) + abs(Q[c, 3]))
+    margin = 1e-12 * (abs(y0c) + abs(g0 - y0c)) + 1e-9 * reach
+    return g0 != 0.0 and (g0 > 0.0) == (g1 > 0.0) and abs(g0) > reach + margin
+
+
 @jit
 def event_many(model, ph, which, ts, Y, out):
     """Event ``which`` at many instants ts (s), states Y (len(ts), n): for the scipy reference loop."""
     for i in range(ts.size):
         out[i] = event(model, ph, which, ts[i], Y[i])
+
+
+@kernel
+def _steps(model, ctl, ph, n, ne, atol, t, yv, y_new, tmp, Q, K, h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst):
+    """Steps of one phase from (t, yv) (K[0] = f(t, yv), g_old its event values) until an event
+    fires (yv is then the state at it), the time bound, a failure or the step cap, storing each
+    step; it returns early, ``full``, when the step store is full (``run`` enlarges it and calls
+    again: the state, K[0], g_old and h_abs carry over). Allocates nothing (no reference counts
+    in the per-step work). Returns (status, full, t, h_abs, nst, rhs calls, event hit or -1)."""
+    nfev = 0
+    while t < ctl.t_bound:
+        if nst >= ctl.max_steps:
+            return TOO_MANY_STEPS, False, t, h_abs, nst, nfev, -1
+        if nst == st_t.size:
+            return OK, True, t, h_abs, nst, nfev, -1
+        status, t_new, h, h_abs, calls = attempt(model, ph, t, yv, h_abs, ctl, atol, K, y_new, tmp)
+        nfev += calls
+        if status != OK:
+            return status, False, t, h_abs, nst, nfev, -1
+        dense_coeffs(K, Q)
+        st_t[nst] = t
+        st_h[nst] = h
+        for i in range(n):            # element loops: numba's slice copies cost more per step
+            st_y[nst, i] = yv[i]
+            for c in range(4):
+                st_Q[nst, i, c] = Q[i, c]
+        nst += 1
+        best = 2.0
+        hit = -1
+        for e in range(ne):
+            g_new[e] = event(model, ph, e, t_new, y_new)
+            c = event_offset(model, ph, e)
+            if c >= 0 and _out_of_reach(g_old[e], g_new[e], yv[c], h, Q, c):
+                continue                               # no sign change is possible in this step
+            s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], ctl.nsub, tmp)
+            if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
+                best = s
+                hit = e
+        if hit >= 0:
+            dense_eval(yv, h, Q, best, tmp)
+            for i in range(n):
+                yv[i] = tmp[i]
+            return OK, False, t + best * h, h_abs, nst, nfev, hit
+        t = t_new
+        for i in range(n):
+            yv[i] = y_new[i]
+            K[0, i] = K[6, i]
+        for e in range(ne):
+            g_old[e] = g_new[e]
+    return OK, False, t, h_abs, nst, nfev, -1
 
 
 @jit
@@ -399,44 +483,14 @@ def run(model, ctl, ph0, y0, t0):
         for e in range(ne):
             g_old[e] = event(model, ph, e, t, yv)
         hit = -1
-        while t < ctl.t_bound:
-            if nst >= ctl.max_steps:
-                status = TOO_MANY_STEPS
-                break
-            status, t_new, h, h_abs, calls = attempt(model, ph, t, yv, h_abs, ctl, atol, K, y_new, tmp)
+        while True:
+            status, full, t, h_abs, nst, calls, hit = _steps(model, ctl, ph, n, ne, atol, t, yv, y_new, tmp, Q, K,
+                                                            h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst)
             nfev += calls
-            if status != OK:
+            if not full:
                 break
-            dense_coeffs(K, Q)
-            if nst == st_t.size:
-                cap = min(2 * st_t.size, ctl.max_steps)
-                st_t, st_h, st_y, st_Q = grow(st_t, cap), grow(st_h, cap), grow(st_y, cap), grow(st_Q, cap)
-            st_t[nst] = t
-            st_h[nst] = h
-            for i in range(n):            # element loops: numba's slice copies cost more per step
-                st_y[nst, i] = yv[i]
-                for c in range(4):
-                    st_Q[nst, i, c] = Q[i, c]
-            nst += 1
-            best = 2.0
-            for e in range(ne):
-                g_new[e] = event(model, ph, e, t_new, y_new)
-                s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], ctl.nsub, tmp)
-                if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
-                    best = s
-                    hit = e
-            if hit >= 0:
-                dense_eval(yv, h, Q, best, tmp)
-                for i in range(n):
-                    yv[i] = tmp[i]
-                t = t + best * h
-                break
-            t = t_new
-            for i in range(n):
-                yv[i] = y_new[i]
-                K[0, i] = K[6, i]
-            for e in range(ne):
-                g_old[e] = g_new[e]
+            cap = min(2 * st_t.size, ctl.max_steps)     # the step store is full: double it, go on
+            st_t, st_h, st_y, st_Q = grow(st_t, cap), grow(st_h, cap), grow(st_y, cap), grow(st_Q, cap)
         if status != OK:
             break
         ph_t1[nph] = t
@@ -529,3 +583,79 @@ def evaluate_runs(runs, times):
     return evaluate_steps(np.concatenate([r.t0s for r in runs]), np.concatenate([r.hs for r in runs]),
                           np.concatenate([r.y0s for r in runs]), np.concatenate([r.Qs for r in runs]), tt,
                           np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
+
+
+@jit
+def merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid):
+    """The samples of consecutive phases on a time grid plus each phase's own step times, in time
+    order, in one pass: what ``evaluate_runs`` on (the grid points of each phase, its steps),
+    a stable sort and the removal of repeated instants give, value for value (the same arithmetic).
+
+    Phase k covers [starts[k], ends[k]] (ends[k] == starts[k + 1]) and takes the grid points from
+    starts[k] on, up to but excluding ends[k] (including it for the last phase); its steps are
+    first[k] .. last[k] (>= first[k]) of (t0s, hs, y0s, Qs), the concatenated ``DenseRun``
+    arrays; its own times are those steps' starts and ends[k]. At a repeated instant (a grid point
+    on a step time, a phase boundary) the first in order is kept: the grid's, and the value of the
+    phase that ends. Writes out_t (s), out_y (n_state, m), out_seg (phase index), out_grid (grid
+    index, -1 at a step time); returns m.
+    """
+    n_state = y0s.shape[1]
+    m = 0
+    for k in range(starts.size):
+        lo, hi = starts[k], ends[k]
+        a = np.searchsorted(grid, lo, side="left")
+        b = np.searchsorted(grid, hi, side="right") if k == starts.size - 1 else np.searchsorted(grid, hi, side="left")
+        f, l = first[k], last[k]
+        n_times = l - f + 2                # the steps' starts and the phase's end
+        iu, js = a, 0                      # next grid point, next own time
+        i_step = f
+        ts = hi
+        while iu < b or js < n_times:
+            if js < n_times:
+                ts = t0s[f + js] if js < n_times - 1 else hi
+            if js >= n_times or (iu < b and grid[iu] <= ts):
+                tau, gidx = grid[iu], iu
+                iu += 1
+            else:
+                tau, gidx = ts, -1
+                js += 1
+            if m > 0 and tau == out_t[m - 1]:
+                continue
+            out_t[m] = tau
+            out_seg[m] = k
+            out_grid[m] = gidx
+            while i_step < l and t0s[i_step + 1] <= tau:   # the last step starting at or before tau
+                i_step += 1
+            _dense_at(t0s, hs, y0s, Qs, i_step, tau, n_state, out_y, m)
+            m += 1
+    return m
+
+
+@kernel(inline="always")
+def _dense_at(t0s, hs, y0s, Qs, i, tau, n_state, out, m):
+    """out[:n_state, m] = the dense output of step i at tau: ``evaluate_steps``' arithmetic."""
+    h = hs[i]
+    s = (tau - t0s[i]) / h if h > 0 else 0.0
+    for c in range(n_state):
+        poly = s * (Qs[i, c, 0] + s * (Qs[i, c, 1] + s * (Qs[i, c, 2] + s * Qs[i, c, 3])))
+        out[c, m] = y0s[i, c] + h * poly
+
+
+@kernel
+def evaluate_at(times, first, last, width, t0s, hs, y0s, Qs, out):
+    """``evaluate_steps`` for many runs in one compiled pass: times[m] on the steps first[m] ..
+    last[m] of the concatenated (t0s, hs, y0s, Qs) (the state padded to Qs.shape[1]), its first
+    width[m] components into out[:, m] (the same arithmetic, value for value)."""
+    for m in range(times.size):
+        f, l, tau = first[m], last[m], times[m]
+        lo, hi = f, l                       # the last step of [f, l] starting at or before tau, else f
+        if t0s[l] <= tau:
+            lo = l
+        else:
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if t0s[mid] <= tau:
+                    lo = mid
+                else:
+                    hi = mid
+        _dense_at(t0s, hs, y0s, Qs, lo, tau, width[m], out, m)

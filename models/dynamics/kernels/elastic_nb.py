@@ -20,7 +20,7 @@ import numpy as np
 
 from models.dynamics import events as ev_layout
 from models.dynamics.contact import normal_force, penetration_under
-from models.dynamics.jit import jit
+from models.dynamics.jit import jit, kernel
 from models.dynamics.kernels import dopri5 as dp
 
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
@@ -41,7 +41,7 @@ ElasticModel = namedtuple("ElasticModel", [
 ])
 
 
-@jit(inline="always")
+@kernel(inline="always")
 def interp_row(t, tab, row):
     """np.interp(t, tab[TG], tab[row]) on the increasing, nearly uniform grid tab[TG] (one guess,
     then a short walk)."""
@@ -61,7 +61,7 @@ def interp_row(t, tab, row):
     return tab[row, i] + w * (tab[row, i + 1] - tab[row, i])
 
 
-@jit
+@kernel
 def flank_force(phase, x, v, kc, gap, damping):
     """Groove-on-follower normal force along +x (N) in ``phase`` at the normal offset x (m) from the
     interior flank, moving at v (m/s): the contact law (models.dynamics.contact.normal_force) on the
@@ -74,13 +74,13 @@ def flank_force(phase, x, v, kc, gap, damping):
     return 0.0
 
 
-@jit
+@kernel
 def force(m, phase, x, v):
     """``flank_force`` with the model's contact law and gap."""
     return flank_force(phase, x, v, m.kc, m.gap, m.damping)
 
 
-@jit
+@kernel
 def rhs(model, ph, t, y, out):
     tab = model.tab
     d = interp_row(t, tab, DRIVE)
@@ -89,23 +89,29 @@ def rhs(model, ph, t, y, out):
     out[1] = (force(model, int(ph[0]), y[0], y[1]) - d) / mass
 
 
-@jit
+@kernel
 def _on_zero(phase, which):
     """Is event ``which`` of ``phase`` the boundary x = 0 (else x = j)?"""
     return phase == INTERIOR or (phase == FLIGHT and which == 0)
 
 
-@jit
+@kernel
 def event(model, ph, which, t, y):
     return y[0] if _on_zero(int(ph[0]), which) else y[0] - model.gap
 
 
-@jit
+@kernel
+def event_offset(model, ph, which):
+    """Both events are x minus a constant (0 or j): state component 0 (dopri5.event_offset)."""
+    return 0
+
+
+@kernel
 def n_events(model, ph):
     return 2 if int(ph[0]) == FLIGHT else 1
 
 
-@jit
+@kernel
 def direction(model, ph, which):
     """Leaving the interior flank x rises through 0, leaving the exterior one falls through j;
     in flight a landing on the interior flank falls through 0, on the exterior rises through j."""
@@ -117,12 +123,12 @@ def direction(model, ph, which):
     return -1.0 if which == 0 else 1.0
 
 
-@jit
+@kernel
 def state_size(model, ph):
     return 2
 
 
-@jit
+@kernel
 def next_phase(m, phase, which):
     if phase == INTERIOR:
         return FLIGHT if m.gap > 0.0 else EXTERIOR
@@ -131,7 +137,7 @@ def next_phase(m, phase, which):
     return INTERIOR if which == 0 else EXTERIOR
 
 
-@jit
+@kernel
 def restart_position(m, at_zero, new_phase):
     """x (m) just inside ``new_phase`` at the boundary x = 0 (at_zero) or x = j."""
     eps = m.nudge if m.gap == 0.0 else min(m.nudge, 0.25 * m.gap)
@@ -197,4 +203,4 @@ def forces(m, phases, x, v, out):
         out[i] = force(m, phases[i], x[i], v[i])
 
 
-dp.register(ElasticModel, rhs, event, n_events, direction, state_size, transition)
+dp.register(ElasticModel, rhs, event, n_events, direction, state_size, transition, event_offset)
