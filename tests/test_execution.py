@@ -325,18 +325,21 @@ def test_the_models_source_hash_follows_the_files(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.hostile("hang")
-def test_a_design_of_a_million_runs_gives_an_estimate_and_needs_yes(tmp_path):
+def test_a_design_of_ten_million_runs_gives_an_estimate_and_needs_yes(tmp_path):
+    # 10^7 elastic runs: hours on any machine (10^6 at ~1 ms a run on 2 workers is under the 10 min
+    # that needs --yes, and runs)
     levels = ",".join(f"level_{k}" for k in range(1, 11))
     rows = [f"{n},{s},{u}," + ",".join(str(v0 + dv * k) for k in range(10))
             for n, s, u, v0, dv in [("A", "Fu", "N", 0, 5), ("B", "n1", "rpm", 150, 10), ("C", "Jt", "-", 1, 0.5),
-                                    ("D", "Kc", "-", 1, 0.1), ("E", "lw", "mm", 4, 0.5), ("F", "k", "-", 0.1, 0.1)]]
+                                    ("D", "Kc", "-", 1, 0.1), ("E", "lw", "mm", 4, 0.5), ("F", "k", "-", 0.1, 0.1),
+                                    ("G", "j", "mm", 0.016, 0.016)]]
     (tmp_path / "f.csv").write_text(f"factor,symbol,unit,{levels}\n" + "\n".join(rows) + "\n")
     t0 = time.monotonic()
     proc = subprocess.run(_doe(tmp_path, "r.csv", model="elastic"), capture_output=True, text=True,
                           timeout=120, stdin=subprocess.DEVNULL)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
-    assert lines[0].startswith("labtool: error: this design is 1000000 runs x ") and "pass --yes" in lines[0]
+    assert lines[0].startswith("labtool: error: this design is 10000000 runs x ") and "pass --yes" in lines[0]
     assert time.monotonic() - t0 < 120
     assert not parts_folder(tmp_path / "r.csv").exists() and not (tmp_path / "r.csv").exists()
 

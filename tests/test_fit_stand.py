@@ -92,9 +92,11 @@ def test_the_report_shows_the_identified_model_beside_the_nominal_one(recording,
 def test_an_interrupted_fit_says_so_and_writes_nothing(recording, tmp_path):
     out = tmp_path / "fit.json"
     proc = subprocess.Popen([LABTOOL, "fit", str(recording), "--model", "rigid", "--free", "backlash,restitution",
-                             "--accuracy", "standard", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--accuracy", "standard", "--revolutions", "20", "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, "COLUMNS": "200"})
     # the first progress line (after 2 s of work): the fit is under way, in the models' compiled loops
+    # (20 revolutions a model run: the whole fit takes far longer than the 3 s before the signal)
     # most of the time (Ctrl-C there surfaces as numba's SystemError; labtool.cli says "interrupted")
     first = proc.stderr.readline()
     assert first.startswith("fit:"), first
