@@ -20,6 +20,18 @@ def console(stderr: bool = False):
     return con
 
 
+def terminal_confirm():
+    """``confirm(question) -> bool`` asking yes/no (default no) on stderr when a user sits at a
+    terminal (stdin and stderr both are one); None otherwise, so a script gets the refusal line
+    instead of a prompt it cannot answer (common.budget.check)."""
+    import sys
+
+    if not (sys.stdin.isatty() and sys.stderr.isatty()):
+        return None
+    import typer
+    return lambda question: typer.confirm(question, default=False, err=True)
+
+
 class ProgressLines:
     """Progress when stderr is not a terminal (a pipe, a CI log): the current step with the time
     since the start, at most every ``period`` s and not before ``quiet`` s, so a long command is

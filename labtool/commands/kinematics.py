@@ -1,7 +1,6 @@
 """``labtool kinematics``: kinematic analysis of the paper's mechanism at constant cam speed."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -58,8 +57,9 @@ def kinematics(
         est = budget.probe_linear(lambda n: analyze(mech, program, rpm, fu, jt_factor, n_points=int(n)),
                                   (2_000, 50_000), points, "point",
                                   nbytes=lambda d: d.nbytes * (3.1 if output is not None else 2.1), large_factor=2.0)
-        confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
-        budget.check(est, f"--points {points}", max_seconds, "use fewer --points", confirm)
+        from labtool.output import terminal_confirm
+
+        budget.check(est, f"--points {points}", max_seconds, "use fewer --points", terminal_confirm())
     ds = analyze(mech, program, rpm, fu, jt_factor, n_points=points)
     s = rise_summary(ds)
     cut = undercut(mech, program)

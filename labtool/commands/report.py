@@ -39,9 +39,10 @@ def _check_budget(models, modes, accuracy, revolutions, robustness, max_seconds)
         peak = max(peak, est.bytes * len(modes))
         bases.append(f"{model}: {est.basis}, {runs} runs")
     if seconds > 0:
-        confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
+        from labtool.output import terminal_confirm
+
         budget.check(budget.Estimate(seconds, peak, "; ".join(bases)), f"--revolutions {revolutions}", max_seconds,
-                     "use fewer --revolutions", confirm)
+                     "use fewer --revolutions", terminal_confirm())
 
 
 def _split(value: str) -> list[str]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -122,8 +121,9 @@ def _check_budget(scene, model: str, revolutions: float, max_seconds: float, wri
     est = budget.probe_linear(lambda n: run(scene.replace(revolutions=float(n)), model).dataset,
                               (2, 4), revolutions, "revolution",
                               nbytes=lambda ds: ds.nbytes * (3.0 if writes else 2.0))
-    confirm = (lambda q: typer.confirm(q, default=False, err=True)) if sys.stdin.isatty() and sys.stderr.isatty() else None
-    budget.check(est, f"--revolutions {revolutions:g}", max_seconds, "use fewer --revolutions", confirm)
+    from labtool.output import terminal_confirm
+
+    budget.check(est, f"--revolutions {revolutions:g}", max_seconds, "use fewer --revolutions", terminal_confirm())
 
 
 _LABELS = {
