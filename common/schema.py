@@ -53,6 +53,12 @@ class SchemaError(InputError):
 
 def load_toml(path, what: str = "TOML file") -> dict:
     """Read and parse a TOML file; any problem is an InputError naming ``what`` and the file."""
+    return parse_toml(read_toml_bytes(path, what), f"{what} {shown(Path(path))}")
+
+
+def read_toml_bytes(path, what: str = "TOML file") -> bytes:
+    """The bytes of a TOML file, read once (a regular file of at most MAX_TOML_BYTES); any problem
+    is an InputError naming ``what`` and the file. For a caller that also hashes what it parses."""
     path = Path(path)
     name = shown(path)
     try:
@@ -65,12 +71,11 @@ def load_toml(path, what: str = "TOML file") -> dict:
         if size > MAX_TOML_BYTES:
             raise InputError(f"{what} {name} is {size / 2**20:.0f} MB; a {what} is at most "
                              f"{MAX_TOML_BYTES >> 20} MB of TOML text")
-        raw = path.read_bytes()
+        return path.read_bytes()
     except FileNotFoundError:
         raise InputError(f"cannot read {what} {name}: not found") from None
     except OSError as exc:
         raise InputError(f"cannot read {what} {name}: {exc.strerror or exc}") from None
-    return parse_toml(raw, f"{what} {name}")
 
 
 def parse_toml(raw: bytes | str, where: str) -> dict:

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import InputError
-from common.schema import Number, String, Table, load_toml, parse_toml
+from common.names import shown
+from common.schema import Number, String, Table, parse_toml, read_toml_bytes
 from common.units import DEG, MM, RPM
 
 _UNIT_SCALE = {"_mm": MM, "_deg": DEG, "_rpm": RPM}
@@ -218,8 +219,9 @@ class Mechanism:
     @classmethod
     def from_toml(cls, path: str | Path) -> "Mechanism":
         """A user's mechanism file (common.schema: types, bounds and unknown keys checked)."""
-        doc = load_toml(path, what="mechanism file")
-        return cls.from_dict(doc, source=str(path), sha256=hashlib.sha256(Path(path).read_bytes()).hexdigest())
+        raw = read_toml_bytes(path, what="mechanism file")      # read once: what is parsed is what is hashed
+        doc = parse_toml(raw, f"mechanism file {shown(Path(path))}")
+        return cls.from_dict(doc, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
 
     @classmethod
     def from_toml_text(cls, text: str, source: str = "<text>") -> "Mechanism":
