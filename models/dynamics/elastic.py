@@ -46,11 +46,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
-from scipy.special import beta as beta_function
 
 from common.errors import InputError, SolverError
-from models.dynamics import events, reference, validity
-from models.dynamics.contact import N_EXP, contact_stiffness, static_penetration
+from models.dynamics import events, validity
+from models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
 from models.dynamics.kernels import dopri5 as dp
 from models.dynamics.kernels import elastic_nb as eq
 from models.dynamics.kinematic import cam_speed
@@ -190,7 +189,7 @@ def model_struct(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, omega1=0.0) -
 
 def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
               rtol=1e-8, atol=(1e-13, 1e-9), max_step=np.inf, solver="compiled", method="RK45",
-              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, omega1=0.0, stats=None, model=None):
+              max_steps=MAX_STEPS, max_segments=MAX_SEGMENTS, omega1=0.0, stats=None, model=None, raw=False):
     """Integrate M x'' = F - drive over the grid, phase by phase: (segments, event rows).
 
     segments: list of (phase, run) with ``run.t`` the step times and ``run(t)`` the dense output
@@ -199,7 +198,10 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     or None for the model's start (static equilibrium; with no drive at the start, at rest until it
     departs from zero). ``solver``: "compiled" (Dormand-Prince 5(4) of kernels.dopri5) or "scipy"
     (solve_ivp with ``method``). ``stats`` (dict) receives nfev and n_steps. ``model``: the
-    ``model_struct`` of these arguments when the caller has it already.
+    ``model_struct`` of these arguments when the caller has it already. ``raw``: a compiled run
+    that starts at t = 0 returns ``(None, rows, out)`` instead, ``out`` the loop's own arrays
+    (kernels.dopri5.run, read by ``_raw_outputs``) without a Python object per phase; any other
+    run returns its segments as without ``raw``.
     """
     tg = np.asarray(t_grid, dtype=float)
     model = model_struct(tg, drive_grid, m_grid, kc, gap, damping, omega1) if model is None else model
@@ -217,19 +219,29 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     if solver == "compiled":
         if method != "RK45":
             raise InputError("the compiled loop is Dormand-Prince 5(4) (RK45) only")
-        status, t_fail, _, phases, rows, nfev, nst = dp.unpack(dp.run(model, ctl, ph0, y_start, float(t0)),
-                                                               lambda row: 2)
+        out = dp.run(model, ctl, ph0, y_start, float(t0))
+        if raw and t0 == 0:
+            status, t_fail, nst, nev, nfev = out[0], out[1], out[3], out[5], out[6]
+            _count(stats, nfev, nst)
+            _raise_for(status, t_fail, max_steps, max_segments)
+            return None, out[15][:nev].copy(), out
+        status, t_fail, _, phases, rows, nfev, nst = dp.unpack(out, lambda row: 2)
     else:
+        from models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
         status, t_fail, _, phases, rows, nfev, nst = reference.run(model, eq, ctl, ph0, y_start, float(t0),
                                                                    method=method, name="elastic model")
-    if stats is not None:
-        stats["nfev"] = stats.get("nfev", 0) + nfev
-        stats["n_steps"] = stats.get("n_steps", 0) + nst
+    _count(stats, nfev, nst)
     _raise_for(status, t_fail, max_steps, max_segments)
     segments = [(int(p.row[0]), p.sol) for p in phases]
     if t0 > 0:
         segments.insert(0, (int(phase), AtRest(0.0, float(t0), float(x0))))
-    return segments, rows
+    return (segments, rows, None) if raw else (segments, rows)
+
+
+def _count(stats, nfev: int, nst: int) -> None:
+    if stats is not None:
+        stats["nfev"] = stats.get("nfev", 0) + int(nfev)
+        stats["n_steps"] = stats.get("n_steps", 0) + int(nst)
 
 
 def _raise_for(status: int, t_fail: float, max_steps: int, max_segments: int) -> None:
@@ -248,11 +260,13 @@ def _raise_for(status: int, t_fail: float, max_steps: int, max_segments: int) ->
 def contact_period(kc: float, m: float, force: float) -> float:
     """Period (s) of small oscillations of a mass m (kg) on the contact loaded by force (N)."""
     force = max(abs(force), 1.0)
-    k_lin = (10.0 / 9.0) * force / float(static_penetration(force, kc))
+    k_lin = (10.0 / 9.0) * force / float(penetration_under(float(force), float(kc)))
     return 2.0 * math.pi * math.sqrt(m / k_lin)
 
 
-_BOUNCE_INTEGRAL = beta_function(1.0 / (N_EXP + 1.0), 0.5) / (N_EXP + 1.0)   # int_0^1 du / sqrt(1 - u^(n+1))
+# int_0^1 du / sqrt(1 - u^(n+1)) = B(1/(n+1), 1/2) / (n+1), the beta function from gammas (scipy.special.beta's value)
+_BOUNCE_INTEGRAL = (math.gamma(1.0 / (N_EXP + 1.0)) * math.gamma(0.5) / math.gamma(1.0 / (N_EXP + 1.0) + 0.5)
+                    / (N_EXP + 1.0))
 
 
 def bounce_time(kc: float, m, v):
@@ -348,14 +362,12 @@ def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str |
     values (MR13D and x_el extremes, jumps, impacts), from numpy arrays. The refusals of
     ``simulate`` are the same (validity.elastic_after on the deformation); the energy-balance
     warning, which needs the contact force and the geometry at every output instant, is not made."""
-    run = _solve(scene, reading, solver, preset, stats)
-    t, x, _, phase, grid_index = _outputs(run.tab, run.segments)
-    terms = output_terms(scene, run.tab, t, grid_index, geometry=False)
-    m_static = terms.at_speed(run.tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
+    run = _solve(scene, reading, solver, preset, stats, raw=True)
+    t, x, _, phase, _ = _outputs(run.tab, run.segments) if run.raw is None else _raw_outputs(run.tab, run.raw)
     cols = {"deformation": _deformation(x, run.model.gap), "contact_phase": phase, "phi1": run.tab.omega1 * t}
     ev = events.columns(events.from_rows(run.rows))
     ind = empty_indicators()
-    ind.update(_table3(x, m_static, ev))
+    ind.update(_table3(x, kinetostatic_moment(scene, run.tab), ev))
     validity.elastic_after(scene, cols, ind)
     return ind
 
@@ -370,10 +382,12 @@ class _Run:
     rows: np.ndarray
     kc: float
     warnings: list
+    raw: tuple | None = None      # the compiled loop's own arrays (``integrate(raw=True)``), segments None
 
 
-def _solve(scene: Scene, reading: str, solver, preset, stats) -> _Run:
-    """The tables, the loop and its event rows (impact columns not yet completed)."""
+def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False) -> _Run:
+    """The tables, the loop and its event rows (impact columns not yet completed); ``raw``: see
+    ``integrate``."""
     if reading not in READINGS:
         raise InputError(f"elastic model reading must be one of {', '.join(READINGS)}, got '{reading}'")
     warnings = validity.check_scene(scene)
@@ -388,21 +402,23 @@ def _solve(scene: Scene, reading: str, solver, preset, stats) -> _Run:
     warnings += validity.elastic_before(scene, tab)
     f_scale = max(float(np.max(np.abs(tab.R31))), 1.0)
     period = contact_period(kc, float(np.min(tab.M)), f_scale)
-    x_scale = float(static_penetration(f_scale, kc))
+    x_scale = float(penetration_under(f_scale, float(kc)))
     atol = (preset["atol"] * x_scale, preset["atol"] * x_scale * 2.0 * math.pi / period)
     loop_stats = {} if stats is None else stats
     t0 = time.perf_counter()
     model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
-    segments, rows = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"], atol=atol,
-                               max_step=period / preset["steps_per_period"], solver=solver,
-                               method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats, model=model)
+    segments, rows, *out = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"],
+                                     atol=atol, max_step=period / preset["steps_per_period"], solver=solver,
+                                     method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats,
+                                     model=model, raw=raw)
     loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
-    return _Run(tab, model, segments, rows, kc, warnings)
+    return _Run(tab, model, segments, rows, kc, warnings, out[0] if out else None)
 
 
 def _table3(x, m_static, ev: dict) -> dict:
-    """Table 3's indicators from the output samples of x_el (m) and the kinetostatic MR13D (N m)
-    and the event record's columns (one definition for both paths)."""
+    """Table 3's indicators from the output samples of x_el (m), the kinetostatic MR13D (N m) on
+    the uniform output grid (``kinetostatic_moment``) and the event record's columns (one
+    definition for both paths)."""
     return dict(
         MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
         xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
@@ -418,10 +434,10 @@ def _deformation(x, gap: float):
 
 def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: float) -> dict:
     """The indicators from the dataset's columns (numpy arrays, ``_dataset``) and event record."""
-    x, m_static, m_contact = (cols[k] for k in ("x_el", "MR13D_static", "MR13D"))
+    x, m_contact = cols["x_el"], cols["MR13D"]
     ind = empty_indicators()
     ind.update(
-        **_table3(x, m_static, ev),
+        **_table3(x, cols["MR13D_static"][cols["grid_index"] >= 0], ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
@@ -496,6 +512,42 @@ def _outputs(tab: Tables, segments):
     return t, y[0], y[1], phases[seg], out_grid[:m]
 
 
+def _raw_outputs(tab: Tables, out):
+    """``_outputs`` of a compiled run from the loop's own arrays (``integrate(raw=True)``): the same
+    instants and values (the same ``merge_outputs`` pass over the same steps), without a Python
+    object per phase."""
+    nst, nph = out[3], out[4]
+    st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first = out[7:15]
+    first = ph_first[:nph]
+    last = np.empty(nph, dtype=np.int64)
+    last[:-1] = first[1:] - 1
+    last[-1] = nst - 1
+    grid = output_grid(tab)
+    size = grid.size + nst + nph
+    out_t, out_y = np.empty(size), np.empty((2, size))
+    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+    m = dp.merge_outputs(grid, ph_t0[:nph], ph_t1[:nph], first, last, st_t, st_h, st_y, st_Q, out_t, out_y,
+                         out_seg, out_grid)
+    phases = ph_row[:nph, 0].astype(np.int64)
+    return out_t[:m], out_y[0, :m], out_y[1, :m], phases[out_seg[:m]], out_grid[:m]
+
+
+def kinetostatic_moment(scene: Scene, tab: Tables) -> np.ndarray:
+    """The kinetostatic MR13D (N m) on the uniform output grid (``output_grid``), from the per-process
+    table of ``output_terms``: the values of the dataset's MR13D_static at its grid instants. Its
+    extremes are Table 3's (MR13D)max and min: a function of the cam angle alone, taken on the
+    grid so that they do not depend on where the solver put its steps (they would move with the
+    preset by ~1e-9 relative)."""
+    return _grid_terms(scene, tab).at_speed(tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
+
+
+def _grid_terms(scene: Scene, tab: Tables) -> AngleTerms:
+    mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
+    grid = output_grid(tab)
+    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene))
+    return cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), linkage="spline"))
+
+
 def output_grid(tab: Tables) -> np.ndarray:
     """The uniform output instants (s) of a run over tab's span: OUTPUT_STEP or finer."""
     t_end = tab.t[-1]
@@ -514,9 +566,7 @@ def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True
     same functions of the same angles. ``geometry=False``: what the kinetostatic moment alone needs
     (``AngleTerms.at_speed``): the contact geometry and phi2 are left out (None)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    grid = output_grid(tab)
-    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene))
-    on_grid = cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), linkage="spline"))
+    on_grid = _grid_terms(scene, tab)
     at_grid = np.flatnonzero(grid_index >= 0)
     at_step = np.flatnonzero(grid_index < 0)
     at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)
@@ -549,7 +599,7 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
     gap = model.gap
     deformation = _deformation(x, gap)
 
-    cols = {"time": t}
+    cols = {"time": t, "grid_index": grid_index}
 
     def var(data, units, long_name):
         return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})

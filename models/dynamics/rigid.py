@@ -42,7 +42,7 @@ import numpy as np
 import xarray as xr
 
 from common.errors import InputError, SolverError
-from models.dynamics import events, reference, validity
+from models.dynamics import events, validity
 from models.dynamics.contact import contact_stiffness
 from models.dynamics.kernels import dopri5 as dp
 from models.dynamics.kernels import rigid_nb as eq
@@ -187,6 +187,7 @@ def integrate(model: eq.RigidModel, omega1_0: float, preset: dict, t_rise: float
     if solver == "compiled":
         status, t, y, raw, rows, nfev, nst = dp.unpack(dp.run(model, ctl, ph0, y0, float(t_start)), width)
     else:
+        from models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
         status, t, y, raw, rows, nfev, nst = reference.run(model, eq, ctl, ph0, y0, float(t_start),
                                                            method=preset["method"], name="rigid model")
     if stats is not None:
