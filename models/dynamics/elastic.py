@@ -141,8 +141,11 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     and span (models.mechanism.cam_tables): only the combination with the operating point is per run.
     """
     omega1 = cam_speed(scene)
-    terms = grid_terms(scene.mechanism, scene.program, span, n_points, _until(scene))
-    return _tables(scene, terms, terms.phi1 / omega1, omega1)
+    mech, until = scene.mechanism, _until(scene)
+    terms = grid_terms(mech, scene.program, span, n_points, until)
+    arm = cached(("elastic_arm", mech.cache_key, scene.program, float(span), int(n_points), until),
+                 lambda: _arm(mech, terms.alpha))
+    return _tables(scene, terms, terms.phi1 / omega1, omega1, arm)
 
 
 def _until(scene: Scene):
@@ -152,10 +155,16 @@ def _until(scene: Scene):
     return float(np.nextafter(scene.program.rise_angle, 0.0)) if scene.rise_only else None
 
 
-def _tables(scene: Scene, terms, t, omega1: float) -> Tables:
+def _arm(mech, alpha):
+    """l cos(alpha) (m), the normal force's arm about D, at pressure angles alpha (rad)."""
+    return mech.l * np.cos(alpha)
+
+
+def _tables(scene: Scene, terms, t, omega1: float, arm=None) -> Tables:
+    """``arm``: ``_arm`` of terms.alpha when the caller has it (speed-independent, cached)."""
     mech = scene.mechanism
     op = terms.at_speed(omega1, scene.Fu, scene.jt_factor)
-    arm = mech.l * np.cos(terms.alpha)
+    arm = _arm(mech, terms.alpha) if arm is None else arm
     it = transmission_ratio(mech, scene.omega1_nominal)
     M1, M2, M = reduced_masses(cam_inertia(mech, it), op["J_follower"], terms.Db1, terms.Db2)
     return Tables(t=t, phi1=terms.phi1, R31=op["MR13D"] / arm, M=M, M1=M1, M2=M2, arm=arm,
@@ -538,14 +547,19 @@ def kinetostatic_moment(scene: Scene, tab: Tables) -> np.ndarray:
     extremes are Table 3's (MR13D)max and min: a function of the cam angle alone, taken on the
     grid so that they do not depend on where the solver put its steps (they would move with the
     preset by ~1e-9 relative)."""
-    return _grid_terms(scene, tab).at_speed(tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
+    return _grid_terms(scene, tab, geometry=False).at_speed(tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
 
 
-def _grid_terms(scene: Scene, tab: Tables) -> AngleTerms:
+def _grid_terms(scene: Scene, tab: Tables, geometry: bool = True) -> AngleTerms:
+    """The kinematic terms on the uniform output grid, per process (per mechanism, law, cam speed
+    and span): the linkage evaluated exactly (a few ms once per speed; the stroke spline would load
+    scipy.interpolate, 0.5 s, into every process of a sweep); ``geometry=False`` without the contact
+    geometry (what the kinetostatic moment needs; its other terms are the same values)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
     grid = output_grid(tab)
-    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene))
-    return cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), linkage="spline"))
+    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene),
+           geometry)
+    return cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), geometry=geometry))
 
 
 def output_grid(tab: Tables) -> np.ndarray:
@@ -559,14 +573,14 @@ _MOMENT_TERMS = ("dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load")      # wha
 
 
 def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True):
-    """The kinematic terms (cam_tables.angle_terms, the linkage from its stroke spline) at the output
-    instants t (s) of ``_outputs``: those on the uniform output grid (grid_index >= 0) from a
-    per-process table shared by every run of the same mechanism, law, cam speed and span (a sweep
-    over the load, Jt, j or Kc reuses it), the solver's step instants computed; elementwise the
-    same functions of the same angles. ``geometry=False``: what the kinetostatic moment alone needs
+    """The kinematic terms (cam_tables.angle_terms) at the output instants t (s) of ``_outputs``:
+    those on the uniform output grid (grid_index >= 0) from a per-process table shared by every run
+    of the same mechanism, law, cam speed and span (a sweep over the load, Jt, j or Kc reuses it,
+    ``_grid_terms``), the solver's step instants computed with the linkage from its stroke spline
+    (1e-13 relative of the exact linkage, 4x cheaper at thousands of arbitrary instants). ``geometry=False``: what the kinetostatic moment alone needs
     (``AngleTerms.at_speed``): the contact geometry and phi2 are left out (None)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    on_grid = _grid_terms(scene, tab)
+    on_grid = _grid_terms(scene, tab, geometry)
     at_grid = np.flatnonzero(grid_index >= 0)
     at_step = np.flatnonzero(grid_index < 0)
     at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)

@@ -114,7 +114,13 @@ def from_rows(rows, extra: dict | None = None) -> dict:
 def _names(values, codes: dict) -> np.ndarray:
     arr = np.asarray(values).reshape(-1)
     if arr.dtype.kind in "iuf":
-        arr = np.array([codes[int(v)] for v in arr], dtype=object)
+        # integer codes (what the compiled loops write) -> names, vectorised: the codes are 0 .. n-1
+        table = np.array([codes[k] for k in range(len(codes))])
+        ints = arr.astype(np.int64)
+        if ints.size and (ints.min() < 0 or ints.max() >= table.size or np.any(ints != arr)):
+            raise ValueError(f"event record: unknown code(s) {sorted(set(arr.tolist()) - set(codes))}; "
+                             f"known: {sorted(codes)}")
+        return table[ints] if arr.size else np.zeros(0, dtype="<U10")
     out = np.asarray(arr, dtype=str) if arr.size else np.zeros(0, dtype="<U10")
     bad = set(out.tolist()) - set(codes.values())
     if bad:

@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from common.errors import InputError, SolverError
+from models.dynamics.jit import jit
 from models.mechanism.cam_profile import contact_geometry
 from models.mechanism.memo import cached
 from models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
@@ -65,7 +66,8 @@ def _groove(mech, program) -> dict:
         g = contact_geometry(mech, program, phi1)
         rho, alpha = g["rho_pitch"], np.degrees(np.abs(g["pressure_angle"]))
         convex, concave = rho > 0, rho < 0
-        return dict(phi1=phi1, rho_inner=np.abs(g["rho_inner"]), rho_outer=np.abs(g["rho_outer"]), alpha_max=float(alpha.max()), alpha_at=float(phi1[alpha.argmax()]),
+        return dict(phi1=phi1, rho_inner=np.abs(g["rho_inner"]), rho_outer=np.abs(g["rho_outer"]),
+                    rho_flank_min=float(min(np.abs(g["rho_inner"]).min(), np.abs(g["rho_outer"]).min())), alpha_max=float(alpha.max()), alpha_at=float(phi1[alpha.argmax()]),
                     rho_min=float(np.abs(rho).min()), rho_at=float(phi1[np.abs(rho).argmin()]),
                     convex_min=float(rho[convex].min()) if convex.any() else math.inf,
                     concave_min=float(-rho[concave].max()) if concave.any() else math.inf)
@@ -118,17 +120,38 @@ def speed_drop(scene, tab) -> tuple[float, np.ndarray]:
     mech = scene.mechanism
     it = transmission_ratio(mech, scene.omega1_nominal)
     J_cam = cam_inertia(mech, it)
-    omega1 = tab.omega1
-    J_follower = tab.M2 * tab.Db2**2 / 4.0                       # eq. (16) inverted
-    T_follower = 0.5 * J_follower * tab.omega2**2
-    power = tab.MR13D * tab.omega2
-    W = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(tab.t))])
-    W_static = W - (T_follower - T_follower[0])
-    J_red = J_cam + J_follower * (tab.omega2 / omega1) ** 2
-    energy = J_red[0] * omega1**2 - 2.0 * W_static
-    drop = 1.0 - float(np.sqrt(max(float(np.min(energy / J_red)), 0.0))) / omega1
-    slack = 0.5 * energy + float(motor_moment_on_cam(mech, 0.0, it)) * (tab.phi1 - tab.phi1[0])
+    slack = np.empty(tab.t.size)
+    lowest = _energy_budget(tab.t, tab.phi1, tab.M2, tab.Db2, tab.omega2, tab.MR13D, float(J_cam), float(tab.omega1),
+                            float(motor_moment_on_cam(mech, 0.0, it)), slack)
+    drop = 1.0 - float(np.sqrt(max(lowest, 0.0))) / tab.omega1
     return drop, slack
+
+
+@jit
+def _energy_budget(t, phi1, M2, Db2, omega2, MR13D, J_cam, omega1, motor0, slack):
+    """``speed_drop``'s balance in one pass (the numpy expressions' arithmetic, in their order):
+    the work W of the trapezoidal MR13D omega2 integral, J'' = M2 Db2^2 / 4 (eq. 16 inverted),
+    energy = Jred(0) omega1^2 - 2 (W - (T'' - T''(0))); writes slack = energy / 2 + motor0 (phi1 -
+    phi1(0)) and returns min(energy / Jred) (NaN if any is)."""
+    n = t.size
+    J0 = M2[0] * Db2[0] ** 2 / 4.0
+    T0 = 0.5 * J0 * omega2[0] ** 2
+    J_red0 = J_cam + J0 * (omega2[0] / omega1) ** 2
+    e_start = J_red0 * omega1 ** 2
+    W = 0.0
+    lowest = np.inf
+    for i in range(n):
+        J = M2[i] * Db2[i] ** 2 / 4.0
+        if i > 0:
+            W += 0.5 * (MR13D[i] * omega2[i] + MR13D[i - 1] * omega2[i - 1]) * (t[i] - t[i - 1])
+        W_static = W - (0.5 * J * omega2[i] ** 2 - T0)
+        J_red = J_cam + J * (omega2[i] / omega1) ** 2
+        energy = e_start - 2.0 * W_static
+        r = energy / J_red
+        if r < lowest or r != r:
+            lowest = r
+        slack[i] = 0.5 * energy + motor0 * (phi1[i] - phi1[0])
+    return lowest
 
 
 def elastic_before(scene, tab) -> list[str]:
@@ -160,7 +183,9 @@ def elastic_after(scene, cols, ind) -> list[str]:
         raise SolverError(f"the contact deformation reaches {d_max * 1e3:.3g} mm, at least the roller radius "
                           f"{mech.R * 1e3:g} mm: the contact law is meaningless there; check the contact "
                           "stiffness (--kc-factor, --contact-length-mm) and the load")
-    if d_max > 0:
+    if d_max > DEFORMATION_WARN * min(mech.R, _groove(mech, scene.program)["rho_flank_min"]):
+        # the flank's radius where the deformation is largest (the bound above is the smallest
+        # radius of either flank: below it no scale can make the warning)
         k = int(np.argmax(deformation))
         g = _groove(mech, scene.program)
         flank = g["rho_inner"] if int(np.asarray(cols["contact_phase"])[k]) == 0 else g["rho_outer"]
