@@ -70,6 +70,9 @@ def test_plan_tiles_the_missing_ranges_and_shrinks_at_the_end():
     sizes = [b - a for a, b in chunked.plan([(0, 100_000)], cost, 2, 1.0, None)]
     assert sizes[0] == 1000 and sizes[-1] < 1000 and sum(sizes) == 100_000
     assert max(sizes) <= chunked.MAX_CHUNK
+    # the shrinking tail stops at MIN_TASK_S of work (50 items of 1 ms), except the very last chunk
+    floor = round(chunked.MIN_TASK_S / 1e-3)
+    assert min(sizes[:-1]) == floor and sizes[-1] <= floor
 
 
 def test_cost_skips_the_first_item_of_each_worker():
