@@ -556,20 +556,33 @@ def _grid_terms(scene: Scene, tab: Tables, geometry: bool = True) -> AngleTerms:
     scipy.interpolate, 0.5 s, into every process of a sweep); ``geometry=False`` without the contact
     geometry (what the kinetostatic moment needs; its other terms are the same values)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    grid = output_grid(tab)
-    key = ("elastic_output_terms", mech.cache_key, program, float(omega1), float(grid[-1]), grid.size, _until(scene),
-           geometry)
-    return cached(key, lambda: angle_terms(mech, program, omega1 * grid, _until(scene), geometry=geometry))
+    return cached(_grid_key(scene, tab, geometry),
+                  lambda: angle_terms(mech, program, omega1 * output_grid(tab), _until(scene), geometry=geometry))
+
+
+def _grid_key(scene: Scene, tab: Tables, geometry: bool) -> tuple:
+    return ("elastic_output_terms", scene.mechanism.cache_key, scene.program, float(tab.omega1), float(tab.t[-1]),
+            _output_size(tab.t[-1]), _until(scene), geometry)
 
 
 def output_grid(tab: Tables) -> np.ndarray:
     """The uniform output instants (s) of a run over tab's span: OUTPUT_STEP or finer."""
-    t_end = tab.t[-1]
-    return np.linspace(0.0, t_end, max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2))
+    return np.linspace(0.0, tab.t[-1], _output_size(tab.t[-1]))
+
+
+def _output_size(t_end: float) -> int:
+    return max(int(math.ceil(t_end / OUTPUT_STEP)) + 1, 2)
 
 
 _TERMS = ("psi", "dpsi", "ddpsi", "phi2", "J0", "dJ0", "M_gravity", "m_load", "alpha", "Db1", "Db2")
 _MOMENT_TERMS = ("dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load")      # what at_speed reads
+
+
+def _grid_block(scene: Scene, tab: Tables, names: tuple) -> np.ndarray:
+    """The terms ``names`` of ``_grid_terms`` stacked, (len(names), grid size), per process."""
+    geometry = names == _TERMS
+    return cached(_grid_key(scene, tab, geometry) + ("block", names),
+                  lambda: np.vstack([getattr(_grid_terms(scene, tab, geometry), name) for name in names]))
 
 
 def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True):
@@ -577,20 +590,29 @@ def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True
     those on the uniform output grid (grid_index >= 0) from a per-process table shared by every run
     of the same mechanism, law, cam speed and span (a sweep over the load, Jt, j or Kc reuses it,
     ``_grid_terms``), the solver's step instants computed with the linkage from its stroke spline
-    (1e-13 relative of the exact linkage, 4x cheaper at thousands of arbitrary instants). ``geometry=False``: what the kinetostatic moment alone needs
-    (``AngleTerms.at_speed``): the contact geometry and phi2 are left out (None)."""
+    (1e-13 relative of the exact linkage, 4x cheaper at thousands of arbitrary instants).
+    ``geometry=False``: what the kinetostatic moment alone needs (``AngleTerms.at_speed``): the
+    contact geometry and phi2 are left out (None)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    on_grid = _grid_terms(scene, tab, geometry)
+    names = _TERMS if geometry else _MOMENT_TERMS
+    on_grid = _grid_block(scene, tab, names)
     at_grid = np.flatnonzero(grid_index >= 0)
     at_step = np.flatnonzero(grid_index < 0)
     at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)
+    block = np.empty((len(names), t.size))        # one gather for all terms, row k = names[k]
+    block[:, at_grid] = on_grid[:, grid_index[at_grid]]
+    for k, name in enumerate(names):
+        block[k, at_step] = getattr(at_steps, name)
     fields = dict.fromkeys(_TERMS)
-    for name in _TERMS if geometry else _MOMENT_TERMS:
-        out = np.empty(t.size)
-        out[at_grid] = getattr(on_grid, name)[grid_index[at_grid]]
-        out[at_step] = getattr(at_steps, name)
-        fields[name] = out
+    fields.update(zip(names, block))
     return AngleTerms(phi1=omega1 * t, **fields)
+
+
+def _arm_rate(scene: Scene, tab: Tables) -> np.ndarray:
+    """d(l cos alpha)/dt (m/s) on the tables' grid (np.gradient), per process and cam speed."""
+    key = ("elastic_arm_rate", scene.mechanism.cache_key, scene.program, float(tab.omega1), float(tab.t[-1]),
+           tab.t.size, _until(scene))
+    return cached(key, lambda: np.gradient(tab.arm, tab.t))
 
 
 def _dataset(scene, run: _Run, reading, record: dict, outputs):
@@ -606,7 +628,7 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
     eq.forces(model, phase.astype(np.int64), x, v, F)
     drive = R31 if reading == "consistent" else -R31
     a = (F - drive) / M
-    darm = np.interp(t, tab.t, np.gradient(tab.arm, tab.t))
+    darm = np.interp(t, tab.t, _arm_rate(scene, tab))
     phi2 = exact.phi2 + x / arm                                           # eq. (19)
     omega2 = exact.omega2 + v / arm                                       # eq. (19)
     epsilon2 = exact.epsilon2 + a / arm - v * darm / arm**2               # d/dt of eq. (19)
