@@ -45,7 +45,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import xarray as xr
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
+    import xarray as xr
 
 from common.errors import InputError, SolverError
 from models.dynamics import events, validity
@@ -640,6 +643,7 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
     def var(data, units, long_name):
         return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
 
+    import xarray as xr
     ds = xr.Dataset(
         data_vars={
             "phi1": var(tab.omega1 * t, "rad", "cam angle (0 at rise start)"),

@@ -42,7 +42,10 @@ interior flank), ``impacts`` = impacts in both models.
 from __future__ import annotations
 
 import numpy as np
-import xarray as xr
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
+    import xarray as xr
 
 from common.errors import FileFormatError
 
@@ -214,6 +217,6 @@ def in_rise(ev, rise_angle: float) -> np.ndarray:
 def within_rise(ev, rise_angle: float):
     """The rows of ``in_rise`` (a Dataset's ``isel``, or a mapping's arrays indexed)."""
     keep = in_rise(ev, rise_angle)
-    if isinstance(ev, xr.Dataset):
+    if hasattr(ev, "isel"):                # a Dataset (without loading xarray for a mapping)
         return ev.isel({DIM: keep})
     return {name: np.asarray(values)[keep] for name, values in ev.items()}

@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import dataclasses
 
-import xarray as xr
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
+    import xarray as xr
 
 # indicator keys of the paper's Tables 2 and 3 (DESIGN.md, --json contract)
 INDICATORS = (

@@ -39,7 +39,10 @@ import time as _time
 from dataclasses import dataclass
 
 import numpy as np
-import xarray as xr
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
+    import xarray as xr
 
 from common.errors import InputError, SolverError
 from models.dynamics import events, validity
@@ -393,6 +396,7 @@ def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> xr.Dataset:
         "domega1": var(s["omega1"] - r["omega1"], "rad/s", "omega1rcj - omega1rfj (Figure 8c)"),
         **record,
     }
+    import xarray as xr
     ds = xr.Dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time from the start of the rise"})})
     ds.attrs.update({
         "title": "labtool rigid-element dynamic model (paper sec. 2.1.1, eqs 1-11)",

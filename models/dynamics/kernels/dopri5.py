@@ -439,10 +439,12 @@ def run(model, ctl, ph0, y0, t0):
     t0s, t1s, first step of each phase, event rows)."""
     nmax = ctl.n_state
     cap = min(ctl.max_steps, 4096)
-    st_t = np.zeros(cap)
-    st_h = np.zeros(cap)
-    st_y = np.zeros((cap, nmax))
-    st_Q = np.zeros((cap, nmax, 4))
+    # not zeroed: only the first n_steps rows are ever read, and zeroing the rest (~300 kB) would
+    # pull it through the cache at every call
+    st_t = np.empty(cap)
+    st_h = np.empty(cap)
+    st_y = np.empty((cap, nmax))
+    st_Q = np.empty((cap, nmax, 4))
     pcap = 64
     ph_row = np.zeros((pcap, PHASE_WIDTH))
     ph_t0 = np.zeros(pcap)
