@@ -16,7 +16,8 @@ import time
 
 from acquisition.device import Device, DeviceDisconnected, Event
 from acquisition.recorder import DiskFull, Recorder, _classify
-from common.errors import InputError
+from common.errors import InputError, Interrupted
+from common.files import inside_another_command
 
 
 @dataclasses.dataclass
@@ -67,6 +68,7 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     outcome, message, complete = "done", "duration reached", True
     t0 = time.perf_counter()
     stop = _StopRequest()
+    insist = None
     try:
         stop.install()
         device.start()
@@ -86,8 +88,10 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
                 on_block(block)
             if progress is not None:
                 progress(rec, time.perf_counter() - t0)
-    except KeyboardInterrupt:
-        outcome, message = "interrupted", "stopped by the user (Ctrl-C)"
+    except KeyboardInterrupt as exc:
+        name = signal.Signals(exc.signum).name if isinstance(exc, Interrupted) else "Ctrl-C"
+        outcome, message = "interrupted", f"stopped by the user ({name})"
+        insist = exc
     except DeviceDisconnected as exc:
         outcome, message = "disconnected", f"device disconnected: {exc}"
         _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message)))
@@ -107,6 +111,12 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         stop.restore()
         _try(device.stop)
         outcome, message, complete = _close(rec, outcome, message, complete)
+    # a recording that another command runs (labtool demo's acquire step): a stop signal ends that
+    # command too, once this file is closed, not only this recording (a second signal always does)
+    if stop.signum is not None and inside_another_command():
+        raise Interrupted(stop.signum) if stop.signum != signal.SIGINT else KeyboardInterrupt()
+    if insist is not None and inside_another_command():
+        raise insist
     wall = time.perf_counter() - t0
     return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
                      rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)

@@ -231,6 +231,26 @@ def _fsync(path: Path) -> None:
 
 
 # --- signals ---------------------------------------------------------------------------------
+_COMMAND_DEPTH = [0]         # labtool commands running in this process (one that another runs: 2)
+
+
+@contextlib.contextmanager
+def command_scope():
+    """The extent of one labtool command (labtool.cli.main); commands that a command runs (as
+    ``labtool demo`` runs ``acquire``) nest."""
+    _COMMAND_DEPTH[0] += 1
+    try:
+        yield
+    finally:
+        _COMMAND_DEPTH[0] -= 1
+
+
+def inside_another_command() -> bool:
+    """Does another labtool command run this one? Then a signal must end that command too, not
+    only what this one would stop (a recording)."""
+    return _COMMAND_DEPTH[0] > 1
+
+
 @contextlib.contextmanager
 def signals_interrupt(signals: Iterable[int] = (signal.SIGTERM, signal.SIGHUP)):
     """Inside the block, SIGTERM and SIGHUP raise :class:`Interrupted` (like Ctrl-C raises

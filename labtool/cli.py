@@ -19,7 +19,7 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
 from common.errors import Interrupted, LabtoolError, OutputError
-from common.files import describe_disk_error, disk_error, signals_interrupt
+from common.files import describe_disk_error, disk_error, command_scope, inside_another_command, signals_interrupt
 from common.names import shown
 
 app = typer.Typer(
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     _tolerant_stdio()
     _STATE["exit_at_disk_error"] = argv is None
-    with signals_interrupt():
+    with command_scope(), signals_interrupt():
         code = _run(argv)
     if argv is None:
         sys.exit(code)
@@ -124,6 +124,8 @@ def _run(argv) -> int:
         # click turns KeyboardInterrupt (and so Interrupted, for SIGTERM/SIGHUP) into Abort
         cause = exc if isinstance(exc, Interrupted) else exc.__cause__ or exc.__context__
         signum = cause.signum if isinstance(cause, Interrupted) else signal.SIGINT
+        if inside_another_command():      # a step of another command (labtool demo): that one ends too
+            raise (cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt()) from None
         typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); no output was left half-written",
                    err=True)
         return 128 + int(signum)
