@@ -19,7 +19,8 @@ except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
 from common.errors import Interrupted, LabtoolError, OutputError
-from common.files import describe_disk_error, disk_error, command_scope, inside_another_command, signals_interrupt
+from common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
+                          signals_interrupt)
 from common.names import shown
 
 app = typer.Typer(

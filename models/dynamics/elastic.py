@@ -419,12 +419,12 @@ def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False)
     loop_stats = {} if stats is None else stats
     t0 = time.perf_counter()
     model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
-    segments, rows, *out = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"],
-                                     atol=atol, max_step=period / preset["steps_per_period"], solver=solver,
-                                     method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats,
-                                     model=model, raw=raw)
+    result = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"], atol=atol,
+                       max_step=period / preset["steps_per_period"], solver=solver,
+                       method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats, model=model, raw=raw)
+    segments, rows, loop_arrays = result if raw else (*result, None)
     loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
-    return _Run(tab, model, segments, rows, kc, warnings, out[0] if out else None)
+    return _Run(tab, model, segments, rows, kc, warnings, loop_arrays)
 
 
 def _table3(x, m_static, ev: dict) -> dict:
@@ -511,17 +511,13 @@ def _outputs(tab: Tables, segments):
         first[k], last[k] = count, count + parts[-1][0].size - 1
         count += parts[-1][0].size
     t0s, hs, y0s, Qs = (np.ascontiguousarray(np.concatenate([p[i] for p in parts])) for i in range(4))
-    size = t_uniform.size + count + n_seg
-    out_t, out_y = np.empty(size), np.empty((2, size))
-    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
-    m = dp.merge_outputs(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid)
-    t, y, seg = out_t[:m], out_y[:, :m], out_seg[:m]
+    t, y, seg, grid_index = _merge(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, count)
     for k, (_, run) in enumerate(segments):
         if not isinstance(run, dp.DenseRun):
             sel = seg == k
             y[:, sel] = np.asarray(run(t[sel]), dtype=float).reshape(2, -1)
     phases = np.array([ph for ph, _ in segments], dtype=np.int64)
-    return t, y[0], y[1], phases[seg], out_grid[:m]
+    return t, y[0], y[1], phases[seg], grid_index
 
 
 def _raw_outputs(tab: Tables, out):
@@ -534,14 +530,19 @@ def _raw_outputs(tab: Tables, out):
     last = np.empty(nph, dtype=np.int64)
     last[:-1] = first[1:] - 1
     last[-1] = nst - 1
-    grid = output_grid(tab)
-    size = grid.size + nst + nph
+    t, y, seg, grid_index = _merge(output_grid(tab), ph_t0[:nph], ph_t1[:nph], first, last, st_t, st_h, st_y, st_Q,
+                                   nst)
+    return t, y[0], y[1], ph_row[:nph, 0].astype(np.int64)[seg], grid_index
+
+
+def _merge(grid, starts, ends, first, last, t0s, hs, y0s, Qs, n_steps: int):
+    """``dopri5.merge_outputs`` of phases (starts, ends, their steps first..last of t0s, hs, y0s,
+    Qs; n_steps of them) with the grid: (t, y (2, m), phase index, grid index or -1)."""
+    size = grid.size + n_steps + starts.size
     out_t, out_y = np.empty(size), np.empty((2, size))
     out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
-    m = dp.merge_outputs(grid, ph_t0[:nph], ph_t1[:nph], first, last, st_t, st_h, st_y, st_Q, out_t, out_y,
-                         out_seg, out_grid)
-    phases = ph_row[:nph, 0].astype(np.int64)
-    return out_t[:m], out_y[0, :m], out_y[1, :m], phases[out_seg[:m]], out_grid[:m]
+    m = dp.merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid)
+    return out_t[:m], out_y[:, :m], out_seg[:m], out_grid[:m]
 
 
 def kinetostatic_moment(scene: Scene, tab: Tables) -> np.ndarray:

@@ -65,9 +65,11 @@ def _groove(mech, program) -> dict:
         phi1 = np.linspace(0.0, 2.0 * math.pi, GROOVE_POINTS, endpoint=False)
         g = contact_geometry(mech, program, phi1)
         rho, alpha = g["rho_pitch"], np.degrees(np.abs(g["pressure_angle"]))
+        rho_inner, rho_outer = np.abs(g["rho_inner"]), np.abs(g["rho_outer"])
         convex, concave = rho > 0, rho < 0
-        return dict(phi1=phi1, rho_inner=np.abs(g["rho_inner"]), rho_outer=np.abs(g["rho_outer"]),
-                    rho_flank_min=float(min(np.abs(g["rho_inner"]).min(), np.abs(g["rho_outer"]).min())), alpha_max=float(alpha.max()), alpha_at=float(phi1[alpha.argmax()]),
+        return dict(phi1=phi1, rho_inner=rho_inner, rho_outer=rho_outer,
+                    rho_flank_min=float(min(rho_inner.min(), rho_outer.min())),
+                    alpha_max=float(alpha.max()), alpha_at=float(phi1[alpha.argmax()]),
                     rho_min=float(np.abs(rho).min()), rho_at=float(phi1[np.abs(rho).argmin()]),
                     convex_min=float(rho[convex].min()) if convex.any() else math.inf,
                     concave_min=float(-rho[concave].max()) if concave.any() else math.inf)
