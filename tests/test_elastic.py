@@ -378,3 +378,23 @@ def test_a_micro_bounce_inside_one_step_is_an_event_in_both_loops():
         out.append((list(zip(ev["event_kind"].values, ev["event_side"].values)), ev["event_time"].values))
     assert out[0][0] == out[1][0]
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("dip_s", [2e-5, 6e-5])
+def test_a_graze_inside_a_long_flight_step_is_a_landing(dip_s):
+    """A flight's steps are not capped at the contact's (PRESETS' cap_flight False): on a parabola
+    x = x0 + v0 t + a t^2 / 2 (M x'' = -drive, constant) the Dormand-Prince error estimate is zero
+    and the steps grow to milliseconds, while x dips below the interior flank for only ``dip_s``.
+    The event signs are still read every contact cap / EVENT_SUBSTEPS (here 12.5 us), so the
+    landing is found, at the parabola's first root (closed form)."""
+    a, cap, x0, gap = 10.0, 1e-4, 1e-3, 2e-3          # m/s^2, s, m, m
+    depth = 0.5 * a * (dip_s / 2) ** 2                # m below x = 0 at the bottom of the dip
+    v0 = -math.sqrt(2.0 * a * (x0 + depth))
+    t = np.linspace(0.0, 0.03, 31)
+    stats = {}
+    _, rows = E.integrate(t, np.full(t.size, -a), np.ones(t.size), 1e12, gap, y0=(x0, v0, E.FLIGHT),
+                          rtol=1e-8, atol=(1e-12, 1e-9), max_step=E.step_caps(cap, cap_flight=False), stats=stats)
+    t_root = (-v0 - math.sqrt(v0 * v0 - 2.0 * a * x0)) / a
+    assert stats["n_steps"] < 0.5 * t_root / cap                 # the flight's steps are longer than the cap
+    assert rows.shape[0] >= 1 and rows[0, EV.COL_KIND] == EV.KIND_CONTACT
+    assert rows[0, EV.COL_TIME] == pytest.approx(t_root, abs=1e-9)
