@@ -226,7 +226,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
         phase, t0, x0, v0 = eq.start(model)
     else:
         (x0, v0, phase), t0 = y0, 0.0
-    caps = np.minimum(np.broadcast_to(np.asarray(max_step, dtype=float), (3,)), t_end)   # one or one a mode
+    caps = np.minimum(np.broadcast_to(np.asarray(max_step, dtype=float), (3,)), t_end)   # one for all modes or one each
     ctl = dp.Controls(float(rtol), np.tile(np.asarray(atol, dtype=float), (3, 1)), caps, t_end, True,
                       int(max_steps), int(max_segments), EVENT_SUBSTEPS, ZENO_SEGMENTS, ZENO_DT, 2)
     ph0 = np.zeros(dp.PHASE_WIDTH)

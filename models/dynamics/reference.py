@@ -129,7 +129,8 @@ def run(model, eq, ctl, ph0, y0, t0: float, method: str = "DOP853", name: str = 
             return out.copy()
 
         sol = solve_ivp(fun, (t, ctl.t_bound), y[:n].copy(), method=method, rtol=ctl.rtol,
-                        atol=ctl.atol[int(frozen[0]), :n], max_step=ctl.max_step[int(frozen[0])], dense_output=True,
+                        atol=ctl.atol[int(frozen[0]), :n], max_step=ctl.max_step[int(frozen[0])],
+                        dense_output=True,
                         events=[_event_function(calls, eq, model, frozen, e) for e in range(ne)])
         nfev += sol.nfev
         nst += sol.t.size - 1

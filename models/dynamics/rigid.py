@@ -184,7 +184,8 @@ def integrate(model: eq.RigidModel, omega1_0: float, preset: dict, t_rise: float
     rtol = float(preset["rtol"])
     atol = np.array([[rtol * 1e-3, rtol * 1e-2, 0.0, 0.0], [rtol * 1e-3, rtol * 1e-2, rtol * 1e-6, rtol * 1e-3]])
     t_bound = t_start + TIME_BOUND_FACTOR * model.phi1_end / max(omega1_0, 1e-9) + 1.0
-    ctl = dp.Controls(rtol, atol, np.full(atol.shape[0], float(preset["max_step"] * t_rise)), float(t_bound), False, int(max_steps),
+    max_step = np.full(atol.shape[0], float(preset["max_step"] * t_rise))      # s, the same in every mode
+    ctl = dp.Controls(rtol, atol, max_step, float(t_bound), False, int(max_steps),
                       int(preset["max_events"]), EVENT_SUBSTEPS, ZENO_PHASES, ZENO_DT, 4)
     width = lambda row: 2 if int(row[0]) == CONTACT else 4  # noqa: E731
     if solver == "compiled":

@@ -341,6 +341,13 @@ def _fires(g0, g1, dirn):
     return (g0 <= 0.0 and g1 >= 0.0 and dirn > 0) or (g0 >= 0.0 and g1 <= 0.0 and dirn < 0)
 
 
+@kernel(inline="always")
+def _event_at(model, ph, which, t, y0, h, Q, s, tmp):
+    """Event ``which`` at the fraction s of the step (its dense output; tmp receives the state)."""
+    dense_eval(y0, h, Q, s, tmp)
+    return event(model, ph, which, t + s * h, tmp)
+
+
 @kernel
 def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     """Step fraction in (lo, hi] where event ``which`` changes sign (bisection on the dense output)."""
@@ -348,8 +355,7 @@ def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
-        dense_eval(y0, h, Q, mid, tmp)
-        g = event(model, ph, which, t + mid * h, tmp)
+        g = _event_at(model, ph, which, t, y0, h, Q, mid, tmp)
         if (g_lo <= 0.0) == (g <= 0.0) and g != 0.0:
             lo, g_lo = mid, g
         else:
@@ -365,11 +371,7 @@ def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     s_prev, g_prev = 0.0, g0
     for k in range(1, nsub + 1):
         s = k / nsub
-        if k == nsub:
-            g = g1
-        else:
-            dense_eval(y0, h, Q, s, tmp)
-            g = event(model, ph, which, t + s * h, tmp)
+        g = g1 if k == nsub else _event_at(model, ph, which, t, y0, h, Q, s, tmp)
         if _fires(g_prev, g, dirn):
             return bisect(model, ph, which, t, y0, h, Q, s_prev, s, g_prev, tmp)
         s_prev, g_prev = s, g
@@ -391,11 +393,7 @@ def crossing_bounded(model, ph, which, t, y0, h, Q, g0, g1, c, ds_min, tmp):
     while s_prev < 1.0:
         free = (abs(g_prev) - margin) / d if d > 0.0 else 2.0
         s = min(s_prev + max(free, ds_min), 1.0)
-        if s >= 1.0:
-            g = g1
-        else:
-            dense_eval(y0, h, Q, s, tmp)
-            g = event(model, ph, which, t + s * h, tmp)
+        g = g1 if s >= 1.0 else _event_at(model, ph, which, t, y0, h, Q, s, tmp)
         if _fires(g_prev, g, dirn):
             return bisect(model, ph, which, t, y0, h, Q, s_prev, s, g_prev, tmp)
         s_prev, g_prev = s, g
