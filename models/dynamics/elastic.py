@@ -58,7 +58,8 @@ from models.dynamics.kernels import elastic_nb as eq
 from models.dynamics.kinematic import cam_speed
 from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
-from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms
+from models.dynamics.jit import kernel
+from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, operating_point
 from models.mechanism.memo import cached
 from models.mechanism.motor import cam_inertia, transmission_ratio
 
@@ -114,17 +115,47 @@ class Tables:
     omega1: float          # rad/s
 
 
+@kernel(inline="always")
+def _reduced_mass(J_cam, J_follower, Db1, Db2):
+    """Eq. (16) at one angle: (M1, M2, M) kg; M1 = inf where Db1 = 0 (see reduced_masses)."""
+    M1 = 4.0 * J_cam / Db1**2 if Db1 > 0 else np.inf
+    M2 = 4.0 * J_follower / Db2**2
+    return M1, M2, M2 / (1.0 + M2 / M1)          # = M1 M2 / (M1 + M2), and M2 where M1 = inf
+
+
 def reduced_masses(J_cam, J_follower, Db1, Db2):
-    """M1, M2, M (kg) of eq. (16): M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2, M = M1 M2/(M1+M2).
+    """M1, M2, M (kg) of eq. (16): M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2, M = M1 M2/(M1+M2),
+    element by element over the broadcast arguments (kg m^2, kg m^2, m, m).
 
     Where the normal passes through A (Db1 = 0) the cam cannot move along it: M1 = inf, M = M2.
     """
-    Db1 = np.asarray(Db1, dtype=float)
-    with np.errstate(divide="ignore"):
-        M1 = np.where(Db1 > 0, 4.0 * J_cam / np.where(Db1 > 0, Db1, 1.0) ** 2, np.inf)
-    M2 = 4.0 * np.asarray(J_follower) / np.asarray(Db2) ** 2
-    M = M2 / (1.0 + M2 / M1)          # = M1 M2 / (M1 + M2), and M2 where M1 = inf
-    return M1, M2, M
+    J_cam, J_follower, Db1, Db2 = (np.ascontiguousarray(a, dtype=float).ravel() for a in
+                                   np.broadcast_arrays(J_cam, J_follower, Db1, Db2))
+    out = np.empty((3, Db1.size))
+    _masses(J_cam, J_follower, Db1, Db2, out)
+    return out[0], out[1], out[2]
+
+
+@kernel
+def _masses(J_cam, J_follower, Db1, Db2, out):
+    for i in range(Db1.size):
+        out[0, i], out[1, i], out[2, i] = _reduced_mass(J_cam[i], J_follower[i], Db1[i], Db2[i])
+
+
+_point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
+
+
+@kernel
+def _operating_tables(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, arm, Db1, Db2, omega1, Fu, jt_factor, J_cam,
+                      out):
+    """``_tables``' per-angle arithmetic in one pass (cam_tables.operating_point, _reduced_mass and
+    R31 = MR13D / arm): rows of ``out`` omega2, epsilon2, MR13D, M1, M2, M, R31."""
+    for i in range(dpsi.size):
+        omega2, epsilon2, moment, J = _point(dpsi[i], ddpsi[i], J0[i], dJ0[i], M_gravity[i], m_load[i],
+                                             omega1, Fu, jt_factor)
+        M1, M2, M = _reduced_mass(J_cam, J, Db1[i], Db2[i])
+        out[0, i], out[1, i], out[2, i] = omega2, epsilon2, moment
+        out[3, i], out[4, i], out[5, i], out[6, i] = M1, M2, M, moment / arm[i]
 
 
 def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None,
@@ -169,13 +200,16 @@ def _arm(mech, alpha):
 def _tables(scene: Scene, terms, t, omega1: float, arm=None) -> Tables:
     """``arm``: ``_arm`` of terms.alpha when the caller has it (speed-independent, cached)."""
     mech = scene.mechanism
-    op = terms.at_speed(omega1, scene.Fu, scene.jt_factor)
     arm = _arm(mech, terms.alpha) if arm is None else arm
     it = transmission_ratio(mech, scene.omega1_nominal)
-    M1, M2, M = reduced_masses(cam_inertia(mech, it), op["J_follower"], terms.Db1, terms.Db2)
-    return Tables(t=t, phi1=terms.phi1, R31=op["MR13D"] / arm, M=M, M1=M1, M2=M2, arm=arm,
-                  phi2=terms.phi2, omega2=op["omega2"], epsilon2=op["epsilon2"], MR13D=op["MR13D"],
-                  alpha=terms.alpha, Db1=terms.Db1, Db2=terms.Db2, omega1=omega1)
+    rows = np.empty((7, t.size))
+    _operating_tables(*(np.ascontiguousarray(a, dtype=float) for a in (terms.dpsi, terms.ddpsi, terms.J0, terms.dJ0,
+                                                                       terms.M_gravity, terms.m_load, arm, terms.Db1,
+                                                                       terms.Db2)),
+                      float(omega1), float(scene.Fu), float(scene.jt_factor), float(cam_inertia(mech, it)), rows)
+    omega2, epsilon2, MR13D, M1, M2, M, R31 = rows
+    return Tables(t=t, phi1=terms.phi1, R31=R31, M=M, M1=M1, M2=M2, arm=arm, phi2=terms.phi2, omega2=omega2,
+                  epsilon2=epsilon2, MR13D=MR13D, alpha=terms.alpha, Db1=terms.Db1, Db2=terms.Db2, omega1=omega1)
 
 
 # ---------------------------------------------------------------- the integration

@@ -26,7 +26,7 @@ import numba
 from numba import njit
 
 _ROOT = Path(__file__).resolve().parents[2]          # the tree that holds models/ and common/
-_SEED = "from models.dynamics.jit import jit"      # a module that compiles code
+_SEED = "from models.dynamics.jit import"          # a module that compiles code (jit or kernel)
 _IMPORT = re.compile(r"^\s*(?:from\s+((?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)|import\s+((?:models|common)(?:\.\w+)*))",
                      re.MULTILINE)
 

@@ -55,11 +55,20 @@ class AngleTerms:
         """The operating point's kinematics at these angles (cam at constant omega1 rad/s, load Fu
         N, inertia factor Jt): dict of arrays omega2 (rad/s), epsilon2 (rad/s^2), MR13D (N m),
         J_follower (kg m^2, J''red with Jt applied)."""
-        omega2 = self.dpsi * omega1
-        epsilon2 = self.ddpsi * omega1**2
-        J = jt_factor * self.J0
-        MR13D = J * epsilon2 + 0.5 * (jt_factor * self.dJ0) * omega2**2 - self.M_gravity - Fu * self.m_load
+        omega2, epsilon2, MR13D, J = operating_point(self.dpsi, self.ddpsi, self.J0, self.dJ0, self.M_gravity,
+                                                     self.m_load, omega1, Fu, jt_factor)
         return dict(omega2=omega2, epsilon2=epsilon2, MR13D=MR13D, J_follower=J)
+
+
+def operating_point(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_factor):
+    """The module doc's combination of the terms (arrays, or floats at one angle) with an operating
+    point (omega1 rad/s, Fu N, Jt): (omega2 rad/s, epsilon2 rad/s^2, MR13D N m, J''red kg m^2).
+    Plain arithmetic only, so that compiled code (models.dynamics.elastic) runs this same source."""
+    omega2 = dpsi * omega1
+    epsilon2 = ddpsi * omega1**2
+    J = jt_factor * J0
+    MR13D = J * epsilon2 + 0.5 * (jt_factor * dJ0) * omega2**2 - M_gravity - Fu * m_load
+    return omega2, epsilon2, MR13D, J
 
 
 def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None = None,
