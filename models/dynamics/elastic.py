@@ -427,7 +427,7 @@ def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str |
     cols = {"deformation": _deformation(x, run.model.gap), "contact_phase": phase, "phi1": run.tab.omega1 * t}
     ev = events.columns(events.from_rows(run.rows))
     ind = empty_indicators()
-    ind.update(_table3(x, kinetostatic_moment(scene, run.tab), ev))
+    ind.update(_table3(x, kinetostatic_extremes(scene, run.tab), ev))
     validity.elastic_after(scene, cols, ind)
     return ind
 
@@ -476,12 +476,12 @@ def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False)
     return _Run(tab, model, segments, rows, kc, warnings, loop_arrays)
 
 
-def _table3(x, m_static, ev: dict) -> dict:
-    """Table 3's indicators from the output samples of x_el (m), the kinetostatic MR13D (N m) on
-    the uniform output grid (``kinetostatic_moment``) and the event record's columns (one
-    definition for both paths)."""
+def _table3(x, m_static: tuple, ev: dict) -> dict:
+    """Table 3's indicators from the output samples of x_el (m), the largest and smallest
+    kinetostatic MR13D (N m) on the uniform output grid (``kinetostatic_extremes``) and the event
+    record's columns (one definition for both paths)."""
     return dict(
-        MR13D_max_Nm=float(m_static.max()), MR13D_min_Nm=float(m_static.min()),
+        MR13D_max_Nm=float(m_static[0]), MR13D_min_Nm=float(m_static[1]),
         xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
         # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
         jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
@@ -498,7 +498,7 @@ def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: 
     x, m_contact = cols["x_el"], cols["MR13D"]
     ind = empty_indicators()
     ind.update(
-        **_table3(x, cols["MR13D_static"][cols["grid_index"] >= 0], ev),
+        **_table3(x, _extremes(cols["MR13D_static"][cols["grid_index"] >= 0]), ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
@@ -594,13 +594,30 @@ def _merge(grid, starts, ends, first, last, t0s, hs, y0s, Qs, n_steps: int):
     return out_t[:m], out_y[:, :m], out_seg[:m], out_grid[:m]
 
 
-def kinetostatic_moment(scene: Scene, tab: Tables) -> np.ndarray:
-    """The kinetostatic MR13D (N m) on the uniform output grid (``output_grid``), from the per-process
-    table of ``output_terms``: the values of the dataset's MR13D_static at its grid instants. Its
-    extremes are Table 3's (MR13D)max and min: a function of the cam angle alone, taken on the
-    grid so that they do not depend on where the solver put its steps (they would move with the
-    preset by ~1e-9 relative)."""
-    return _grid_terms(scene, tab, geometry=False).at_speed(tab.omega1, scene.Fu, scene.jt_factor)["MR13D"]
+def _extremes(values) -> tuple:
+    return float(values.max()), float(values.min())
+
+
+def kinetostatic_extremes(scene: Scene, tab: Tables) -> tuple:
+    """(largest, smallest) kinetostatic MR13D (N m) on the uniform output grid (``output_grid``),
+    from the per-process table of ``output_terms``: the extremes of the dataset's MR13D_static at
+    its grid instants, Table 3's (MR13D)max and min. A function of the cam angle alone, taken on
+    the grid so that they do not depend on where the solver put its steps (they would move with
+    the preset by ~1e-9 relative). One compiled pass, no array (NaN if any value is)."""
+    g = _grid_terms(scene, tab, geometry=False)
+    return _moment_extremes(g.dpsi, g.ddpsi, g.J0, g.dJ0, g.M_gravity, g.m_load, float(tab.omega1),
+                            float(scene.Fu), float(scene.jt_factor))
+
+
+@kernel
+def _moment_extremes(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_factor):
+    hi, lo = -np.inf, np.inf
+    for i in range(dpsi.size):
+        moment = _point(dpsi[i], ddpsi[i], J0[i], dJ0[i], M_gravity[i], m_load[i], omega1, Fu, jt_factor)[2]
+        if moment != moment:
+            return np.nan, np.nan
+        hi, lo = max(hi, moment), min(lo, moment)
+    return hi, lo
 
 
 def _grid_terms(scene: Scene, tab: Tables, geometry: bool = True) -> AngleTerms:
