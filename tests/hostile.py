@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import resource
+import signal
 import subprocess
 import sys
 import time
@@ -44,7 +45,17 @@ def command(args: list) -> list:
 CHILD_MEMORY = 8 << 30     # address-space limit of every child: a runaway request fails, the machine stays
 
 
+def default_signals():
+    """In a child before exec: SIGINT, SIGHUP and SIGTERM back to their default actions. An ignored
+    signal is inherited across exec, and labtool rightly keeps it ignored (``nohup labtool ...``);
+    a suite started under nohup or as a background job of a script (SIGINT ignored) would
+    otherwise send its test signals to children that ignore them."""
+    for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _limit():
+    default_signals()
     resource.setrlimit(resource.RLIMIT_AS, (CHILD_MEMORY, CHILD_MEMORY))
 
 

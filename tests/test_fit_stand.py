@@ -20,6 +20,7 @@ import pytest
 import xarray as xr
 
 from common.files import write_netcdf
+from hostile import default_signals
 from identification.fit import FitRequest, identify, load_fit
 from labtool.cli import main
 
@@ -93,7 +94,7 @@ def test_an_interrupted_fit_says_so_and_writes_nothing(recording, tmp_path):
     out = tmp_path / "fit.json"
     proc = subprocess.Popen([LABTOOL, "fit", str(recording), "--model", "rigid", "--free", "backlash,restitution",
                              "--accuracy", "standard", "--revolutions", "20", "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=default_signals,
                             text=True, env={**os.environ, "COLUMNS": "200"})
     # the first progress line (after 2 s of work): the fit is under way, in the models' compiled loops
     # (20 revolutions a model run: the whole fit takes far longer than the 3 s before the signal)
