@@ -62,7 +62,7 @@ def test_base_circles_match_paper_eq18_and_reduced_masses():
     Db1_paper = 2 * (mech.l * np.cos(a) - mech.d * np.cos(mech.psi0 + psi + a))
     np.testing.assert_allclose(g["Db1"], np.abs(Db1_paper), atol=2e-6)
     np.testing.assert_allclose(g["Db2"], 2 * mech.l * np.cos(a), rtol=1e-9)
-    M1, M2, M = E.reduced_masses(0.2, 0.008, np.array([0.0, 0.04]), np.array([0.12, 0.1]))
+    M1, M2, M = np.array([E._reduced_mass(0.2, 0.008, Db1, Db2) for Db1, Db2 in ((0.0, 0.12), (0.04, 0.1))]).T
     assert M1[0] == np.inf and M[0] == pytest.approx(M2[0])
     assert M[1] == pytest.approx(M1[1] * M2[1] / (M1[1] + M2[1]))
     assert M1[1] == pytest.approx(4 * 0.2 / 0.04**2) and M2[1] == pytest.approx(4 * 0.008 / 0.1**2)

@@ -117,29 +117,12 @@ class Tables:
 
 @kernel(inline="always")
 def _reduced_mass(J_cam, J_follower, Db1, Db2):
-    """Eq. (16) at one angle: (M1, M2, M) kg; M1 = inf where Db1 = 0 (see reduced_masses)."""
+    """M1, M2, M (kg) of eq. (16) at one angle: M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2,
+    M = M1 M2/(M1+M2) (J kg m^2, Db m). Where the normal passes through A (Db1 = 0) the cam cannot
+    move along it: M1 = inf, M = M2."""
     M1 = 4.0 * J_cam / Db1**2 if Db1 > 0 else np.inf
     M2 = 4.0 * J_follower / Db2**2
     return M1, M2, M2 / (1.0 + M2 / M1)          # = M1 M2 / (M1 + M2), and M2 where M1 = inf
-
-
-def reduced_masses(J_cam, J_follower, Db1, Db2):
-    """M1, M2, M (kg) of eq. (16): M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2, M = M1 M2/(M1+M2),
-    element by element over the broadcast arguments (kg m^2, kg m^2, m, m).
-
-    Where the normal passes through A (Db1 = 0) the cam cannot move along it: M1 = inf, M = M2.
-    """
-    J_cam, J_follower, Db1, Db2 = (np.ascontiguousarray(a, dtype=float).ravel() for a in
-                                   np.broadcast_arrays(J_cam, J_follower, Db1, Db2))
-    out = np.empty((3, Db1.size))
-    _masses(J_cam, J_follower, Db1, Db2, out)
-    return out[0], out[1], out[2]
-
-
-@kernel
-def _masses(J_cam, J_follower, Db1, Db2, out):
-    for i in range(Db1.size):
-        out[0, i], out[1, i], out[2, i] = _reduced_mass(J_cam[i], J_follower[i], Db1[i], Db2[i])
 
 
 _point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
