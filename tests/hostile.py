@@ -54,7 +54,8 @@ def default_signals():
         signal.signal(sig, signal.SIG_DFL)
 
 
-def _limit():
+def _prepare_child():
+    """preexec_fn of every labtool child: default signal actions and the CHILD_MEMORY limit."""
     default_signals()
     resource.setrlimit(resource.RLIMIT_AS, (CHILD_MEMORY, CHILD_MEMORY))
 
@@ -62,13 +63,13 @@ def _limit():
 def run(args: list, cwd=None, timeout: float = 240) -> tuple[int, str]:
     """labtool in a child process: (exit code, stderr); a timeout is a test failure (a hang)."""
     proc = subprocess.run(command(args), cwd=cwd, env=env(), capture_output=True, timeout=timeout,
-                          preexec_fn=_limit)
+                          preexec_fn=_prepare_child)
     return proc.returncode, proc.stderr.decode("utf-8", "replace")
 
 
 def start(args: list, cwd=None) -> subprocess.Popen:
     return subprocess.Popen(command(args), cwd=cwd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            preexec_fn=_limit)
+                            preexec_fn=_prepare_child)
 
 
 def one_error_line(code: int, err: str) -> str:
