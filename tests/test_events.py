@@ -31,6 +31,22 @@ def test_counts_have_one_definition_each():
         events.flights(ev, side="left")
 
 
+def test_the_row_counts_equal_the_named_counts():
+    # the rows the compiled loops write (integer codes), in every order of kinds and sides
+    rng = np.random.default_rng(7)
+    for n in (0, 1, 5, 40):
+        rows = np.full((n, events.N_SHARED + 2), np.nan)
+        rows[:, events.COL_KIND] = rng.integers(0, 2, n)
+        rows[:, events.COL_SIDE] = rng.integers(0, 2, n)
+        rows[:, events.COL_PERSISTENT] = rng.integers(0, 2, n)
+        ev = events.columns(events.from_rows(rows))
+        for side in (None, events.INTERIOR, events.EXTERIOR):
+            assert events.flights_in_rows(rows, side) == events.flights(ev, side)
+            assert events.impacts_in_rows(rows, side) == events.impacts(ev, side)
+    with pytest.raises(ValueError, match="side"):
+        events.flights_in_rows(rows, side="left")
+
+
 def test_integer_codes_and_names_agree_and_bad_values_are_refused():
     by_code = events.record([0.0], [0.0], [events.KIND_CONTACT], [events.SIDE_EXTERIOR], [0.1], [0.0], [0.0], [False])
     assert by_code["event_kind"][1][0] == "contact" and by_code["event_side"][1][0] == "exterior"

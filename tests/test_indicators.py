@@ -91,3 +91,22 @@ def test_doe_rows_are_the_indicator_paths():
         for key in doe.responses_for(model):
             assert res["indicators"][key] == (None if ind[key] is None else float(ind[key]))
     assert math.isfinite(res["wall_s"])
+
+
+@pytest.mark.parametrize("reading", ["consistent", "literal"])
+def test_the_compiled_indicator_pass_is_the_general_path(reading):
+    """``elastic.simulate_indicators`` runs tables to counts in one compiled pass; the general path
+    (``_solve``, the loop's arrays, numpy) gives the same numbers or the same refusal."""
+    from models.dynamics import elastic
+
+    def general(scene):
+        return elastic._general_indicators(scene, reading, None, None, None)
+
+    def compiled(scene):
+        return elastic.simulate_indicators(scene, reading=reading)
+
+    for run in RUNS:
+        for gap in ("physical", "closed"):
+            scene = _scene(run, elastic_gap=gap)
+            a, b = _outcome(lambda s, _: general(s), scene, None), _outcome(lambda s, _: compiled(s), scene, None)
+            assert a == b, (run.run, gap, a, b)

@@ -58,10 +58,10 @@ from models.dynamics.kernels import elastic_nb as eq
 from models.dynamics.kinematic import cam_speed
 from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
-from models.dynamics.jit import kernel
+from models.dynamics.jit import jit, kernel
 from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, operating_point
 from models.mechanism.memo import cached
-from models.mechanism.motor import cam_inertia, transmission_ratio
+from models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
 
 INTERIOR, FLIGHT, EXTERIOR = eq.INTERIOR, eq.FLIGHT, eq.EXTERIOR
 READINGS = ("consistent", "literal")
@@ -300,6 +300,7 @@ def step_caps(contact_cap: float, cap_flight: bool = True) -> np.ndarray:
     return caps
 
 
+@jit
 def contact_period(kc: float, m: float, force: float) -> float:
     """Period (s) of small oscillations of a mass m (kg) on the contact loaded by force (N)."""
     force = max(abs(force), 1.0)
@@ -402,17 +403,180 @@ def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str |
                         preset: dict | None = None, stats: dict | None = None) -> dict:
     """The paper's Table 3 indicators of ``simulate`` (result.INDICATORS; those this model does not
     compute None), without its Dataset: the same loop, the same output instants and the same
-    values (MR13D and x_el extremes, jumps, impacts), from numpy arrays. The refusals of
-    ``simulate`` are the same (validity.elastic_after on the deformation); the energy-balance
-    warning, which needs the contact force and the geometry at every output instant, is not made."""
+    values (MR13D and x_el extremes, jumps, impacts). The refusals of ``simulate`` are the same
+    (the motor's stall, the solver's failures, the deformation's range); its warnings are not made
+    (the energy balance needs the contact force and the geometry at every output instant).
+
+    A compiled run that starts loaded (nearly all) goes through one compiled pass, tables to counts
+    (``_indicator_pass``); ``stats["loop_s"]`` is then that whole pass. A scipy run, or one whose
+    drive is zero at the start (at rest until it departs), takes the general path."""
+    preset = PRESETS[scene.accuracy] if preset is None else preset
+    solver = SOLVERS[scene.accuracy] if solver is None else solver
+    if solver != "compiled" or preset.get("method", "RK45") != "RK45" or reading not in READINGS:
+        return _general_indicators(scene, reading, solver, preset, stats)
+    validity.check_scene(scene)
+    kc = contact_stiffness(scene.contact_length, scene.kc_factor)
+    gap = contact_gap(scene)
+    span, n_grid = _span(scene)
+    omega1 = cam_speed(scene)
+    mech = scene.mechanism
+    block = _angle_block(scene, span, n_grid)
+    it = transmission_ratio(mech, scene.omega1_nominal)
+    check_motor = scene.omega1_mode == "var"
+    motor0 = float(motor_moment_on_cam(mech, 0.0, it)) if check_motor else 0.0
+    t_end = float(block[0, -1] / omega1)
+    g = _grid_terms(scene, omega1, t_end, geometry=False)
+    loop_stats = {} if stats is None else stats
+    t0 = time.perf_counter()
+    code, vals, rows = _indicator_pass(
+        block, float(omega1), float(scene.Fu), float(scene.jt_factor), float(cam_inertia(mech, it)), check_motor,
+        motor0, 1.0 if reading == "consistent" else -1.0, float(kc), float(gap), float(scene.contact_damping),
+        float(preset["rtol"]), float(preset["atol"]), float(preset["steps_per_period"]),
+        bool(preset.get("cap_flight", True)), _uniform_grid(t_end), g.dpsi, g.ddpsi, g.J0, g.dJ0, g.M_gravity,
+        g.m_load)
+    if code == _STALLS:
+        raise validity.motor_stall(float(block[0, int(vals[_K_STALL])]))
+    if code == _STARTS_AT_REST:
+        return _general_indicators(scene, reading, solver, preset, stats)
+    loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
+    _count(stats, int(vals[_NFEV]), int(vals[_NSTEPS]))
+    _raise_for(code, vals[_T_FAIL], MAX_STEPS, MAX_SEGMENTS)
+    ind = empty_indicators()
+    ind.update(_table3((vals[_X_MAX], vals[_X_MIN]), (vals[_M_MAX], vals[_M_MIN]), rows,
+                       events.flights_in_rows, events.impacts_in_rows))
+    validity.deformation_range(scene, float(vals[_D_MAX]), int(vals[_D_PHASE]), float(vals[_D_PHI1]))
+    return ind
+
+
+def _general_indicators(scene: Scene, reading: str, solver, preset, stats) -> dict:
+    """``simulate_indicators`` through ``_solve`` and the loop's own arrays (any solver)."""
     run = _solve(scene, reading, solver, preset, stats, raw=True)
     t, x, _, phase, _ = _outputs(run.tab, run.segments) if run.raw is None else _raw_outputs(run.tab, run.raw)
     cols = {"deformation": _deformation(x, run.model.gap), "contact_phase": phase, "phi1": run.tab.omega1 * t}
-    ev = events.columns(events.from_rows(run.rows))
     ind = empty_indicators()
-    ind.update(_table3(x, kinetostatic_extremes(scene, run.tab), ev))
+    ind.update(_table3(_extremes(x), kinetostatic_extremes(scene, run.tab), events.columns(events.from_rows(run.rows))))
     validity.elastic_after(scene, cols, ind)
     return ind
+
+
+def _span(scene: Scene) -> tuple:
+    """(cam angle a run covers, rad; points of its tables' grid)."""
+    span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
+    return span, (GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle))
+
+
+_ANGLE_ROWS = ("phi1", "dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load", "arm", "Db1", "Db2")
+
+
+def _angle_block(scene: Scene, span: float, n_points: int) -> np.ndarray:
+    """``grid_tables``' speed-independent inputs stacked, rows _ANGLE_ROWS (arm = l cos alpha, the
+    rest grid_terms'), per process."""
+    mech, until = scene.mechanism, _until(scene)
+
+    def build():
+        terms = grid_terms(mech, scene.program, span, n_points, until)
+        return np.vstack([_arm(mech, terms.alpha) if name == "arm" else getattr(terms, name) for name in _ANGLE_ROWS])
+    return cached(("elastic_angle_block", mech.cache_key, scene.program, float(span), int(n_points), until), build)
+
+
+# what ``_indicator_pass`` returns beside dopri5's status codes, and the layout of its values
+_STALLS, _STARTS_AT_REST = 100, 101
+_T_FAIL, _K_STALL, _X_MAX, _X_MIN, _D_MAX, _D_PHASE, _D_PHI1, _M_MAX, _M_MIN, _NFEV, _NSTEPS = range(11)
+
+
+@jit
+def _nan_min(a, b):
+    """np.minimum of two floats (NaN if either is)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a < b else b
+
+
+@jit
+def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, sign, kc, gap, damping,
+                    rtol, atol_frac, steps_per_period, cap_flight, grid, dpsi, ddpsi, J0, dJ0, M_gravity, m_load):
+    """``simulate_indicators``' run in one compiled pass, the same arithmetic as the general path in
+    its order: the tables (``_tables``) on the angle grid ``block`` (rows _ANGLE_ROWS) at the cam
+    speed omega1 (rad/s); the motor's energy budget (validity.elastic_before) if ``check_motor``;
+    the scales, tolerances and step caps of ``_solve``; the loop (dopri5.run, what ``integrate``
+    runs); its outputs merged on the uniform ``grid`` (``_raw_outputs``); their x and deformation
+    extremes; the kinetostatic MR13D extremes on the grid's terms (``kinetostatic_extremes``).
+    ``sign`` +1 for the consistent reading, -1 for the literal. Returns (code, values, event rows):
+    code dopri5's status, or _STALLS (values[_K_STALL] the first angle index) or _STARTS_AT_REST
+    (no drive at t = 0: the general path runs it); values in the layout _T_FAIL ... _NSTEPS."""
+    vals = np.zeros(11)
+    no_rows = np.empty((0, dp.EV_WIDTH))
+    n = block.shape[1]
+    t = block[0] / omega1
+    rows = np.empty((7, n))
+    _operating_tables(block[1], block[2], block[3], block[4], block[5], block[6], block[7], block[8], block[9],
+                      omega1, Fu, jt_factor, J_cam, rows)
+    if check_motor:
+        slack = np.empty(n)
+        validity._energy_budget(t, block[0], rows[4], block[9], rows[0], rows[2], J_cam, omega1, motor0, slack)
+        for i in range(n):
+            if slack[i] < 0.0:
+                vals[_K_STALL] = i
+                return _STALLS, vals, no_rows
+    tab = np.empty((3, n))
+    f, m_min = -np.inf, np.inf
+    for i in range(n):
+        r, mass = rows[6, i], rows[5, i]
+        tab[eq.TG, i], tab[eq.DRIVE, i], tab[eq.MASS, i] = t[i], sign * r, mass
+        a = abs(r)
+        if f == f and (a > f or a != a):          # np.max: NaN wins
+            f = a
+        if m_min == m_min and (mass < m_min or mass != mass):
+            m_min = mass
+    f_scale = 1.0 if 1.0 > f else f                # max(f, 1.0)
+    period = contact_period(kc, m_min, f_scale)
+    x_scale = penetration_under(f_scale, kc)
+    t_end = t[n - 1]
+    atol = np.empty((3, 2))
+    caps = np.empty(3)
+    for mode in range(3):
+        atol[mode, 0], atol[mode, 1] = atol_frac * x_scale, atol_frac * x_scale * 2.0 * math.pi / period
+        cap = period / steps_per_period if (cap_flight or mode != FLIGHT) else np.inf      # step_caps
+        caps[mode] = _nan_min(cap, t_end)
+    model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE)
+    phase, t0, x0, v0 = eq.start(model)
+    if t0 != 0.0:
+        return _STARTS_AT_REST, vals, no_rows
+    ctl = dp.Controls(rtol, atol, caps, t_end, True, MAX_STEPS, MAX_SEGMENTS, EVENT_SUBSTEPS, ZENO_SEGMENTS, ZENO_DT, 2)
+    ph0 = np.zeros(dp.PHASE_WIDTH)
+    ph0[0] = phase
+    y0 = np.empty(2)
+    y0[0], y0[1] = x0, v0
+    out = dp.run(model, ctl, ph0, y0, 0.0)
+    status, nst, nph, nev = out[0], out[3], out[4], out[5]
+    vals[_T_FAIL], vals[_NFEV], vals[_NSTEPS] = out[1], out[6], nst
+    if status != dp.OK:
+        return status, vals, no_rows
+    st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first = out[7], out[8], out[9], out[10], out[11], out[12], \
+        out[13], out[14]
+    first = ph_first[:nph].copy()
+    last = np.empty(nph, dtype=np.int64)
+    last[:-1] = first[1:] - 1
+    last[-1] = nst - 1
+    size = grid.size + nst + nph
+    out_t, out_y = np.empty(size), np.empty((2, size))
+    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+    m = dp.merge_outputs(grid, ph_t0[:nph].copy(), ph_t1[:nph].copy(), first, last, st_t, st_h, st_y, st_Q,
+                         out_t, out_y, out_seg, out_grid)
+    x_max, x_min, d_max, k = -np.inf, np.inf, -np.inf, 0
+    for i in range(m):                               # x.max(), x.min(), _deformation's max and argmax
+        x = out_y[0, i]
+        if x_max == x_max and (x > x_max or x != x):
+            x_max = x
+        if x_min == x_min and (x < x_min or x != x):
+            x_min = x
+        d = -x if x < 0 else (x - gap if x > gap else 0.0)
+        if d > d_max:
+            d_max, k = d, i
+    vals[_X_MAX], vals[_X_MIN], vals[_D_MAX] = x_max, x_min, d_max
+    vals[_D_PHASE], vals[_D_PHI1] = ph_row[out_seg[k], 0], omega1 * out_t[k]
+    vals[_M_MAX], vals[_M_MIN] = _moment_extremes(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_factor)
+    return status, vals, out[15][:nev].copy()
 
 
 @dataclass(frozen=True)
@@ -436,9 +600,7 @@ def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False)
     warnings = validity.check_scene(scene)
     kc = contact_stiffness(scene.contact_length, scene.kc_factor)
     gap = contact_gap(scene)
-    span = scene.program.rise_angle if scene.rise_only else 2.0 * math.pi * scene.revolutions
-    n_grid = GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle)
-    tab = grid_tables(scene, span, n_grid)
+    tab = grid_tables(scene, *_span(scene))
     drive = tab.R31 if reading == "consistent" else -tab.R31
     preset = PRESETS[scene.accuracy] if preset is None else preset
     solver = SOLVERS[scene.accuracy] if solver is None else solver
@@ -459,15 +621,17 @@ def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False)
     return _Run(tab, model, segments, rows, kc, warnings, loop_arrays)
 
 
-def _table3(x, m_static: tuple, ev: dict) -> dict:
-    """Table 3's indicators from the output samples of x_el (m), the largest and smallest
-    kinetostatic MR13D (N m) on the uniform output grid (``kinetostatic_extremes``) and the event
-    record's columns (one definition for both paths)."""
+def _table3(x_extremes: tuple, m_static: tuple, ev, flights=events.flights, impacts=events.impacts) -> dict:
+    """Table 3's indicators from the largest and smallest x_el (m) at the output instants, the
+    largest and smallest kinetostatic MR13D (N m) on the uniform output grid
+    (``kinetostatic_extremes``) and the event record ``ev`` counted by ``flights`` and ``impacts``
+    (events' counts of a record, or their ``*_in_rows`` forms of the loop's rows): one definition
+    for every path."""
     return dict(
         MR13D_max_Nm=float(m_static[0]), MR13D_min_Nm=float(m_static[1]),
-        xel_max_mm=float(x.max() * 1e3), xel_min_mm=float(x.min() * 1e3),
+        xel_max_mm=float(x_extremes[0] * 1e3), xel_min_mm=float(x_extremes[1] * 1e3),
         # Table 3's jumps: x leaves the interior flank (the paper's criterion); impacts: every landing
-        jumps=events.flights(ev, side=events.INTERIOR), impacts=events.impacts(ev),
+        jumps=flights(ev, side=events.INTERIOR), impacts=impacts(ev),
     )
 
 
@@ -481,7 +645,7 @@ def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: 
     x, m_contact = cols["x_el"], cols["MR13D"]
     ind = empty_indicators()
     ind.update(
-        **_table3(x, _extremes(cols["MR13D_static"][cols["grid_index"] >= 0]), ev),
+        **_table3(_extremes(x), _extremes(cols["MR13D_static"][cols["grid_index"] >= 0]), ev),
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
@@ -587,7 +751,7 @@ def kinetostatic_extremes(scene: Scene, tab: Tables) -> tuple:
     its grid instants, Table 3's (MR13D)max and min. A function of the cam angle alone, taken on
     the grid so that they do not depend on where the solver put its steps (they would move with
     the preset by ~1e-9 relative). One compiled pass, no array (NaN if any value is)."""
-    g = _grid_terms(scene, tab, geometry=False)
+    g = _grid_terms(scene, tab.omega1, float(tab.t[-1]), geometry=False)
     return _moment_extremes(g.dpsi, g.ddpsi, g.J0, g.dJ0, g.M_gravity, g.m_load, float(tab.omega1),
                             float(scene.Fu), float(scene.jt_factor))
 
@@ -603,24 +767,30 @@ def _moment_extremes(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_fac
     return hi, lo
 
 
-def _grid_terms(scene: Scene, tab: Tables, geometry: bool = True) -> AngleTerms:
-    """The kinematic terms on the uniform output grid, per process (per mechanism, law, cam speed
-    and span): the linkage evaluated exactly (a few ms once per speed; the stroke spline would load
-    scipy.interpolate, 0.5 s, into every process of a sweep); ``geometry=False`` without the contact
-    geometry (what the kinetostatic moment needs; its other terms are the same values)."""
-    mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    return cached(_grid_key(scene, tab, geometry),
-                  lambda: angle_terms(mech, program, omega1 * output_grid(tab), _until(scene), geometry=geometry))
+def _grid_terms(scene: Scene, omega1: float, t_end: float, geometry: bool = True) -> AngleTerms:
+    """The kinematic terms on the uniform output grid of a run over [0, t_end] (s) at the cam speed
+    omega1 (rad/s), per process (per mechanism, law, cam speed and span): the linkage evaluated
+    exactly (a few ms once per speed; the stroke spline would load scipy.interpolate, 0.5 s, into
+    every process of a sweep); ``geometry=False`` without the contact geometry (what the
+    kinetostatic moment needs; its other terms are the same values)."""
+    mech, program = scene.mechanism, scene.program
+    return cached(_grid_key(scene, omega1, t_end, geometry),
+                  lambda: angle_terms(mech, program, omega1 * _uniform_grid(t_end), _until(scene), geometry=geometry))
 
 
-def _grid_key(scene: Scene, tab: Tables, geometry: bool) -> tuple:
-    return ("elastic_output_terms", scene.mechanism.cache_key, scene.program, float(tab.omega1), float(tab.t[-1]),
-            _output_size(tab.t[-1]), _until(scene), geometry)
+def _grid_key(scene: Scene, omega1: float, t_end: float, geometry: bool) -> tuple:
+    return ("elastic_output_terms", scene.mechanism.cache_key, scene.program, float(omega1), float(t_end),
+            _output_size(t_end), _until(scene), geometry)
 
 
 def output_grid(tab: Tables) -> np.ndarray:
     """The uniform output instants (s) of a run over tab's span: OUTPUT_STEP or finer."""
-    return np.linspace(0.0, tab.t[-1], _output_size(tab.t[-1]))
+    return _uniform_grid(float(tab.t[-1]))
+
+
+def _uniform_grid(t_end: float) -> np.ndarray:
+    """``output_grid`` of a run over [0, t_end] (s), per process (shared, read-only)."""
+    return cached(("elastic_output_grid", float(t_end)), lambda: np.linspace(0.0, t_end, _output_size(t_end)))
 
 
 def _output_size(t_end: float) -> int:
@@ -631,11 +801,11 @@ _TERMS = ("psi", "dpsi", "ddpsi", "phi2", "J0", "dJ0", "M_gravity", "m_load", "a
 _MOMENT_TERMS = ("dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load")      # what at_speed reads
 
 
-def _grid_block(scene: Scene, tab: Tables, names: tuple) -> np.ndarray:
+def _grid_block(scene: Scene, omega1: float, t_end: float, names: tuple) -> np.ndarray:
     """The terms ``names`` of ``_grid_terms`` stacked, (len(names), grid size), per process."""
     geometry = names == _TERMS
-    return cached(_grid_key(scene, tab, geometry) + ("block", names),
-                  lambda: np.vstack([getattr(_grid_terms(scene, tab, geometry), name) for name in names]))
+    return cached(_grid_key(scene, omega1, t_end, geometry) + ("block", names),
+                  lambda: np.vstack([getattr(_grid_terms(scene, omega1, t_end, geometry), name) for name in names]))
 
 
 def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True):
@@ -648,7 +818,7 @@ def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True
     contact geometry and phi2 are left out (None)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
     names = _TERMS if geometry else _MOMENT_TERMS
-    on_grid = _grid_block(scene, tab, names)
+    on_grid = _grid_block(scene, tab.omega1, float(tab.t[-1]), names)
     at_grid = np.flatnonzero(grid_index >= 0)
     at_step = np.flatnonzero(grid_index < 0)
     at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)

@@ -209,6 +209,28 @@ def settles(ev, side: str | None = None) -> int:
     return int(is_settle(ev, side).sum())
 
 
+# the same counts on the compiled loops' event rows (integer codes in COL_KIND and COL_SIDE), for
+# the paths that never build the named record (tests/test_events.py holds them equal to the above)
+
+def _row_side(rows, side: str | None) -> np.ndarray:
+    if side is None:
+        return np.ones(rows.shape[0], dtype=bool)
+    codes = {name: code for code, name in SIDE_CODES.items()}
+    if side not in codes:
+        raise ValueError(f"side must be {INTERIOR!r} or {EXTERIOR!r}, got {side!r}")
+    return rows[:, COL_SIDE] == codes[side]
+
+
+def flights_in_rows(rows, side: str | None = None) -> int:
+    """``flights`` of event rows (n, >= N_SHARED)."""
+    return int(np.count_nonzero((rows[:, COL_KIND] == KIND_SEPARATION) & _row_side(rows, side)))
+
+
+def impacts_in_rows(rows, side: str | None = None) -> int:
+    """``impacts`` of event rows (n, >= N_SHARED)."""
+    return int(np.count_nonzero((rows[:, COL_KIND] == KIND_CONTACT) & _row_side(rows, side)))
+
+
 def in_rise(ev, rise_angle: float) -> np.ndarray:
     """Rows whose cam angle lies in a rise, 0 <= phi1 mod 2 pi < rise_angle (rad)."""
     return np.mod(_col(ev, "event_phi1").astype(float), 2.0 * np.pi) < rise_angle

@@ -162,11 +162,7 @@ def elastic_before(scene, tab) -> list[str]:
         return []
     drop, slack = speed_drop(scene, tab)
     if np.any(slack < 0):
-        k = int(np.argmax(slack < 0))
-        raise SolverError(
-            f"the motor stalls: by phi1 = {math.degrees(tab.phi1[k]):.1f} deg the follower's load has taken more "
-            "work than the cam's kinetic energy and the motor's standstill torque (eq. 3) can give; the elastic "
-            "model's constant cam speed is meaningless here (--model rigid integrates the speed)")
+        raise motor_stall(float(tab.phi1[int(np.argmax(slack < 0))]))
     if drop > SPEED_DROP_WARN:
         return [f"the follower's demand could slow the cam by up to {100 * drop:.0f} % (an energy bound, the "
                 "motor's response left out); the elastic model holds the cam speed constant: --model rigid "
@@ -174,29 +170,45 @@ def elastic_before(scene, tab) -> list[str]:
     return []
 
 
-def elastic_after(scene, cols, ind) -> list[str]:
-    """The contact law's range and the energy balance of an elastic run (``cols``: the dataset or
-    its columns: deformation, contact_phase, phi1)."""
+def motor_stall(phi1: float) -> SolverError:
+    """The refusal of a run whose motor stalls by the cam angle phi1 (rad): ``speed_drop``'s slack
+    below zero there."""
+    return SolverError(
+        f"the motor stalls: by phi1 = {math.degrees(phi1):.1f} deg the follower's load has taken more "
+        "work than the cam's kinetic energy and the motor's standstill torque (eq. 3) can give; the elastic "
+        "model's constant cam speed is meaningless here (--model rigid integrates the speed)")
+
+
+def deformation_range(scene, d_max: float, phase: int, phi1: float) -> list[str]:
+    """The contact law's range in an elastic run whose largest deformation is d_max (m), first
+    reached in contact phase ``phase`` (0 interior flank) at the cam angle phi1 (rad): refused at the
+    roller radius, warned above DEFORMATION_WARN of the roller's or that flank's radius there."""
     mech = scene.mechanism
-    warnings = []
-    deformation = np.asarray(cols["deformation"])
-    d_max = float(deformation.max())
     if d_max >= mech.R:
         raise SolverError(f"the contact deformation reaches {d_max * 1e3:.3g} mm, at least the roller radius "
                           f"{mech.R * 1e3:g} mm: the contact law is meaningless there; check the contact "
                           "stiffness (--kc-factor, --contact-length-mm) and the load")
-    if d_max > DEFORMATION_WARN * min(mech.R, _groove(mech, scene.program)["rho_flank_min"]):
-        # the flank's radius where the deformation is largest (the bound above is the smallest
-        # radius of either flank: below it no scale can make the warning)
-        k = int(np.argmax(deformation))
-        g = _groove(mech, scene.program)
-        flank = g["rho_inner"] if int(np.asarray(cols["contact_phase"])[k]) == 0 else g["rho_outer"]
-        rho = float(np.interp(np.mod(np.asarray(cols["phi1"])[k], 2.0 * math.pi), g["phi1"], flank, period=2.0 * math.pi))
-        scale = min(mech.R, rho)
-        if d_max > DEFORMATION_WARN * scale:
-            warnings.append(f"the contact deformation reaches {d_max * 1e3:.3g} mm, {100 * d_max / scale:.1f} % of "
-                            f"the roller radius or the flank's radius of curvature ({scale * 1e3:.3g} mm): "
-                            "Palmgren's line-contact law is extrapolated")
+    g = _groove(mech, scene.program)
+    # the bound is the smallest radius of either flank: below it no scale can make the warning
+    if not d_max > DEFORMATION_WARN * min(mech.R, g["rho_flank_min"]):
+        return []
+    flank = g["rho_inner"] if phase == 0 else g["rho_outer"]
+    rho = float(np.interp(np.mod(phi1, 2.0 * math.pi), g["phi1"], flank, period=2.0 * math.pi))
+    scale = min(mech.R, rho)
+    if d_max > DEFORMATION_WARN * scale:
+        return [f"the contact deformation reaches {d_max * 1e3:.3g} mm, {100 * d_max / scale:.1f} % of "
+                f"the roller radius or the flank's radius of curvature ({scale * 1e3:.3g} mm): "
+                "Palmgren's line-contact law is extrapolated"]
+    return []
+
+
+def elastic_after(scene, cols, ind) -> list[str]:
+    """The contact law's range and the energy balance of an elastic run (``cols``: the dataset or
+    its columns: deformation, contact_phase, phi1)."""
+    deformation = np.asarray(cols["deformation"])
+    k = int(np.argmax(deformation))             # the first largest (NaN first, as max() reads it)
+    warnings = deformation_range(scene, float(deformation.max()), int(np.asarray(cols["contact_phase"])[k]),
+                                 float(np.asarray(cols["phi1"])[k]))
     err = ind.get("energy_error")
     if err is not None and err > ENERGY_BOUND:
         warnings.append(f"the energy balance closes to {err:.1e} only (bound {ENERGY_BOUND:g}): the output "

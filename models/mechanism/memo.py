@@ -10,8 +10,9 @@ import threading
 
 import numpy as np
 
-CACHE_SIZE = 40         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB; the elastic
-                        # output grid of one cam speed 0.2-0.6 MB: a sweep over 16+ speeds keeps them all)
+CACHE_SIZE = 64         # tables kept per process (a rise grid of 4001 angles is ~0.4 MB; the elastic
+                        # output grid of one cam speed 0.2-0.6 MB, its instants and moment terms two
+                        # entries: a sweep over 16+ speeds keeps them all)
 
 _cache: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
 _lock = threading.Lock()
