@@ -1,4 +1,5 @@
 """Motion laws: closed-form peak coefficients, boundary conditions, derivatives by finite differences."""
+import dataclasses
 import math
 
 import numpy as np
@@ -87,3 +88,15 @@ def test_impossible_programs_are_rejected(kw):
     args.update(kw)
     with pytest.raises(InputError):
         CamProgram.rise_dwell_return_dwell(**args)
+
+
+def test_a_program_keeps_its_hash_but_does_not_pickle_it():
+    import pickle
+
+    from models.dynamics.scene import Scene
+    program = Scene(law="cosine").program
+    assert Scene(law="cosine").program is program            # one per mechanism and law: found by identity
+    h = hash(program)
+    assert hash(program) == h == hash(dataclasses.replace(program))
+    copy = pickle.loads(pickle.dumps(program))
+    assert "_hash" not in copy.__dict__ and copy == program and hash(copy) == h

@@ -12,6 +12,7 @@ import math
 from common.errors import InputError
 from common.units import rpm_to_rad_s
 from models.mechanism import Mechanism
+from models.mechanism.memo import cached
 from models.mechanism.motion_laws import CamProgram, get_law
 
 ACCURACY_PRESETS = ("fast", "standard", "reference")
@@ -85,8 +86,11 @@ class Scene:
 
     @functools.cached_property
     def program(self) -> CamProgram:
-        """The cam program of the mechanism with the scene's law (built once per scene)."""
-        return CamProgram.for_mechanism(self.mechanism, law=self.law)
+        """The cam program of the mechanism with the scene's law: one object per mechanism and law
+        in a process, so that the per-process tables keyed on it (models.mechanism.memo) find it by
+        identity, without comparing its segments."""
+        return cached(("cam_program", self.mechanism.cache_key, self.law),
+                      lambda: CamProgram.for_mechanism(self.mechanism, law=self.law))
 
     def replace(self, **changes) -> "Scene":
         return dataclasses.replace(self, **changes)

@@ -169,6 +169,21 @@ class CamProgram:
     stroke: float
     segments: tuple[Segment, ...]
 
+    def __hash__(self) -> int:
+        # the dataclass hash, made once: a program keys the per-process tables (models.mechanism.memo)
+        # and hashing its segments and laws field by field cost ~5 us a lookup
+        h = self.__dict__.get("_hash")
+        if h is None:
+            h = hash((self.stroke, self.segments))
+            object.__setattr__(self, "_hash", h)
+        return h
+
+    def __getstate__(self) -> dict:
+        # a string's hash differs between processes: another process makes its own
+        state = dict(self.__dict__)
+        state.pop("_hash", None)
+        return state
+
     @classmethod
     def rise_dwell_return_dwell(cls, law: str | Law = "sine", stroke: float = math.radians(15.0),
                                 rise: float = math.radians(58.0), upper_dwell: float | None = None,
