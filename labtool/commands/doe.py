@@ -131,7 +131,7 @@ def run(
     per_run = "" if result.cost_s is None else f", {result.cost_s * 1e3:.3g} ms per run"
     resumed = f"; {result.resumed} runs resumed from {folder}" if result.resumed else ""
     typer.echo(f"wrote {output} and {nc_path}: {n_runs} runs of the {model} model "
-               f"({result.where}, {result.wall_s:.1f} s{per_run}{resumed})")
+               f"({result.where}, {result.wall_s:.2f} s{per_run}{resumed})")
     if model == "elastic" and elastic_gap == "physical":
         typer.echo("note: the follower crosses the backlash here; the paper's Table 3 counts (1 jump, 0 impacts) "
                    "come from --elastic-gap closed (docs/models.md)")
