@@ -42,15 +42,15 @@ ElasticModel = namedtuple("ElasticModel", [
 
 
 @kernel(inline="always")
-def interp_row(t, tab, row):
-    """np.interp(t, tab[TG], tab[row]) on the increasing, nearly uniform grid tab[TG] (one guess,
-    then a short walk)."""
+def interp_rows(t, tab, row_a, row_b):
+    """np.interp(t, tab[TG], tab[row]) of two rows on the increasing, nearly uniform grid tab[TG]
+    (one guess, then a short walk; the interval and its weight found once for both)."""
     n = tab.shape[1]
     t0, t1 = tab[TG, 0], tab[TG, n - 1]
     if t <= t0:
-        return tab[row, 0]
+        return tab[row_a, 0], tab[row_b, 0]
     if t >= t1:
-        return tab[row, n - 1]
+        return tab[row_a, n - 1], tab[row_b, n - 1]
     i = int((t - t0) / (t1 - t0) * (n - 1))
     i = min(max(i, 0), n - 2)
     while i > 0 and t < tab[TG, i]:
@@ -58,7 +58,8 @@ def interp_row(t, tab, row):
     while i < n - 2 and t >= tab[TG, i + 1]:
         i += 1
     w = (t - tab[TG, i]) / (tab[TG, i + 1] - tab[TG, i])
-    return tab[row, i] + w * (tab[row, i + 1] - tab[row, i])
+    return (tab[row_a, i] + w * (tab[row_a, i + 1] - tab[row_a, i]),
+            tab[row_b, i] + w * (tab[row_b, i + 1] - tab[row_b, i]))
 
 
 @kernel
@@ -82,9 +83,7 @@ def force(m, phase, x, v):
 
 @kernel
 def rhs(model, ph, t, y, out):
-    tab = model.tab
-    d = interp_row(t, tab, DRIVE)
-    mass = interp_row(t, tab, MASS)
+    d, mass = interp_rows(t, model.tab, DRIVE, MASS)
     out[0] = y[1]
     out[1] = (force(model, int(ph[0]), y[0], y[1]) - d) / mass
 
