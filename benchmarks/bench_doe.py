@@ -84,9 +84,12 @@ def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[
 
 
 def _warm(model: str) -> int:
+    """Load in a worker what its runs will use: the model's compiled code, of the Dataset path and of
+    the indicator path that ``doe run`` calls."""
     from models.dynamics.scene import Scene
-    from models.dynamics.simulate import simulate
+    from models.dynamics.simulate import indicators, simulate
     simulate(Scene(), model)
+    indicators(Scene(), model)
     return os.getpid()
 
 
