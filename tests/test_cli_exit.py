@@ -1,0 +1,83 @@
+"""The console command skips the interpreter's teardown only when nothing is left to finish
+(labtool.cli._exit_without_teardown): the atexit handlers run, open files are flushed, the output
+is complete, the exit code is the command's; a thread still working, or an HDF5 file still open,
+gets the normal exit. Each case is a new interpreter started the way the console script starts."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _console(before: str, args: list[str]) -> subprocess.CompletedProcess:
+    """Run ``before``, then labtool's console entry point with ``args``."""
+    code = textwrap.dedent(before) + textwrap.dedent(f"""
+        import sys
+        import labtool.cli
+        real = labtool.cli._exit_without_teardown
+        def spy(code):
+            print("fast exit tried", file=sys.stderr)
+            real(code)                                  # returns only when the normal exit is kept
+            print("normal exit", file=sys.stderr)
+        labtool.cli._exit_without_teardown = spy
+        sys.argv = ["labtool", *{args!r}]
+        labtool.cli.main()
+        """)
+    return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_atexit_handlers_run_and_open_files_are_flushed(tmp_path):
+    before = f"""
+        import atexit
+        out = {str(tmp_path)!r}
+        atexit.register(lambda: open(out + "/atexit.txt", "w").write("ran"))
+        held = open(out + "/held.txt", "w")          # open, referenced, never closed by anyone
+        held.write("x" * 100)                        # still in the file object's buffer
+        """
+    proc = _console(before, ["--help"])
+    assert proc.returncode == 0, proc.stderr
+    assert "fast exit tried" in proc.stderr and "normal exit" not in proc.stderr     # the fast exit was taken
+    assert "kinematics" in proc.stdout and "campaign" in proc.stdout          # the whole help, flushed
+    assert (tmp_path / "atexit.txt").read_text() == "ran"
+    assert (tmp_path / "held.txt").read_text() == "x" * 100
+
+
+def test_the_exit_code_is_the_commands():
+    proc = _console("", ["kinematics", "--law", "parabolic"])
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[0].startswith("labtool: error: unknown motion law 'parabolic'")
+    assert "fast exit tried" in proc.stderr and "normal exit" not in proc.stderr
+
+
+def test_a_working_thread_gets_the_normal_exit(tmp_path):
+    before = f"""
+        import threading, time
+        def work():
+            time.sleep(0.5)
+            open({str(tmp_path / "thread.txt")!r}, "w").write("done")
+        threading.Thread(target=work).start()       # not a daemon: the normal exit waits for it
+        """
+    proc = _console(before, ["--help"])
+    assert proc.returncode == 0, proc.stderr
+    assert "normal exit" in proc.stderr
+    assert (tmp_path / "thread.txt").read_text() == "done"
+
+
+def test_an_open_hdf5_file_gets_the_normal_exit(tmp_path):
+    path = tmp_path / "open.h5"
+    before = f"""
+        import h5py, numpy as np
+        f = h5py.File({str(path)!r}, "w")             # left open: HDF5 closes it at its own exit
+        f["x"] = np.arange(1000.0)
+        """
+    proc = _console(before, ["--help"])
+    assert proc.returncode == 0, proc.stderr
+    assert "normal exit" in proc.stderr
+    with h5py.File(path, "r") as f:
+        assert np.array_equal(f["x"][()], np.arange(1000.0))
