@@ -110,3 +110,26 @@ def test_the_compiled_indicator_pass_is_the_general_path(reading):
             scene = _scene(run, elastic_gap=gap)
             a, b = _outcome(lambda s, _: general(s), scene, None), _outcome(lambda s, _: compiled(s), scene, None)
             assert a == b, (run.run, gap, a, b)
+
+
+def test_a_drive_zero_at_the_start_goes_to_the_general_path(monkeypatch):
+    """The compiled pass leaves a run that starts at rest (no drive at t = 0, kernels.elastic_nb.start)
+    to the general path, which begins it with an AtRest phase; the answer is the general path's."""
+    import numpy as np
+
+    from models.dynamics import elastic
+
+    scene = _scene(RUNS[0])
+    real = elastic._angle_block
+    rows = {name: k for k, name in enumerate(elastic._ANGLE_ROWS)}
+
+    def unloaded_start(scene, span, n_points):
+        block = np.array(real(scene, span, n_points))
+        for name in ("dpsi", "ddpsi", "M_gravity", "m_load"):     # MR13D = 0 at the first two angles
+            block[rows[name], :2] = 0.0
+        return block
+
+    monkeypatch.setattr(elastic, "_angle_block", unloaded_start)
+    calls = []
+    monkeypatch.setattr(elastic, "_general_indicators", lambda *a: calls.append(a) or {"general": True})
+    assert elastic.simulate_indicators(scene) == {"general": True} and len(calls) == 1
