@@ -501,7 +501,10 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     the scales, tolerances and step caps of ``_solve``; the loop (dopri5.run, what ``integrate``
     runs); its outputs merged on the uniform ``grid`` (``_raw_outputs``); their x and deformation
     extremes; the kinetostatic MR13D extremes on the grid's terms (``kinetostatic_extremes``).
-    ``sign`` +1 for the consistent reading, -1 for the literal. Returns (code, values, event rows):
+    Units: Fu N, J_cam kg m^2, motor0 N m (the motor's standstill moment on the cam), kc
+    N/m^(10/9), gap m, damping s/m, ``grid`` s, the moment terms those of cam_tables.AngleTerms;
+    rtol, atol_frac and steps_per_period the preset's. ``sign`` +1 for the consistent reading, -1
+    for the literal. Returns (code, values, event rows):
     code dopri5's status, or _STALLS (values[_K_STALL] the first angle index) or _STARTS_AT_REST
     (no drive at t = 0: the general path runs it); values in the layout _T_FAIL ... _NSTEPS."""
     vals = np.zeros(11)
