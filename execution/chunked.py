@@ -26,7 +26,6 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import pandas as pd
 
 from common.errors import InputError
 from execution.backends import InProcess, LocalProcesses, TaskFailed
@@ -56,12 +55,14 @@ class Chunk:
             except Exception as exc:  # noqa: BLE001 - a failing item must not lose its chunk
                 rows.append({"error": f"{type(exc).__name__}: {exc}"})
             times[k] = time.perf_counter() - t0
-        return ChunkResult(self.start, self.stop, pd.DataFrame.from_records(rows), times, os.getpid())
+        return ChunkResult(self.start, self.stop, rows, times, os.getpid())
 
 
 class ChunkResult:
-    def __init__(self, start, stop, frame, item_s, pid):
-        self.start, self.stop, self.frame, self.item_s, self.pid = start, stop, frame, item_s, pid
+    """A finished chunk: its items' rows (dicts, ``fn``'s return values), their times (s), the pid."""
+
+    def __init__(self, start, stop, rows, item_s, pid):
+        self.start, self.stop, self.rows, self.item_s, self.pid = start, stop, rows, item_s, pid
 
 
 class Cost:
@@ -154,7 +155,7 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
 
     def write(r: ChunkResult) -> None:
         try:
-            store.write(r.start, r.stop, r.frame)
+            store.write(r.start, r.stop, r.rows)
         except DiskFull as exc:
             kept = state["done"]
             raise DiskFull(f"disk full ({exc}): {kept} of {n} {unit} are finished and kept in "

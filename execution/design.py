@@ -17,6 +17,7 @@ stays that of the chunks in flight and of NC_FLUSH_ROWS runs' columns, whatever 
 """
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 import os
@@ -27,7 +28,7 @@ import numpy as np
 
 from common.errors import InputError
 from execution.chunked import map_chunked
-from execution.parts import DiskFull, PartStore, _is_disk_full
+from execution.parts import DiskFull, PartStore, _is_disk_full, float_cells
 
 EXTRA_COLUMNS = ("wall_s", "error")
 MAX_LISTED_FAILURES = 100
@@ -107,19 +108,21 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
     try:
         with open(tmp_csv, "w") as fh, h5netcdf.File(tmp_nc, "w") as nc:
             variables = _netcdf_layout(nc, design)
+            writer = csv.writer(fh, lineterminator="\n")
             for k, (a, b, path) in enumerate(parts):
-                frame = store.read(path)
-                if len(frame) != b - a or not np.array_equal(frame["run"].to_numpy(), np.arange(a + 1, b + 1)):
+                cells = store.read(path)
+                runs = np.array(float_cells(cells["run"]))
+                if runs.size != b - a or not np.array_equal(runs, np.arange(a + 1, b + 1)):
                     raise InputError(f"{path} is damaged (its rows are not runs {a + 1}-{b}); delete it and "
                                      "rerun the same command to compute those runs again")
-                bad = frame["error"].fillna("") != ""
-                n_failed += int(bad.sum())
-                for run, msg in zip(frame["run"][bad], frame["error"][bad]):
-                    if len(failures) < MAX_LISTED_FAILURES:
-                        failures[int(run)] = msg
-                _write_csv_part(fh, frame, design, header=(k == 0))
-                pending.append((a, b, {name: frame[name].to_numpy(dtype=float if name != "run" else np.int64)
-                                       for name in variables}))
+                for run, msg in zip(runs, cells["error"]):
+                    if msg:
+                        n_failed += 1
+                        if len(failures) < MAX_LISTED_FAILURES:
+                            failures[int(run)] = msg
+                _write_csv_part(writer, cells, design, header=(k == 0))
+                pending.append((a, b, {name: runs.astype(np.int64) if name == "run" else
+                                       np.array(float_cells(cells[name])) for name in variables}))
                 if sum(y - x for x, y, _ in pending) >= NC_FLUSH_ROWS or k == len(parts) - 1:
                     _write_nc_block(variables, pending, design.shape)
                     pending.clear()
@@ -163,13 +166,24 @@ def _check_tiling(parts, n: int, store) -> None:
         raise InputError(f"{store.folder}: runs {pos + 1}-{n} are missing; rerun the same command")
 
 
-def _write_csv_part(fh, frame, design, header: bool) -> None:
-    table = frame[design.columns].copy()
+def _write_csv_part(writer, cells: dict, design, header: bool) -> None:
+    """A part's rows in the results table: the run and level columns as integers, the counts
+    rounded to integers, every other number with 10 significant digits, an empty cell for no value
+    (a failed run's)."""
     from models.study.doe import COUNT_RESPONSES
-    for c in COUNT_RESPONSES:
-        if c in table:
-            table[c] = table[c].round().astype("Int64")   # integers; a failed run's cell stays empty
-    table.to_csv(fh, index=False, header=header, float_format="%.10g")
+    columns = design.columns
+    as_text = set(["run"] + design.level_columns)
+
+    def fmt(c):
+        if c in as_text:
+            return lambda v: v
+        if c in COUNT_RESPONSES:
+            return lambda v: str(int(round(float(v)))) if v else ""
+        return lambda v: "%.10g" % float(v) if v else ""
+    formats = [fmt(c) for c in columns]
+    if header:
+        writer.writerow(columns)
+    writer.writerows([f(v) for f, v in zip(formats, row)] for row in zip(*(cells[c] for c in columns)))
 
 
 def _failed_text(failures: dict, n_failed: int) -> str:

@@ -12,19 +12,23 @@ A :class:`PartStore` is a folder (``results.csv.parts/`` beside the output) hold
 
 Opening a store whose manifest matches resumes it (the finished items are skipped); a manifest of
 other work is refused, naming the first difference. Floats are written with 17 significant digits:
-a part read back is bit-identical to what was computed.
+a part read back is bit-identical to what was computed. The parts are written and read with the
+csv module (a sweep's process need not load pandas, ~0.3 s; tests/test_execution.py reads them
+back with pandas too).
 """
 from __future__ import annotations
 
 import contextlib
+import csv
 import errno
 import fcntl
+import io
 import json
+import math
+import numbers
 import os
 import re
 from pathlib import Path
-
-import pandas as pd
 
 from common.errors import InputError
 
@@ -133,21 +137,38 @@ class PartStore:
             out.append((pos, n_items))
         return [(a, b) for a, b in out if b > a]
 
-    def write(self, start: int, stop: int, frame: pd.DataFrame) -> Path:
-        """Write the rows of items [start, stop) as one part (atomically)."""
-        if len(frame) != stop - start:
-            raise ValueError(f"part {start}..{stop}: {len(frame)} rows")
+    def write(self, start: int, stop: int, rows) -> Path:
+        """Write the rows of items [start, stop) as one part (atomically): ``rows`` a sequence of
+        dicts, column -> value (a column a row lacks, None or NaN: an empty cell; floats with 17
+        significant digits), or a DataFrame."""
+        if hasattr(rows, "to_dict"):                         # a DataFrame, without importing pandas
+            rows = rows.to_dict("records")
+        if len(rows) != stop - start:
+            raise ValueError(f"part {start}..{stop}: {len(rows)} rows")
         path = self.folder / f"items-{start:09d}-{stop - 1:09d}.csv"
-        self._write_text(path, frame.reindex(columns=self.columns).to_csv(index=False, float_format="%.17g"))
+        out = io.StringIO()
+        # lines end in CRLF: the csv module quotes a field holding a character of the line ending,
+        # and with "\n" alone a lone "\r" in an error message would go unquoted and split its row
+        writer = csv.writer(out, lineterminator="\r\n")
+        writer.writerow(self.columns)
+        writer.writerows([_cell(row.get(c)) for c in self.columns] for row in rows)
+        self._write_text(path, out.getvalue())
         return path
 
-    def read(self, path: Path) -> pd.DataFrame:
-        return pd.read_csv(path, keep_default_na=False, na_values=[""], dtype={"error": str})
+    def read(self, path: Path) -> dict[str, list[str]]:
+        """A part's cells as text, column -> one cell per row (empty: no value); InputError when
+        its header is not the store's columns or a row has another number of cells."""
+        with open(path, newline="") as fh:
+            table = list(csv.reader(fh))
+        if not table or table[0] != self.columns or any(len(r) != len(self.columns) for r in table[1:]):
+            raise InputError(f"{path} is damaged (not a table of the columns {', '.join(self.columns)}); delete it "
+                             "and rerun the same command to compute those runs again")
+        return {c: [r[k] for r in table[1:]] for k, c in enumerate(self.columns)}
 
     def _write_text(self, path: Path, text: str) -> None:
         tmp = path.with_name(f".{path.name}.tmp")
         try:
-            with open(tmp, "w") as fh:
+            with open(tmp, "w", newline="") as fh:        # the text's line endings, unchanged
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
@@ -157,6 +178,24 @@ class PartStore:
             if _is_disk_full(exc):
                 raise DiskFull(f"{exc.strerror} writing {path}") from None
             raise InputError(f"cannot write {path} ({exc.strerror})") from None
+
+
+def _cell(v) -> str:
+    """A value as a part's CSV cell (what pandas' to_csv wrote with float_format "%.17g")."""
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):
+        return "" if v != v else "%.17g" % v
+    return str(v)
+
+
+def float_cells(cells: list[str]) -> list[float]:
+    """Numeric cells of ``PartStore.read`` as floats (an empty cell: NaN)."""
+    return [float(c) if c else math.nan for c in cells]
 
 
 def _first_difference(have, want) -> str:

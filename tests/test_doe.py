@@ -72,6 +72,13 @@ def test_factor_files_csv_and_toml_agree(tmp_path):
     ('[[factor]]\nname = "A"\nsymbol = "Fu"\nunit = "N"\nlevels = [0, 65]\ncolor = 1\n', ".toml", "unknown key(s) color"),
     ("[[factor]\n", ".toml", "not a valid TOML file"),
     ('[[factor]]\nname = "AA"\nsymbol = "Fu"\nunit = "N"\nlevels = [0, 65]\n', ".toml", "one capital letter"),
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,NA\n", ".csv", "level 'NA' is not a number"),   # pandas dropped it
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,nan\n", ".csv", "level 'nan' is not a number"),
+    ("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,1,2\n", ".csv", "row 2 has 6 cells"),
+    ("factor,symbol,unit,level_1,level_1\nA,Fu,N,0,1\n", ".csv", "level_1 repeated"),
+    ("factor,symbol,unit,level_1,level_2,\nA,Fu,N,0,1,\n", ".csv", "unknown column(s) (unnamed)"),
+    ("", ".csv", "not a readable CSV file"),
+    ("\n\n", ".csv", "not a readable CSV file"),
 ])
 def test_bad_factor_files_are_user_errors(tmp_path, text, suffix, fragment, capsys):
     p = tmp_path / f"f{suffix}"
@@ -81,6 +88,21 @@ def test_bad_factor_files_are_user_errors(tmp_path, text, suffix, fragment, caps
     assert fragment in str(exc.value)
     assert main(["doe", "run", "--model", "kinematic", "--factors", str(p), "-o", str(tmp_path / "r.csv")]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_factor_csv_from_a_spreadsheet_reads_as_pandas_reads_it(tmp_path):
+    """A byte-order mark, quoted cells, CRLF line ends, blank lines and rows short of cells: the
+    factors pandas (what read them before) finds."""
+    text = ('\ufefffactor,symbol,unit,level_1,level_2,level_3\r\n"A","Fu","N",0,"32.5",65\r\n\r\n'
+            'B,n1,rpm,180,300\r\n,,,,,\r\nC,j,mm, 0.016 ,0.128,\r\n')
+    p = tmp_path / "f.csv"
+    p.write_text(text, encoding="utf-8", newline="")
+    got = doe.read_factors(p)
+    frame = pd.read_csv(p, dtype={"unit": str}).dropna(how="all")
+    want = [doe.Factor(str(r.factor), str(r.symbol), str(r.unit),
+                       tuple(float(v) for v in (r.level_1, r.level_2, r.level_3) if not pd.isna(v)))
+            for r in frame.itertuples()]
+    assert got == want and [f.levels for f in got] == [(0.0, 32.5, 65.0), (180.0, 300.0), (0.016, 0.128)]
 
 
 @settings(max_examples=40, deadline=None)

@@ -21,7 +21,9 @@ Result tables (CSV shaped like the paper's Tables 2 and 3) name the level column
 """
 from __future__ import annotations
 
+import csv
 import dataclasses
+import io
 import itertools
 import math
 import re
@@ -29,7 +31,6 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from common.errors import FileFormatError, InputError
 
@@ -86,8 +87,8 @@ class Factor:
 def table1_factors() -> list[Factor]:
     """The paper's Table 1: A = Fu [N], B = j [mm], C = n1 [rpm], D = Jt [factor of nominal]."""
     from importlib import resources
-    with resources.files("models.data").joinpath("table1_factors.csv").open() as fh:
-        return _factors_from_frame(pd.read_csv(fh), "table1_factors.csv")
+    text = resources.files("models.data").joinpath("table1_factors.csv").read_text(encoding="utf-8")
+    return _factors_from_csv(text, "table1_factors.csv")
 
 
 def read_factors(path: str | Path) -> list[Factor]:
@@ -118,36 +119,56 @@ def read_factors(path: str | Path) -> list[Factor]:
                                   tuple(float(v) for v in levels)))
         return _check_factor_set(factors, path)
     try:
-        frame = pd.read_csv(path, dtype={"unit": str}, keep_default_na=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        text = path.read_text(encoding="utf-8-sig")       # a spreadsheet's byte-order mark dropped
+    except UnicodeDecodeError as exc:
         raise FileFormatError(f"{path}: not a readable CSV file ({exc})") from None
-    return _factors_from_frame(frame, path)
+    return _factors_from_csv(text, path)
 
 
-def _factors_from_frame(frame: pd.DataFrame, source) -> list[Factor]:
+def _factors_from_csv(text: str, source) -> list[Factor]:
+    """Factors from the text of a factor CSV (the csv module's dialect: commas, double quotes).
+    Rows with every cell empty are skipped (a spreadsheet's trailing rows); an empty level cell is
+    no level; every other level cell must be a finite number (pandas, which read these files
+    before, dropped cells such as 'NA' or 'nan' without a word)."""
+    try:
+        table = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise FileFormatError(f"{source}: not a readable CSV file ({exc})") from None
+    if not table:
+        raise FileFormatError(f"{source}: not a readable CSV file (it is empty)")
+    header = [c.strip() for c in table[0]]
     required = ["factor", "symbol", "unit"]
-    missing = [c for c in required if c not in frame.columns]
-    level_cols = [c for c in frame.columns if re.match(r"^level_\d+$", str(c))]
+    missing = [c for c in required if c not in header]
+    level_cols = [c for c in header if re.match(r"^level_\d+$", c)]
     if missing or not level_cols:
         raise FileFormatError(f"{source}: factor CSV needs columns factor,symbol,unit,level_1,level_2[,...]"
                               + (f"; missing {', '.join(missing)}" if missing else "; no level_N columns"))
-    unknown = [c for c in frame.columns if c not in required and c not in level_cols]
+    unknown = [c or "(unnamed)" for c in header if c not in required and c not in level_cols]
     if unknown:
-        raise FileFormatError(f"{source}: unknown column(s) {', '.join(map(str, unknown))} in the factor CSV")
+        raise FileFormatError(f"{source}: unknown column(s) {', '.join(unknown)} in the factor CSV")
+    repeated = sorted({c for c in header if header.count(c) > 1})
+    if repeated:
+        raise FileFormatError(f"{source}: column(s) {', '.join(repeated)} repeated in the factor CSV")
     level_cols.sort(key=lambda c: int(c.split("_")[1]))
     factors = []
-    for _, row in frame.iterrows():
+    for line, cells in enumerate(table[1:], 2):
+        if len(cells) > len(header):
+            raise FileFormatError(f"{source}: not a readable CSV file (row {line} has {len(cells)} cells, the "
+                                  f"header {len(header)})")
+        row = dict(zip(header, cells + [""] * (len(header) - len(cells))))
         values = []
         for c in level_cols:
-            v = row[c]
-            if pd.isna(v):
+            v = row[c].strip()
+            if not v:
                 continue
             try:
-                values.append(float(v))
-            except (TypeError, ValueError):
-                raise FileFormatError(f"{source}: factor {row['factor']}: level '{v}' is not a number") from None
-        unit = "" if pd.isna(row["unit"]) else str(row["unit"])
-        factors.append(Factor(str(row["factor"]), str(row["symbol"]), unit, tuple(values)))
+                value = float(v)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                raise FileFormatError(f"{source}: factor {row['factor']}: level '{v}' is not a number")
+            values.append(value)
+        factors.append(Factor(row["factor"], row["symbol"], row["unit"].strip(), tuple(values)))
     return _check_factor_set(factors, source)
 
 
@@ -162,7 +183,7 @@ def _check_factor_set(factors: list[Factor], source) -> list[Factor]:
     return factors
 
 
-def full_factorial(factors: list[Factor]) -> pd.DataFrame:
+def full_factorial(factors: list[Factor]):
     """All level combinations, the paper's run order (first factor slowest, last fastest).
 
     Columns: ``run`` (1-based), one level-index column per factor (``A_Fu_level``, values 1..L)
@@ -176,6 +197,7 @@ def full_factorial(factors: list[Factor]) -> pd.DataFrame:
         for f, i in zip(factors, idx):
             row[f.symbol] = f.levels[i]
         rows.append(row)
+    import pandas as pd           # the table of a small design; a sweep's process does not load pandas
     return pd.DataFrame(rows)
 
 
