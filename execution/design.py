@@ -111,7 +111,15 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
             writer = csv.writer(fh, lineterminator="\n")
             for k, (a, b, path) in enumerate(parts):
                 cells = store.read(path)
-                runs = np.array(float_cells(cells["run"]))
+                try:
+                    runs = np.array(float_cells(cells["run"]))
+                    columns = {name: runs.astype(np.int64) if name == "run" else np.array(float_cells(cells[name]))
+                               for name in variables}
+                    for name in design.level_columns:        # copied as text into the results CSV
+                        float_cells(cells[name])
+                except ValueError:
+                    raise InputError(f"{path} is damaged (a cell that holds a number holds text); delete it and "
+                                     "rerun the same command to compute those runs again") from None
                 if runs.size != b - a or not np.array_equal(runs, np.arange(a + 1, b + 1)):
                     raise InputError(f"{path} is damaged (its rows are not runs {a + 1}-{b}); delete it and "
                                      "rerun the same command to compute those runs again")
@@ -121,8 +129,7 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
                         if len(failures) < MAX_LISTED_FAILURES:
                             failures[int(run)] = msg
                 _write_csv_part(writer, cells, design, header=(k == 0))
-                pending.append((a, b, {name: runs.astype(np.int64) if name == "run" else
-                                       np.array(float_cells(cells[name])) for name in variables}))
+                pending.append((a, b, columns))
                 if sum(y - x for x, y, _ in pending) >= NC_FLUSH_ROWS or k == len(parts) - 1:
                     _write_nc_block(variables, pending, design.shape)
                     pending.clear()

@@ -439,3 +439,20 @@ print(rc, "pandas" in sys.modules)
                          text=True, timeout=300)
     assert out.stdout.split()[-2:] == ["0", "False"], out.stdout + out.stderr
     assert len(pd.read_csv(tmp_path / "r.csv")) == 100
+
+
+def test_a_part_with_text_where_a_number_belongs_is_refused_in_one_line(tmp_path, capsys):
+    (tmp_path / "f.csv").write_text(FACTORS_100)
+    from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    rows = [design.row(i) for i in range(100)]
+    rows[7][design.responses[0]] = "12.5 N m"                  # a hand-edited or damaged cell
+    store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
+    store.write(0, 100, rows)
+    store.close()
+    rc = main(["doe", "run", "--model", "kinematic", "--accuracy", "fast", "--factors", str(tmp_path / "f.csv"),
+               "-o", str(tmp_path / "r.csv")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err[-1].startswith("labtool: error:") and "is damaged" in err[-1]
+    assert not (tmp_path / "r.csv").exists()
