@@ -290,6 +290,7 @@ def _raise_for(status: int, t_fail: float, max_steps: int, max_segments: int) ->
                       f"(limits: {max_steps} steps, {max_segments} phases per run)")
 
 
+@jit
 def step_caps(contact_cap: float, cap_flight: bool = True) -> np.ndarray:
     """The largest step (s) of each mode (INTERIOR, FLIGHT, EXTERIOR): ``contact_cap`` in contact,
     and in flight too if ``cap_flight``, else none (the tolerances alone). The loop still reads a
@@ -298,6 +299,40 @@ def step_caps(contact_cap: float, cap_flight: bool = True) -> np.ndarray:
     if not cap_flight:
         caps[FLIGHT] = np.inf
     return caps
+
+
+@jit
+def _nan_min(a, b):
+    """np.minimum of two floats (NaN if either is)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a < b else b
+
+
+@jit
+def _tolerances(R31, M, kc, atol_frac, steps_per_period, cap_flight, t_end):
+    """A run's absolute tolerances and step caps from its tables (R31 N, M kg on the grid), the
+    contact stiffness kc (N/m^(10/9)), the preset's atol fraction, steps per contact period and
+    flight cap, and its end t_end (s): (atol (2,): m and m/s, caps (3,): s a mode, at most t_end).
+    The scales (PRESETS' comment): the static deflection under the largest |R31| (at least 1 N)
+    and that times the contact's angular frequency at the smallest M. NaN in R31 or M makes them
+    NaN, as numpy's max and min would."""
+    f, m_min = -np.inf, np.inf
+    for i in range(R31.size):
+        a, mass = abs(R31[i]), M[i]
+        if f == f and (a > f or a != a):
+            f = a
+        if m_min == m_min and (mass < m_min or mass != mass):
+            m_min = mass
+    f_scale = 1.0 if 1.0 > f else f                # max(f, 1.0)
+    period = contact_period(kc, m_min, f_scale)
+    x_scale = penetration_under(f_scale, kc)
+    atol = np.empty(2)
+    atol[0], atol[1] = atol_frac * x_scale, atol_frac * x_scale * 2.0 * math.pi / period
+    caps = step_caps(period / steps_per_period, cap_flight)
+    for mode in range(3):
+        caps[mode] = _nan_min(caps[mode], t_end)
+    return atol, caps
 
 
 @jit
@@ -485,14 +520,6 @@ _T_FAIL, _K_STALL, _X_MAX, _X_MIN, _D_MAX, _D_PHASE, _D_PHI1, _M_MAX, _M_MIN, _N
 
 
 @jit
-def _nan_min(a, b):
-    """np.minimum of two floats (NaN if either is)."""
-    if a != a or b != b:
-        return np.nan
-    return a if a < b else b
-
-
-@jit
 def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, sign, kc, gap, damping,
                     rtol, atol_frac, steps_per_period, cap_flight, grid, dpsi, ddpsi, J0, dJ0, M_gravity, m_load):
     """``simulate_indicators``' run in one compiled pass, the same arithmetic as the general path in
@@ -517,30 +544,18 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     if check_motor:
         slack = np.empty(n)
         validity._energy_budget(t, block[0], rows[4], block[9], rows[0], rows[2], J_cam, omega1, motor0, slack)
-        for i in range(n):
-            if slack[i] < 0.0:
-                vals[_K_STALL] = i
-                return _STALLS, vals, no_rows
-    tab = np.empty((3, n))
-    f, m_min = -np.inf, np.inf
+        k = validity.stall_index(slack)
+        if k >= 0:
+            vals[_K_STALL] = k
+            return _STALLS, vals, no_rows
+    tab = np.empty((3, n))                          # model_struct's rows
     for i in range(n):
-        r, mass = rows[6, i], rows[5, i]
-        tab[eq.TG, i], tab[eq.DRIVE, i], tab[eq.MASS, i] = t[i], sign * r, mass
-        a = abs(r)
-        if f == f and (a > f or a != a):          # np.max: NaN wins
-            f = a
-        if m_min == m_min and (mass < m_min or mass != mass):
-            m_min = mass
-    f_scale = 1.0 if 1.0 > f else f                # max(f, 1.0)
-    period = contact_period(kc, m_min, f_scale)
-    x_scale = penetration_under(f_scale, kc)
+        tab[eq.TG, i], tab[eq.DRIVE, i], tab[eq.MASS, i] = t[i], sign * rows[6, i], rows[5, i]
     t_end = t[n - 1]
-    atol = np.empty((3, 2))
-    caps = np.empty(3)
+    pair, caps = _tolerances(rows[6], rows[5], kc, atol_frac, steps_per_period, cap_flight, t_end)
+    atol = np.empty((3, 2))                         # integrate's: one row a mode
     for mode in range(3):
-        atol[mode, 0], atol[mode, 1] = atol_frac * x_scale, atol_frac * x_scale * 2.0 * math.pi / period
-        cap = period / steps_per_period if (cap_flight or mode != FLIGHT) else np.inf      # step_caps
-        caps[mode] = _nan_min(cap, t_end)
+        atol[mode, 0], atol[mode, 1] = pair[0], pair[1]
     model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE)
     phase, t0, x0, v0 = eq.start(model)
     if t0 != 0.0:
@@ -551,23 +566,13 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     y0 = np.empty(2)
     y0[0], y0[1] = x0, v0
     out = dp.run(model, ctl, ph0, y0, 0.0)
-    status, nst, nph, nev = out[0], out[3], out[4], out[5]
-    vals[_T_FAIL], vals[_NFEV], vals[_NSTEPS] = out[1], out[6], nst
+    status, nev = out[0], out[5]
+    vals[_T_FAIL], vals[_NFEV], vals[_NSTEPS] = out[1], out[6], out[3]
     if status != dp.OK:
         return status, vals, no_rows
-    st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first = out[7], out[8], out[9], out[10], out[11], out[12], \
-        out[13], out[14]
-    first = ph_first[:nph].copy()
-    last = np.empty(nph, dtype=np.int64)
-    last[:-1] = first[1:] - 1
-    last[-1] = nst - 1
-    size = grid.size + nst + nph
-    out_t, out_y = np.empty(size), np.empty((2, size))
-    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
-    m = dp.merge_outputs(grid, ph_t0[:nph].copy(), ph_t1[:nph].copy(), first, last, st_t, st_h, st_y, st_Q,
-                         out_t, out_y, out_seg, out_grid)
+    out_t, out_y, out_seg, _ = dp.merge_run(grid, out)
     x_max, x_min, d_max, k = -np.inf, np.inf, -np.inf, 0
-    for i in range(m):                               # x.max(), x.min(), _deformation's max and argmax
+    for i in range(out_t.size):                      # x.max(), x.min(), _deformation's max and argmax
         x = out_y[0, i]
         if x_max == x_max and (x > x_max or x != x):
             x_max = x
@@ -577,7 +582,7 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
         if d > d_max:
             d_max, k = d, i
     vals[_X_MAX], vals[_X_MIN], vals[_D_MAX] = x_max, x_min, d_max
-    vals[_D_PHASE], vals[_D_PHI1] = ph_row[out_seg[k], 0], omega1 * out_t[k]
+    vals[_D_PHASE], vals[_D_PHI1] = out[11][out_seg[k], 0], omega1 * out_t[k]
     vals[_M_MAX], vals[_M_MIN] = _moment_extremes(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_factor)
     return status, vals, out[15][:nev].copy()
 
@@ -608,16 +613,13 @@ def _solve(scene: Scene, reading: str, solver, preset, stats, raw: bool = False)
     preset = PRESETS[scene.accuracy] if preset is None else preset
     solver = SOLVERS[scene.accuracy] if solver is None else solver
     warnings += validity.elastic_before(scene, tab)
-    f_scale = max(float(np.max(np.abs(tab.R31))), 1.0)
-    period = contact_period(kc, float(np.min(tab.M)), f_scale)
-    x_scale = float(penetration_under(f_scale, float(kc)))
-    atol = (preset["atol"] * x_scale, preset["atol"] * x_scale * 2.0 * math.pi / period)
+    atol, caps = _tolerances(tab.R31, tab.M, float(kc), float(preset["atol"]), float(preset["steps_per_period"]),
+                             bool(preset.get("cap_flight", True)), float(tab.t[-1]))
     loop_stats = {} if stats is None else stats
     t0 = time.perf_counter()
     model = model_struct(tab.t, drive, tab.M, kc, gap, scene.contact_damping, tab.omega1)
     result = integrate(tab.t, drive, tab.M, kc, gap, scene.contact_damping, rtol=preset["rtol"], atol=atol,
-                       max_step=step_caps(period / preset["steps_per_period"], preset.get("cap_flight", True)),
-                       solver=solver,
+                       max_step=caps, solver=solver,
                        method=preset.get("method", "RK45"), omega1=tab.omega1, stats=loop_stats, model=model, raw=raw)
     segments, rows, loop_arrays = result if raw else (*result, None)
     loop_stats["loop_s"] = loop_stats.get("loop_s", 0.0) + time.perf_counter() - t0
@@ -710,7 +712,7 @@ def _outputs(tab: Tables, segments):
         first[k], last[k] = count, count + parts[-1][0].size - 1
         count += parts[-1][0].size
     t0s, hs, y0s, Qs = (np.ascontiguousarray(np.concatenate([p[i] for p in parts])) for i in range(4))
-    t, y, seg, grid_index = _merge(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, count)
+    t, y, seg, grid_index = dp.merged(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, count)
     for k, (_, run) in enumerate(segments):
         if not isinstance(run, dp.DenseRun):
             sel = seg == k
@@ -723,25 +725,8 @@ def _raw_outputs(tab: Tables, out):
     """``_outputs`` of a compiled run from the loop's own arrays (``integrate(raw=True)``): the same
     instants and values (the same ``merge_outputs`` pass over the same steps), without a Python
     object per phase."""
-    nst, nph = out[3], out[4]
-    st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first = out[7:15]
-    first = ph_first[:nph]
-    last = np.empty(nph, dtype=np.int64)
-    last[:-1] = first[1:] - 1
-    last[-1] = nst - 1
-    t, y, seg, grid_index = _merge(output_grid(tab), ph_t0[:nph], ph_t1[:nph], first, last, st_t, st_h, st_y, st_Q,
-                                   nst)
-    return t, y[0], y[1], ph_row[:nph, 0].astype(np.int64)[seg], grid_index
-
-
-def _merge(grid, starts, ends, first, last, t0s, hs, y0s, Qs, n_steps: int):
-    """``dopri5.merge_outputs`` of phases (starts, ends, their steps first..last of t0s, hs, y0s,
-    Qs; n_steps of them) with the grid: (t, y (2, m), phase index, grid index or -1)."""
-    size = grid.size + n_steps + starts.size
-    out_t, out_y = np.empty(size), np.empty((2, size))
-    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
-    m = dp.merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid)
-    return out_t[:m], out_y[:, :m], out_seg[:m], out_grid[:m]
+    t, y, seg, grid_index = dp.merge_run(output_grid(tab), out)
+    return t, y[0], y[1], out[11][:out[4], 0].astype(np.int64)[seg], grid_index
 
 
 def _extremes(values) -> tuple:

@@ -161,13 +161,23 @@ def elastic_before(scene, tab) -> list[str]:
     if scene.omega1_mode != "var":
         return []
     drop, slack = speed_drop(scene, tab)
-    if np.any(slack < 0):
-        raise motor_stall(float(tab.phi1[int(np.argmax(slack < 0))]))
+    k = stall_index(slack)
+    if k >= 0:
+        raise motor_stall(float(tab.phi1[k]))
     if drop > SPEED_DROP_WARN:
         return [f"the follower's demand could slow the cam by up to {100 * drop:.0f} % (an energy bound, the "
                 "motor's response left out); the elastic model holds the cam speed constant: --model rigid "
                 "computes its variation"]
     return []
+
+
+@jit
+def stall_index(slack) -> int:
+    """The first angle index where ``speed_drop``'s slack is below zero (the motor stalls), or -1."""
+    for i in range(slack.size):
+        if slack[i] < 0.0:
+            return i
+    return -1
 
 
 def motor_stall(phi1: float) -> SolverError:

@@ -684,6 +684,30 @@ def merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_
     return m
 
 
+@jit
+def merged(grid, starts, ends, first, last, t0s, hs, y0s, Qs, n_steps):
+    """``merge_outputs`` of phases (starts, ends, their steps first..last of t0s, hs, y0s, Qs; n_steps
+    of them) with the grid, into arrays of their own: (t, y (n_state, m), phase index, grid index
+    or -1)."""
+    size = grid.size + n_steps + starts.size
+    out_t, out_y = np.empty(size), np.empty((y0s.shape[1], size))
+    out_seg, out_grid = np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64)
+    m = merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid)
+    return out_t[:m], out_y[:, :m], out_seg[:m], out_grid[:m]
+
+
+@jit
+def merge_run(grid, out):
+    """``merged`` of a run from ``run``'s own return value ``out`` (its step store and phase
+    table), without a Python object per phase."""
+    nst, nph = out[3], out[4]
+    first = out[14][:nph]
+    last = np.empty(nph, dtype=np.int64)
+    last[:-1] = first[1:] - 1
+    last[-1] = nst - 1
+    return merged(grid, out[12][:nph], out[13][:nph], first, last, out[7], out[8], out[9], out[10], nst)
+
+
 @kernel(inline="always")
 def _dense_at(t0s, hs, y0s, Qs, i, tau, n_state, out, m):
     """out[:n_state, m] = the dense output of step i at tau: ``evaluate_steps``' arithmetic."""
