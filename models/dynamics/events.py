@@ -212,13 +212,15 @@ def settles(ev, side: str | None = None) -> int:
 # the same counts on the compiled loops' event rows (integer codes in COL_KIND and COL_SIDE), for
 # the paths that never build the named record (tests/test_events.py holds them equal to the above)
 
+_SIDE_BY_NAME = {name: code for code, name in SIDE_CODES.items()}
+
+
 def _row_side(rows, side: str | None) -> np.ndarray:
     if side is None:
         return np.ones(rows.shape[0], dtype=bool)
-    codes = {name: code for code, name in SIDE_CODES.items()}
-    if side not in codes:
+    if side not in _SIDE_BY_NAME:
         raise ValueError(f"side must be {INTERIOR!r} or {EXTERIOR!r}, got {side!r}")
-    return rows[:, COL_SIDE] == codes[side]
+    return rows[:, COL_SIDE] == _SIDE_BY_NAME[side]
 
 
 def flights_in_rows(rows, side: str | None = None) -> int:
