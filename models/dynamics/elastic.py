@@ -161,11 +161,15 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     and span (models.mechanism.cam_tables): only the combination with the operating point is per run.
     """
     omega1 = cam_speed(scene)
+    terms = grid_terms(scene.mechanism, scene.program, span, n_points, _until(scene))
+    return _tables(scene, terms, terms.phi1 / omega1, omega1, _grid_arm(scene, span, n_points))
+
+
+def _grid_arm(scene: Scene, span: float, n_points: int) -> np.ndarray:
+    """``_arm`` on grid_tables' cam-angle grid, per process (speed-independent)."""
     mech, until = scene.mechanism, _until(scene)
-    terms = grid_terms(mech, scene.program, span, n_points, until)
-    arm = cached(("elastic_arm", mech.cache_key, scene.program, float(span), int(n_points), until),
-                 lambda: _arm(mech, terms.alpha))
-    return _tables(scene, terms, terms.phi1 / omega1, omega1, arm)
+    return cached(("elastic_arm", mech.cache_key, scene.program, float(span), int(n_points), until),
+                  lambda: _arm(mech, grid_terms(mech, scene.program, span, n_points, until).alpha))
 
 
 def _until(scene: Scene):
@@ -504,13 +508,14 @@ _ANGLE_ROWS = ("phi1", "dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load", "arm
 
 
 def _angle_block(scene: Scene, span: float, n_points: int) -> np.ndarray:
-    """``grid_tables``' speed-independent inputs stacked, rows _ANGLE_ROWS (arm = l cos alpha, the
+    """``grid_tables``' speed-independent inputs stacked, rows _ANGLE_ROWS (arm ``_grid_arm``, the
     rest grid_terms'), per process."""
     mech, until = scene.mechanism, _until(scene)
 
     def build():
         terms = grid_terms(mech, scene.program, span, n_points, until)
-        return np.vstack([_arm(mech, terms.alpha) if name == "arm" else getattr(terms, name) for name in _ANGLE_ROWS])
+        arm = _grid_arm(scene, span, n_points)
+        return np.vstack([arm if name == "arm" else getattr(terms, name) for name in _ANGLE_ROWS])
     return cached(("elastic_angle_block", mech.cache_key, scene.program, float(span), int(n_points), until), build)
 
 
