@@ -50,6 +50,13 @@ def test_contact_law_never_nan_and_potential_is_its_integral():
     assert np.all(hunt_crossley_force(x, -1e3 * np.ones_like(x), KC, 1.0) >= 0)   # never pulls
 
 
+def test_contact_power_is_libm_pow_to_a_few_ulps():
+    """normal_force forms p^(10/9) as p exp(ln p / 9) (cheaper than pow in the loop): it must agree
+    with numpy's power (an independent libm call) over every penetration a run can reach."""
+    p = np.geomspace(1e-15, 1e-2, 20001)
+    np.testing.assert_allclose(contact_force(p, KC), KC * np.power(p, 10.0 / 9.0), rtol=1e-14, atol=0)
+
+
 # ------------------------------------------------------------------ eqs (16)-(18)
 
 def test_base_circles_match_paper_eq18_and_reduced_masses():

@@ -30,6 +30,34 @@ def test_tableau_is_dormand_prince():
     np.testing.assert_allclose(dopri5.P.sum(axis=1)[:6], dopri5.B, atol=1e-14)
 
 
+def test_step_factor_is_scipys_controller_to_a_few_ulps():
+    """new_step_factor forms err^(-1/5) by exp and log (cheaper than pow in the loop): it must be
+    scipy RK45's factor (numpy's power, an independent libm call) at every error norm."""
+    from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
+    for err in np.geomspace(1e-12, 1e3, 4001):
+        for rejected in (False, True):
+            want = SAFETY * np.power(err, -0.2)
+            want = (min(1.0, min(MAX_FACTOR, want)) if rejected else min(MAX_FACTOR, want)) if err < 1 \
+                else max(MIN_FACTOR, want)
+            assert dopri5.new_step_factor(err, rejected) == pytest.approx(want, rel=1e-14, abs=0)
+    assert dopri5.new_step_factor(0.0, False) == MAX_FACTOR
+
+
+def test_grid_lookup_is_np_interp_on_a_nonuniform_grid():
+    """The right-hand side's table lookup (a guess from the mean rate, then a walk) is np.interp on
+    grids far from uniform, at and between the nodes and outside the grid."""
+    from models.dynamics.kernels import elastic_nb as eq
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        tg = np.cumsum(rng.uniform(0.05, 3.0, 200)) * 1e-5
+        tab = np.vstack([tg, rng.normal(size=200), rng.uniform(0.5, 2.0, 200)])
+        ts = np.concatenate([rng.uniform(tg[0] - 1e-4, tg[-1] + 1e-4, 500), tg])
+        for t in ts:
+            a, b = eq.interp_rows(t, tab, eq.DRIVE, eq.MASS, eq.grid_rate(tg))
+            assert a == pytest.approx(np.interp(t, tg, tab[eq.DRIVE]), rel=1e-13, abs=1e-15)
+            assert b == pytest.approx(np.interp(t, tg, tab[eq.MASS]), rel=1e-13, abs=1e-15)
+
+
 @pytest.mark.parametrize("solver", ["compiled", "scipy"])
 def test_free_flight_is_exact_parabola(solver):
     # flight phase, constant drive d and mass m: x = x0 + v0 t - d t^2 / (2 m): 5th order is exact
@@ -150,9 +178,10 @@ def test_dense_output_is_continuous_across_steps():
     for _, run in segs:
         if not isinstance(run, dopri5.DenseRun) or run.t0s.size < 2:
             continue
-        # each step's polynomial at s = 1 is the next step's start
+        # each step's polynomial at s = 1 is the next step's start, to the rounding of its terms
         ends = run.y0s[:-1] + run.hs[:-1, None] * run.Qs[:-1].sum(axis=2)
-        np.testing.assert_allclose(ends, run.y0s[1:], rtol=1e-12, atol=1e-18)
+        terms = np.abs(run.y0s[:-1]) + np.abs(run.hs[:-1, None]) * np.abs(run.Qs[:-1]).sum(axis=2)
+        assert np.all(np.abs(ends - run.y0s[1:]) <= 16 * np.finfo(float).eps * terms)
 
 
 def test_kernels_are_compiled_with_an_on_disk_cache():

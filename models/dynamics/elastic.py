@@ -220,7 +220,8 @@ class AtRest:
 def model_struct(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, omega1=0.0) -> eq.ElasticModel:
     """The compiled model of a run (kernels.elastic_nb.ElasticModel)."""
     tab = np.ascontiguousarray(np.vstack([t_grid, drive_grid, m_grid]), dtype=np.float64)
-    return eq.ElasticModel(tab, float(kc), float(gap), float(damping), float(omega1), float(BOUNDARY_NUDGE))
+    return eq.ElasticModel(tab, float(kc), float(gap), float(damping), float(omega1), float(BOUNDARY_NUDGE),
+                           float(eq.grid_rate(tab[eq.TG])))
 
 
 def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=None,
@@ -561,7 +562,8 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     atol = np.empty((3, 2))                         # integrate's: one row a mode
     for mode in range(3):
         atol[mode, 0], atol[mode, 1] = pair[0], pair[1]
-    model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE)
+    rate = (n - 1) / (t[n - 1] - t[0]) if n > 1 and t[n - 1] > t[0] else 0.0
+    model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE, rate)
     phase, t0, x0, v0 = eq.start(model)
     if t0 != 0.0:
         return _STARTS_AT_REST, vals, no_rows

@@ -40,6 +40,7 @@ Time in s, states in the model's units; tolerances as in scipy (scale = atol + r
 from __future__ import annotations
 
 import functools
+import math
 from collections import namedtuple
 
 import numpy as np
@@ -247,16 +248,19 @@ def dense_eval(y0, h, Q, s, out):
 
 @kernel(inline="always")
 def new_step_factor(err, rejected):
-    """Step-size factor after a step with error norm ``err`` (scipy's controller)."""
+    """Step-size factor after a step with error norm ``err`` (scipy's controller).
+
+    err^(-1/5) as exp(-ln(err) / 5): libm's pow with that exponent took ~40 ns a call, ~5 % of the
+    elastic loop (one call an attempt); exp and log agree with it to a few ulps."""
     if err < 1.0:
         if err == 0.0:
             f = MAX_FACTOR
         else:
-            f = min(MAX_FACTOR, SAFETY * err ** ERROR_EXPONENT)
+            f = min(MAX_FACTOR, SAFETY * math.exp(ERROR_EXPONENT * math.log(err)))
         if rejected:
             f = min(1.0, f)
         return f
-    return max(MIN_FACTOR, SAFETY * err ** ERROR_EXPONENT)
+    return max(MIN_FACTOR, SAFETY * math.exp(ERROR_EXPONENT * math.log(err)))
 
 
 @jit

@@ -38,20 +38,28 @@ ElasticModel = namedtuple("ElasticModel", [
     "damping",   # s/m, Hunt-Crossley
     "omega1",    # rad/s, the cam's constant speed (phi1 = omega1 t)
     "nudge",     # m, restart offset inside a new phase
+    "rate",      # 1/s, (n - 1) / (tab[TG, -1] - tab[TG, 0]): interp_rows' first guess of an interval
 ])
 
 
+def grid_rate(tg):
+    """ElasticModel.rate of the time grid tg (s): intervals per second."""
+    span = float(tg[-1] - tg[0]) if tg.size > 1 else 0.0
+    return (tg.size - 1) / span if span > 0.0 else 0.0
+
+
 @kernel(inline="always")
-def interp_rows(t, tab, row_a, row_b):
+def interp_rows(t, tab, row_a, row_b, rate):
     """np.interp(t, tab[TG], tab[row]) of two rows on the increasing, nearly uniform grid tab[TG]
-    (one guess, then a short walk; the interval and its weight found once for both)."""
+    (one guess from ``rate``, ElasticModel.rate, then a short walk; the interval and its weight
+    found once for both). The guess multiplies: a division there waited on the other one."""
     n = tab.shape[1]
     t0, t1 = tab[TG, 0], tab[TG, n - 1]
     if t <= t0:
         return tab[row_a, 0], tab[row_b, 0]
     if t >= t1:
         return tab[row_a, n - 1], tab[row_b, n - 1]
-    i = int((t - t0) / (t1 - t0) * (n - 1))
+    i = int((t - t0) * rate)
     i = min(max(i, 0), n - 2)
     while i > 0 and t < tab[TG, i]:
         i -= 1
@@ -83,7 +91,7 @@ def force(m, phase, x, v):
 
 @kernel
 def rhs(model, ph, t, y, out):
-    d, mass = interp_rows(t, model.tab, DRIVE, MASS)
+    d, mass = interp_rows(t, model.tab, DRIVE, MASS, model.rate)
     out[0] = y[1]
     out[1] = (force(model, int(ph[0]), y[0], y[1]) - d) / mass
 
