@@ -28,6 +28,7 @@ def test_must_show_sim_180_rpm_10_s_fast_writes_a_valid_v1_file(tmp_path, capsys
     assert [k for _, k, _ in rec["events"]] == ["start", "stop"]
 
 
+@pytest.mark.slow
 def test_recovered_omega2_matches_the_truth(tmp_path):
     """Tacho -> rise start; integrate aE_t * Ka / DE over the rise: the peak omega2 is the truth's."""
     out = tmp_path / "r.h5"
@@ -59,6 +60,7 @@ def test_scene_file_and_overrides(tmp_path):
     assert a["cam_speed_rpm"] == 300.0 and a["seed"] == 9 and read_recording(out)["signals"].shape[0] == 5000
 
 
+@pytest.mark.slow
 def test_clipping_warns(tmp_path, capsys):
     out = tmp_path / "c.h5"
     assert main(["acquire", "--fast", "--duration", "1", "--fault", "clip@0.5", "-o", str(out)]) == 0
@@ -66,6 +68,7 @@ def test_clipping_warns(tmp_path, capsys):
     assert any(k == "clip" for _, k, _ in read_recording(out)["events"])
 
 
+@pytest.mark.slow
 def test_bad_input_one_line_exit_2(tmp_path, capsys):
     (tmp_path / "exists.h5").write_text("x")
     (tmp_path / "afile").write_text("x")
@@ -110,6 +113,7 @@ def test_force_overwrites(tmp_path):
     assert read_recording(out)["signals"].shape[0] == 2000
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(st.text(max_size=30).filter(lambda s: s.strip() != "sim" and not s.strip().startswith("nidaqmx:")))
 def test_any_other_device_name_is_refused(tmp_path_factory, spec):
@@ -123,6 +127,7 @@ SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_dat
 
 @pytest.mark.parametrize("name", ["run_180rpm", "run_300rpm", "run_500rpm", "calibration_79p6Hz",
                                   "calibration_79p6Hz_aE_n"])
+@pytest.mark.slow
 def test_sample_data_is_what_its_scene_makes(tmp_path, name):
     out = tmp_path / f"{name}.h5"
     assert main(["acquire", "--scene", str(SAMPLE / "scenes" / f"{name}.toml"), "--fast", "-o", str(out)]) == 0
@@ -152,6 +157,7 @@ def test_truth_from_a_recordings_attributes(tmp_path):
         sc.scene_from_attrs({"device": "nidaqmx"})
 
 
+@pytest.mark.slow
 def test_elastic_truth_run_records_the_models_motion(tmp_path):
     out = tmp_path / "el.h5"
     assert main(["acquire", "--truth", "elastic", "--rpm", "300", "--duration", "0.6", "--fast", "--ka", "864.3",
@@ -177,6 +183,7 @@ def test_elastic_truth_run_records_the_models_motion(tmp_path):
     assert not (tmp_path / "x.h5").exists()
 
 
+@pytest.mark.slow
 def test_scene_file_truth_table(tmp_path, capsys):
     scene = tmp_path / "s.toml"
     scene.write_text('[stand]\ncam_speed_rpm = 300\nduration_s = 0.3\n\n[truth]\ncontact_damping_s_per_m = 25.0\n'

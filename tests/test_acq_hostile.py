@@ -187,6 +187,7 @@ def test_two_acquires_started_together(tmp_path, force):
     assert bool(rec["attrs"]["complete"]) and n == 20000 and f"{n} samples" in winner
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("hang")
 @pytest.mark.parametrize("keep", [100, 512, 4096])
 def test_read_recording_of_a_truncated_file_is_one_error_not_a_hang(tmp_path, keep):

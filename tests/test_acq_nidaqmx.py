@@ -84,6 +84,7 @@ operator = "M. Ionescu"
 """
 
 
+@pytest.mark.slow
 def test_configuration_round_trip_set_task_read_back_stored(tmp_path):
     (tmp_path / "dev.toml").write_text(DEVICE_FILE)
     doc = nc.load_device_file(tmp_path / "dev.toml")
@@ -148,6 +149,7 @@ def test_excitation_from_the_daq_when_asked():
     assert board.calls[2][0] == "voltage"  # the tacho gets no excitation
 
 
+@pytest.mark.slow
 def test_real_rate_is_read_back_and_stored(tmp_path):
     board = FakeBoard(coerce=lambda r: 12.8e6 / 1279)  # 10007.8 Hz
     res = session.run(make(board), tmp_path / "n.h5", 10000, 0.05)
@@ -188,6 +190,7 @@ def test_pretrigger_samples_mean_a_software_trigger_not_a_hardware_one():
     assert not board.task.triggers.start_trigger.cfg_anlg_edge_start_trig.called
 
 
+@pytest.mark.slow
 def test_overrun_becomes_an_event_and_a_gap(tmp_path):
     board = FakeBoard(script={3: "overrun"})
     res = session.run(make(board), tmp_path / "o.h5", 10000, 0.1)

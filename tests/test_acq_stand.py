@@ -67,6 +67,7 @@ def test_gravity_component_matches_the_sensor_axes_from_the_linkage():
     np.testing.assert_allclose(f[:, 1], f_grav @ n_hat, atol=1e-4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("truth_model", ["kinematic", "twin"])
 def test_recorded_volts_times_ka_follow_the_truth_in_the_cam_band(truth_model):
     scene = sc.StandScene(cam_speed_rpm=180, truth_model=truth_model)
@@ -133,6 +134,7 @@ def test_adc_quantizes_and_flags_clipping():
     assert q.max() <= 10.0 - lsb + 1e-6 and q.min() >= -10.0
 
 
+@pytest.mark.slow
 def test_same_seed_same_data_other_seed_other_noise():
     a = np.concatenate([b.data for b in record(seed=7, duration=0.5)[1]])
     b = np.concatenate([b.data for b in record(seed=7, duration=0.5)[1]])
@@ -142,6 +144,7 @@ def test_same_seed_same_data_other_seed_other_noise():
     assert np.abs(a - c).max() < 0.1  # same truth, different noise
 
 
+@pytest.mark.slow
 def test_faults_lose_samples_but_keep_the_rest_identical():
     ref = np.concatenate([b.data for b in record(seed=2, duration=3.0)[1]])
     _, blocks = record(seed=2, duration=3.0, faults=[Fault("overrun", 1.0, 0.2), Fault("drop", 2.05)])
@@ -157,6 +160,7 @@ def test_faults_lose_samples_but_keep_the_rest_identical():
     assert firsts == sorted(firsts)
 
 
+@pytest.mark.slow
 def test_clip_fault_and_disconnect():
     _, blocks = record(duration=1.0, faults=[Fault("clip", 0.5)])
     clips = [e for b in blocks for e in b.events if e.kind == "clip"]
@@ -231,6 +235,7 @@ def rigid_scene():
     return sc.StandScene(cam_speed_rpm=300, truth_model="rigid", truth_revolutions=3, ripple=0.0)
 
 
+@pytest.mark.slow
 def test_model_truth_is_the_models_steady_turn_repeated(rigid_scene):
     """The rigid model (k = 0.2) repeats its events turn after turn: the truth is its last turn,
     from t = 0 and for as long as a recording lasts."""

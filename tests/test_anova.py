@@ -37,6 +37,7 @@ with open(anova.Path(__file__).resolve().parents[1] / "models" / "data" / "effec
 
 @pytest.mark.parametrize("i", range(len(EFFECTS)),
                          ids=[f"eq{r.equation}-{r.response}-{r.term}" for r in EFFECTS.itertuples()])
+@pytest.mark.slow
 def test_every_coefficient_of_eqs_20_28_to_printed_precision(paper_results, i):
     """Each printed coefficient is ours cut to the printed decimals: rounded or, more often,
     truncated (A of eq (20) is -6.011875 exactly and is printed -6.0118; A of eq (21) is 0.020021875

@@ -105,6 +105,7 @@ def test_ka_from_fit_conventions():
             ka_from_fit(fit, **kw)
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys):
     rec = cal_recording(tmp_path / "ref.h5", duration=1.0)
     run = SimStand(sc.StandScene(), seed=1, duration_s=1.0, realtime=False)

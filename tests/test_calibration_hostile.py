@@ -260,6 +260,7 @@ def test_a_recording_name_that_is_not_a_given_reference_is_refused(tmp_path, cap
     assert "other.h5 is not one of the reference recordings" in one_error_line(capsys)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_a_second_calibration_is_merged_or_refused_never_silently_replacing(tmp_path, capsys):
     rec = tmp_path / "run.h5"
@@ -284,6 +285,7 @@ def test_a_second_calibration_is_merged_or_refused_never_silently_replacing(tmp_
     assert not (tmp_path / "m2.nc").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_the_papers_default_ka_is_never_used_silently(tmp_path, capsys):
     rec = tmp_path / "run.h5"

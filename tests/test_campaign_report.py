@@ -37,6 +37,7 @@ def page(measured, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_measured_files_make_one_page_json_and_csv(page, measured):
     table = pd.read_csv(page.with_suffix(".csv"))
     # one row per point x simulation, sorted by speed; the points named by their folders (all measured.nc)
@@ -86,6 +87,7 @@ def test_where_the_closest_model_changes_along_the_speed():
     assert [r.name for r in collect.sort_records(recs)] == ["a", "b", "c", "d", "e"]
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("injection")
 def test_names_and_notes_from_files_are_text_on_the_page(tmp_path):
     ds = synthetic_measured(rpm=180.0, revolutions=3.4)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,6 +33,7 @@ def _console(before: str, args: list[str]) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_atexit_handlers_run_and_open_files_are_flushed(tmp_path):
     before = f"""
         import atexit
@@ -48,6 +50,7 @@ def test_atexit_handlers_run_and_open_files_are_flushed(tmp_path):
     assert (tmp_path / "held.txt").read_text() == "x" * 100
 
 
+@pytest.mark.slow
 def test_the_exit_code_is_the_commands():
     proc = _console("", ["kinematics", "--law", "parabolic"])
     assert proc.returncode == 2
@@ -55,6 +58,7 @@ def test_the_exit_code_is_the_commands():
     assert "fast exit tried" in proc.stderr and "normal exit" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_a_working_thread_gets_the_normal_exit(tmp_path):
     before = f"""
         import threading, time
@@ -69,6 +73,7 @@ def test_a_working_thread_gets_the_normal_exit(tmp_path):
     assert (tmp_path / "thread.txt").read_text() == "done"
 
 
+@pytest.mark.slow
 def test_an_open_hdf5_file_gets_the_normal_exit(tmp_path):
     path = tmp_path / "open.h5"
     before = f"""

@@ -203,6 +203,7 @@ def test_doe_run_on_a_local_dask_cluster(tmp_path):
     assert remote.MR13D_max_Nm.to_numpy() == pytest.approx(local.MR13D_max_Nm.to_numpy(), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_an_input_error(tmp_path):
     from execution.backends import DaskCluster
     with pytest.raises(InputError, match="cannot reach the Dask scheduler"):

@@ -192,6 +192,7 @@ def test_eq19_follower_motion_and_dataset_contract():
         assert res.indicators[k] is None
 
 
+@pytest.mark.slow
 def test_table3_moments_jumps_and_counts():
     """Table 1's 16 runs against Table 3 (docs/models.md): with Table 3's convention (gap closed)
     MR13D max/min within 10 %, jumps and impacts equal to Table 3 in every run, and the indicators

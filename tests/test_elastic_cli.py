@@ -7,6 +7,7 @@ import xarray as xr
 from labtool.cli import main
 
 
+@pytest.mark.slow
 def test_simulate_elastic_json_and_netcdf(tmp_path, capsys):
     out = tmp_path / "sim.nc"
     code = main(["simulate", "--model", "elastic", "--law", "sine", "--rpm", "180", "--fu", "65",

@@ -45,6 +45,7 @@ def counted(x):
 
 # ------------------------------------------------------------------------------------ pure parts
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(shape=st.lists(st.integers(1, 6), min_size=1, max_size=4), data=st.data())
 def test_hyperslabs_tile_a_flat_range_in_order(shape, data):
@@ -389,6 +390,7 @@ _cells = st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True), st
 @settings(max_examples=60, deadline=None)
 @given(rows=st.lists(st.fixed_dictionaries({"a": _cells, "b": st.floats(allow_nan=True), "error": st.text(max_size=20)}),
                      min_size=1, max_size=8))
+@pytest.mark.slow
 def test_a_part_reads_back_as_pandas_reads_it(tmp_path_factory, rows):
     """The parts are written with the csv module; pandas (what wrote and read them before) reads
     the same values: floats bit for bit, NaN and None as empty cells, any text (commas, quotes,
@@ -425,6 +427,7 @@ def test_a_damaged_part_is_refused_in_one_line(tmp_path):
     store.close()
 
 
+@pytest.mark.slow
 def test_a_design_run_loads_no_pandas(tmp_path):
     """An elastic sweep's process reads its factor file, runs (the indicator path: no Dataset),
     writes its parts and assembles its outputs without pandas (0.3 s of a command's fixed cost)."""
@@ -441,6 +444,7 @@ print(rc, "pandas" in sys.modules)
     assert len(pd.read_csv(tmp_path / "r.csv")) == 100
 
 
+@pytest.mark.slow
 def test_a_part_with_text_where_a_number_belongs_is_refused_in_one_line(tmp_path, capsys):
     (tmp_path / "f.csv").write_text(FACTORS_100)
     from models.dynamics.scene import Scene

@@ -21,6 +21,7 @@ def measured(tmp_path_factory):
     return d / "measured.nc"
 
 
+@pytest.mark.slow
 def test_cf_conventions_found_by_cf_xarray(measured):
     ds = xr.open_dataset(measured, engine="h5netcdf")
     assert ds.attrs["Conventions"] == "CF-1.10"
@@ -57,6 +58,7 @@ def test_cf_apply_on_a_dataset():
     ["simulate", "--model", "rigid", "--accuracy", "fast", "--backlash-mm", "0.128", "--restitution", "0.5"],
     ["kinematics", "--points", "720"],
 ])
+@pytest.mark.slow
 def test_simulate_and_kinematics_outputs_are_cf(argv, tmp_path, capsys):
     out = tmp_path / "o.nc"
     assert main([*argv, "-o", str(out)]) == 0
@@ -84,6 +86,7 @@ def test_udunits_spelling(text, expected):
     assert udunits(text) == expected
 
 
+@pytest.mark.slow
 def test_export_csv_cycles_and_series(measured, tmp_path, capsys):
     prefix = tmp_path / "m"
     assert main(["export", str(measured), "--csv", "-o", str(prefix)]) == 0
@@ -98,6 +101,7 @@ def test_export_csv_cycles_and_series(measured, tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 def test_export_of_a_damaged_measured_file_is_one_line(measured, tmp_path, capsys):
     """A NetCDF whose omega2 holds strings, a cut file, a foreign file: one line, exit 2, nothing written."""

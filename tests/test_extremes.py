@@ -182,6 +182,7 @@ def test_compiled_elastic_step_cap_names_the_limit():
                           max_step=1e-5, max_steps=50)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["compiled", "scipy"])
 def test_elastic_endless_chatter_is_a_solver_error_not_a_hang(solver):
     # a drive that is exactly zero with no backlash and a huge stiffness: the follower sits on the

@@ -117,6 +117,7 @@ def test_the_intervals_cover_the_truth_over_noise_realisations(tmp_path, monkeyp
 
 @pytest.mark.parametrize("start", [{"backlash": 0.03, "restitution": 0.1}, {"backlash": 0.5, "restitution": 0.9},
                                    {"backlash": 0.1, "restitution": 0.7}])
+@pytest.mark.slow
 def test_the_answer_does_not_depend_on_the_start(measured, monkeypatch, start):
     # three starts across the bounds (no scan): the same answer as the scan's, within its interval
     stand_in(monkeypatch)
@@ -127,6 +128,7 @@ def test_the_answer_does_not_depend_on_the_start(measured, monkeypatch, start):
         assert lo <= s["parameters"][key]["value"] <= hi, (key, s["parameters"][key]["value"], lo, hi)
 
 
+@pytest.mark.slow
 def test_chain_gain_and_delay_cost_no_model_run_and_are_recovered(tmp_path, monkeypatch):
     # measurement = truth x 1.2, 2 deg late: ka_gain = 1/1.2 (measured = truth / ka_gain), delay = 2 deg / (6 x 180 deg/s)
     path = tmp_path / "m.nc"
@@ -355,6 +357,7 @@ def test_linear_theory_equals_ordinary_least_squares_on_independent_noise():
     assert lin.t == pytest.approx(1.968, abs=0.01)
 
 
+@pytest.mark.slow
 def test_the_hac_interval_covers_a_slope_under_correlated_noise_where_ols_does_not():
     # AR(1) noise, rho = 0.7 (correlation time 5.7 samples): the OLS interval of the slope covers it
     # far less than 95 %

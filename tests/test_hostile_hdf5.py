@@ -75,6 +75,7 @@ f.close()
 """
 
 
+@pytest.mark.slow
 def test_a_file_still_open_by_a_swmr_writer_is_read(tmp_path):
     """What must keep working: a live SWMR writer's file (another process) opens with a note."""
     from common.hdf5 import open_file

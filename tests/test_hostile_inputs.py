@@ -139,6 +139,7 @@ def test_random_kinematics_options_work_or_end_in_one_line(capsys, rpm, points, 
         one_error_line(code, err)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(rpm=_values, revolutions=_values, backlash=_values)
@@ -163,6 +164,7 @@ def _toml(v) -> str:
     return repr(v)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 @settings(max_examples=200, deadline=None)
 @given(line=st.integers(0, TEXT.count("\n") - 1), value=_toml_value)
@@ -212,6 +214,7 @@ def test_mechanism_values_that_were_ignored_or_gave_inf(tmp_path, capsys, old, n
     assert "inf" not in capsys.readouterr().out
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_one_cam_speed_range_in_every_command(tmp_path, capsys, measured_nc):
     """simulate --rpm 1e6 gave MR13D = 1.6e8 N m with exit 0 while report refused > 1000 rpm."""
@@ -335,6 +338,7 @@ def test_threshold_and_scene_files_with_bom_and_crlf(tmp_path):
     assert load_scene(scene)["rpm"] == 180 and load_scene(scene)["seed"] == 1
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("real_file")
 def test_outputs_open_in_a_second_tool(tmp_path, capsys):
     """What labtool writes opens elsewhere: the NetCDF with plain h5py, the CSV with numpy."""

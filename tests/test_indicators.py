@@ -69,6 +69,7 @@ def _outcome(fn, scene, model):
        mode=st.sampled_from(["const", "var"]), k=st.sampled_from([0.0, 0.5, 1.0]),
        gap=st.sampled_from(["physical", "closed"]), kc=st.sampled_from([1e-4, 0.1, 1.0, 10.0]),
        law=st.sampled_from(["sine", "cosine"]), preset=st.sampled_from(["fast", "standard"]))
+@pytest.mark.slow
 def test_random_scenes_give_the_same_indicators_or_the_same_error(model, rpm, Fu, j, jt, mode, k, gap, kc, law,
                                                                     preset):
     scene = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, backlash=j, jt_factor=jt, omega1_mode=mode, restitution=k,

@@ -43,6 +43,7 @@ def test_step_factor_is_scipys_controller_to_a_few_ulps():
     assert dopri5.new_step_factor(0.0, False) == MAX_FACTOR
 
 
+@pytest.mark.slow
 def test_grid_lookup_is_np_interp_on_a_nonuniform_grid():
     """The right-hand side's table lookup (a guess from the mean rate, then a walk) is np.interp on
     grids far from uniform, at and between the nodes and outside the grid."""

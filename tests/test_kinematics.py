@@ -108,6 +108,7 @@ def test_table3_mr13d_within_10_percent_and_sign_changes_match():
     assert set(df.loc[~df["sign_change"], "run"]) == {9, 13}
 
 
+@pytest.mark.slow
 def test_nominal_speed_is_15_percent_low_which_is_the_drive_factor():
     """At the nominal n1 the kinematic MR13D is (920/1000)^2 of the paper's: the speed assumption."""
     nominal = kinematic_vs_table3(no_load_speed=False)

@@ -101,6 +101,7 @@ def test_every_first_party_package_has_a_layer():
     assert not unknown, f"give these packages a rank in RANK (DESIGN.md layers): {sorted(unknown)}"
 
 
+@pytest.mark.slow
 def test_imports_point_down_the_layers():
     wrong = set()
     for src, targets in _graph().items():
@@ -146,6 +147,7 @@ def _cycles(graph) -> list[set[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_no_import_cycles():
     graph = _graph()
     # a package's __init__ re-exporting from its own modules is not a cycle of the design

@@ -79,6 +79,7 @@ def test_any_bad_value_for_a_length_is_an_input_error_or_accepted(value):
     assert m.l > 0 and math.isfinite(m.l)
 
 
+@pytest.mark.slow
 def test_kinematics_cli_writes_netcdf_with_units_and_groove_csv(tmp_path, capsys):
     out, csv = tmp_path / "kin.nc", tmp_path / "groove.csv"
     assert main(["kinematics", "--law", "sine", "--rpm", "180", "-o", str(out), "--groove-csv", str(csv)]) == 0

@@ -40,6 +40,7 @@ def _rise_errors(ds, tr):
     return e_o, e_e, int(rise.sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rpm, tacho", [(180.0, True), (180.0, False), (500.0, True), (300.0, False)])
 def test_recovers_known_omega2_and_epsilon2(tmp_path, rpm, tacho):
     """Noise, gravity, AC coupling, resonance, speed ripple and quantization: omega2 < 2 %, epsilon2 < 5 %."""
@@ -58,6 +59,7 @@ def test_recovers_known_omega2_and_epsilon2(tmp_path, rpm, tacho):
     assert np.sqrt(np.mean((ds["omega2_mean"] - ds["omega2_kinematic"]) ** 2)) / pk < 0.03
 
 
+@pytest.mark.slow
 def test_undoing_the_ac_coupling_improves_the_result(tmp_path):
     """A 1.06 Hz AC coupling (tau = 0.15 s), undone with the chain's own tau: omega2's error shrinks
     to the floor the rest of the chain (anti-alias delay, resonance, noise) leaves."""
@@ -69,6 +71,7 @@ def test_undoing_the_ac_coupling_improves_the_result(tmp_path):
     assert e1[0] < 0.4 * e0[0] and e1[1] < 0.4 * e0[1] and e1[0] < 0.01
 
 
+@pytest.mark.slow
 def test_chunk_size_does_not_change_the_result(tmp_path):
     kw = dict(rpm=300.0, duration_s=3.0, extra_m_s2=impact_bursts([1.234]))
     a, _, _, _ = _run(tmp_path, "big", **kw)
@@ -78,6 +81,7 @@ def test_chunk_size_does_not_change_the_result(tmp_path):
     assert a["spike_sample"].values.tolist() == b["spike_sample"].values.tolist()
 
 
+@pytest.mark.slow
 def test_output_names_units_history(tmp_path):
     ds, tr, s, _ = _run(tmp_path, duration_s=2.0, extra_m_s2=impact_bursts([0.777]))
     for v in ("aE_t", "aE_n", "epsilon2", "omega2", "phi1", "revolution", "aE_t_amplitude", "aE_n_psd",
@@ -104,6 +108,7 @@ def test_output_names_units_history(tmp_path):
     assert amp[0] < 0.1 * amp.max() and f[np.argmax(amp)] < 100.0
 
 
+@pytest.mark.slow
 def test_gaps_split_segments_and_clips_are_kept_out(tmp_path):
     gap, clip = 15000, 27000
     ds, tr, s, msgs = _run(tmp_path, rpm=300.0, duration_s=4.0,
@@ -125,6 +130,7 @@ def test_gaps_split_segments_and_clips_are_kept_out(tmp_path):
     assert e_o < 0.02 and e_e < 0.05
 
 
+@pytest.mark.slow
 def test_saturated_adc_is_flagged(tmp_path):
     # the accelerometer channels on a +-1 V range (aE_t peaks ~ 3.4 V), the tacho on its own 10 V range
     volts, scene, _, fs = stand_volts(2.0, 500.0)
@@ -140,12 +146,14 @@ def test_saturated_adc_is_flagged(tmp_path):
     assert ds.attrs["n_revolutions_averaged"] == 0
 
 
+@pytest.mark.slow
 def test_incomplete_recording_processes_with_warning(tmp_path):
     ds, tr, s, msgs = _run(tmp_path, duration_s=2.0, complete=False)
     assert any("incomplete" in m for m in msgs) and ds.attrs["recording_complete"] == 0
     assert _rise_errors(ds, tr)[0] < 0.02
 
 
+@pytest.mark.slow
 def test_ka_from_calibration_file_and_recording_attribute(tmp_path, capsys):
     p = tmp_path / "r.h5"
     stand_recording(p, duration_s=1.5, params={"ka_m_s2_per_v": (100.0, 100.0)}, ka=[90.0, 95.0, np.nan])
@@ -207,6 +215,7 @@ def _bad_inputs(tmp_path):
     }
 
 
+@pytest.mark.slow
 def test_bad_input_one_line_exit_2_and_no_output(tmp_path, capsys):
     cases = _bad_inputs(tmp_path)
     for label, args in cases.items():
@@ -258,6 +267,7 @@ def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
         assert np.isnan(om[c]) or not tr["moving"][c]
 
 
+@pytest.mark.slow
 def test_missed_tacho_pulse_and_dead_tacho(tmp_path):
     from stand_data import truth
 
@@ -294,6 +304,7 @@ def test_missed_tacho_pulse_and_dead_tacho(tmp_path):
     assert e_o < 0.02 and e_e < 0.05
 
 
+@pytest.mark.slow
 def test_spike_records_are_bounded(tmp_path, monkeypatch):
     import processing.accumulators as acc
 
@@ -303,6 +314,7 @@ def test_spike_records_are_bounded(tmp_path, monkeypatch):
     assert ds.attrs["n_spikes"] == s["spikes"]
 
 
+@pytest.mark.slow
 def test_a_channel_missing_from_the_calibration_names_its_fallback(tmp_path):
     from processing.calibration_file import ChannelCalibration
 
@@ -315,6 +327,7 @@ def test_a_channel_missing_from_the_calibration_names_its_fallback(tmp_path):
     assert not any("aE_t" in m for m in msgs if "no entry" in m)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_a_quantised_quiet_channel_is_not_taken_for_clipping(tmp_path):
     """At Ka = 8643 m/s^2/V (gain x0.1) aE_n spans a few dozen ADC levels and holds its top code

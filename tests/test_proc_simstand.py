@@ -11,6 +11,7 @@ from labtool.cli import main
 sc = pytest.importorskip("acquisition.signal_chain")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rpm", [180.0, 500.0])
 def test_simulated_stand_recording(tmp_path, rpm):
     rec, out = tmp_path / "rec.h5", tmp_path / "m.nc"
@@ -33,6 +34,7 @@ def test_simulated_stand_recording(tmp_path, rpm):
     assert ds.attrs["phi1_method"] == "tacho" and ds.attrs["cam_speed_rpm"] == pytest.approx(rpm, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_simulated_stand_faults_split_and_flag(tmp_path):
     """The recorder's own gap/overrun/clip events: segments, lost time counted, clipped samples out."""
     rec, out = tmp_path / "rec.h5", tmp_path / "m.nc"

@@ -155,6 +155,7 @@ def test_tdms_reader(tmp_path):
     assert open_recording(q, sample_rate_hz=500.0).sample_rate_hz == 500.0
 
 
+@pytest.mark.slow
 def test_csv_reader(tmp_path):
     v = _volts(150000)
     p = tmp_path / "r.csv"
@@ -199,6 +200,7 @@ def good_tdms(tmp_path_factory):
     return p.read_bytes()
 
 
+@pytest.mark.slow
 @settings(max_examples=int(__import__("os").environ.get("PROC_FUZZ_EXAMPLES", 60)), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_property_malformed_files_raise_only_labtool_errors(tmp_path, good_v1, good_tdms, data, capsys):
@@ -230,6 +232,7 @@ def test_property_malformed_files_raise_only_labtool_errors(tmp_path, good_v1, g
     assert out.err == "" and out.out == ""
 
 
+@pytest.mark.slow
 def test_killed_swmr_writer_reads_with_warnings(tmp_path):
     """A recorder killed while writing in SWMR mode leaves the consistency flags set."""
     import subprocess
@@ -255,6 +258,7 @@ def test_killed_swmr_writer_reads_with_warnings(tmp_path):
         assert rec.read(0, 1000).shape == (1000, 2)
 
 
+@pytest.mark.slow
 def test_unwritten_rows_are_not_read_as_zeros(tmp_path):
     p = tmp_path / "tail.h5"
     write_v1(p, np.random.default_rng(0).normal(size=(20000, 3)), NAMES, 1000.0)

@@ -72,6 +72,7 @@ def _chans(volts, names=("aE_t", "aE_n", "tacho"), props=None):
             for j, n in enumerate(names)]
 
 
+@pytest.mark.slow
 def test_tdms_raw_int16_with_ni_scale(tmp_path, original):
     """Raw ADC codes with a linear NI_Scale (npTDMS scales them; main read this case too)."""
     volts, ref = original
@@ -87,6 +88,7 @@ def test_tdms_raw_int16_with_ni_scale(tmp_path, original):
     _same_omega2(_process(p, tmp_path), ref)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("real_file")
 def test_tdms_daqmx_names_metadata_group_rate_on_group(tmp_path, original, capsys):
     """Dev1/ai0.. names, a metadata group first, the rate only as a group property: read with
@@ -103,6 +105,7 @@ def test_tdms_daqmx_names_metadata_group_rate_on_group(tmp_path, original, capsy
     _same_omega2(_process(p, tmp_path, "--channels", "aE_t=Dev1/ai0,aE_n=Dev1/ai1,tacho=Dev1/ai2"), ref)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("real_file")
 def test_tdms_two_data_groups_need_group(tmp_path, original, capsys):
     volts, ref = original
@@ -113,6 +116,7 @@ def test_tdms_two_data_groups_need_group(tmp_path, original, capsys):
     _same_omega2(_process(p, tmp_path, "--group", "run1"), ref)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_tdms_channel_in_m_s2_is_not_multiplied_by_ka(tmp_path, original):
     """DAQmx logs an accelerometer channel in m/s^2 (unit_string): Ka must not be applied again
@@ -175,6 +179,7 @@ def _lvm(path, volts, sep, dec, x_column=True):
     path.write_text("\n".join(lines + rows) + "\n")
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("real_file")
 @pytest.mark.parametrize("sep, dec, x_column", [("\t", ".", True), (",", ".", False), (";", ",", True)])
 def test_lvm_dialects(tmp_path, original, sep, dec, x_column):
@@ -209,6 +214,7 @@ def _csv(path, volts, sep=",", dec=".", header_block=(), time=None, names=("aE_t
         df.to_csv(fh, sep=sep, decimal=dec, index=False, float_format="%.9g")
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("real_file")
 @pytest.mark.parametrize("kind", ["header_block", "tab", "semicolon_decimal_comma", "time_ms", "iso_timestamps"])
 def test_csv_exports(tmp_path, original, kind):
@@ -231,6 +237,7 @@ def test_csv_exports(tmp_path, original, kind):
     _same_omega2(_process(p, tmp_path, *opts), ref)
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_csv_time_in_ms_without_unit_is_refused_or_overridden(tmp_path, original, capsys):
     """'time' in ms with no unit gave fs = 10 Hz on main; now: one line asking for --time-unit."""

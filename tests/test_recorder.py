@@ -230,6 +230,7 @@ def test_disk_full_stops_cleanly_and_keeps_the_data(tmp_path, monkeypatch):
     np.testing.assert_array_equal(rec["signals"], reference_data(1, 1.2))
 
 
+@pytest.mark.slow
 def test_disk_full_cli_one_line_exit_2(tmp_path, monkeypatch, capsys):
     _full_disk_after(monkeypatch, 5)
     p = tmp_path / "full.h5"

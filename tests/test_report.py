@@ -43,6 +43,7 @@ def _kin_report(path, **kw):
     return pipeline.build_report(path, models=("kinematic",), modes=("const",), **kw)
 
 
+@pytest.mark.slow
 def test_measured_identical_to_the_model_gives_perfect_scores(files):
     """The synthetic measurement is the kinematics itself: after alignment on the cam angle every
     error is ~0 and every ISO score ~1 (checks the alignment, grid and filter end to end)."""
@@ -219,6 +220,7 @@ def test_json_to_stdout_is_one_object(files, capsys, tmp_path):
     assert summary["passed"] is True and summary["headline"][0]["omega2_iso_grade"] == "excellent"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("drop", ["epsilon2", "phi1"])
 def test_measured_file_without_epsilon2_or_phi1_is_one_line_exit_2(files, capsys, tmp_path, drop):
     import xarray as xr
@@ -228,6 +230,7 @@ def test_measured_file_without_epsilon2_or_phi1_is_one_line_exit_2(files, capsys
     _one_line_exit_2(capsys, ["report", str(path), "-o", str(tmp_path / "r.html")], f"no {drop}" if drop == "epsilon2" else "no cam angle phi1")
 
 
+@pytest.mark.slow
 def test_the_processing_lowpass_is_reapplied_to_the_simulations(tmp_path, monkeypatch):
     """A measurement low-passed in time by processing's Butterworth (here a strong 30 Hz, 10 cam
     harmonics): with the same filter re-applied to the model the two agree (the filters are the
@@ -304,6 +307,7 @@ def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
     assert not any("differs" in n for n in _kin_report(files["exact"]).notes)
 
 
+@pytest.mark.slow
 def test_the_models_run_at_the_measured_speed_not_the_stated_one(tmp_path):
     """A stand whose drive slips (or is set differently from the paper's) turns at another speed than
     it states: the models run at the measured mean speed; omega1 var has its drive set to that speed

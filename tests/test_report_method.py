@@ -77,6 +77,7 @@ def test_a_long_recording_is_read_in_bounded_blocks(tmp_path):
 @settings(max_examples=150, deadline=None)
 @given(n=st.integers(1, 5000), gaps=st.lists(st.tuples(st.floats(0, 1), st.floats(0, 0.5)), max_size=3),
        probes=st.lists(st.floats(-0.1, 1.1), min_size=1, max_size=20), window=st.sampled_from([4, 16, 512]))
+@pytest.mark.slow
 def test_lazy_searchsorted_equals_numpys_on_a_time_axis_with_gaps(n, gaps, probes, window):
     """The long file's time axis is never read whole (a 1-hour recording's is 288 MB): the interpolation
     search finds numpy's answer, gaps (lost samples counted in time) or not, inside or outside."""
@@ -97,6 +98,7 @@ def test_a_long_file_is_opened_without_its_time_index(tmp_path):
     assert "time" not in opened.indexes and "time" in opened.coords
 
 
+@pytest.mark.slow
 def test_the_robustness_rows_name_the_closest_model_at_both_presets_and_lengths(tmp_path):
     path = tmp_path / "m.nc"
     write_netcdf(synthetic_measured(noise=0.01, revolutions=4.3), path)

@@ -80,6 +80,7 @@ def test_const_speed_contact_is_the_kinetostatic_model():
     np.testing.assert_allclose(ds["MR13D"].values[:-1], kin["MR13D"], atol=1e-6 * abs(kin["MR13D"]).max().item())
 
 
+@pytest.mark.slow
 def test_variable_speed_power_balance():
     """omega1 var, j = 0: d/dt(1/2 J' w1^2 + 1/2 J'' w2^2) = motor + cam gravity + gravity + load power,
     each term from models.mechanism.motor / models.mechanism.linkage (not from the model's tables)."""

@@ -44,6 +44,7 @@ def test_auto_runs_the_1dof_rigid_model_when_omega1_varies(capsys):
     assert out["jumps"] == 0 and out["impacts"] == 0
 
 
+@pytest.mark.slow
 def test_netcdf_output_has_units_and_refuses_overwrite(tmp_path, capsys):
     path = tmp_path / "sim.nc"
     args = ["simulate", "--model", "rigid", "--accuracy", "fast", "--omega1", "const", "-o", str(path)]
@@ -80,6 +81,7 @@ def test_bad_input_is_one_line_exit_2(capsys, args, msg):
 @settings(max_examples=25, deadline=None)
 @given(k=st.one_of(st.floats(max_value=-1e-9, allow_nan=False, allow_infinity=False),
                    st.floats(min_value=1.0 + 1e-9, allow_nan=False, allow_infinity=False)))
+@pytest.mark.slow
 def test_any_restitution_outside_unit_interval_is_rejected(k):
     import io
     from contextlib import redirect_stderr
@@ -108,6 +110,7 @@ def test_elastic_contact_options_reject_impossible_values(args, needle, capsys):
     assert len(err) == 1 and needle in err[0]
 
 
+@pytest.mark.slow
 def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
     """Every Scene field, the mechanism's source and hash, labtool's version: enough to simulate
     the file again from its attributes alone (models.dynamics.provenance)."""
@@ -142,6 +145,7 @@ def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
         assert a["validity_warnings"] == "[]"
 
 
+@pytest.mark.slow
 def test_kinematics_netcdf_names_the_mechanism_and_the_version(tmp_path):
     path = tmp_path / "kin.nc"
     assert main(["kinematics", "--rpm", "200", "-o", str(path)]) == 0

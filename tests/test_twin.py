@@ -165,6 +165,7 @@ def test_the_flight_across_the_gap_converges_to_the_rigid_models():
     assert abs(ev["event_time"][1] - tr[1]) < 2e-5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("drive", ["input", "motor"])
 def test_kinematic_limit_at_low_speed_without_backlash(drive):
     """10 rpm, no backlash, every twin effect on: the follower follows the cam. omega2 equals the
@@ -270,6 +271,7 @@ def test_a_motor_that_cannot_drive_the_load_ends_in_a_solver_error():
         run.sample(np.linspace(0.0, 2.0, 50))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rpm", [180, 500])
 def test_the_stands_fast_preset_against_the_reference(rpm):
     """The truth's own accuracy (docs/twin.md, measured 2026-12-01): the 'fast' preset the stand
