@@ -562,8 +562,7 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     atol = np.empty((3, 2))                         # integrate's: one row a mode
     for mode in range(3):
         atol[mode, 0], atol[mode, 1] = pair[0], pair[1]
-    rate = (n - 1) / (t[n - 1] - t[0]) if n > 1 and t[n - 1] > t[0] else 0.0
-    model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE, rate)
+    model = eq.ElasticModel(tab, kc, gap, damping, omega1, BOUNDARY_NUDGE, eq.grid_rate(t))
     phase, t0, x0, v0 = eq.start(model)
     if t0 != 0.0:
         return _STARTS_AT_REST, vals, no_rows

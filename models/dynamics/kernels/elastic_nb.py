@@ -42,10 +42,13 @@ ElasticModel = namedtuple("ElasticModel", [
 ])
 
 
+@kernel
 def grid_rate(tg):
-    """ElasticModel.rate of the time grid tg (s): intervals per second."""
-    span = float(tg[-1] - tg[0]) if tg.size > 1 else 0.0
-    return (tg.size - 1) / span if span > 0.0 else 0.0
+    """ElasticModel.rate of the time grid tg (s): intervals per second (0 for a single instant)."""
+    n = tg.size
+    if n < 2 or not tg[n - 1] > tg[0]:
+        return 0.0
+    return (n - 1) / (tg[n - 1] - tg[0])
 
 
 @kernel(inline="always")
