@@ -26,6 +26,7 @@ def _console(before: str, args: list[str]) -> subprocess.CompletedProcess:
             print("fast exit tried", file=sys.stderr)
             real(code)                                  # returns only when the normal exit is kept
             print("normal exit", file=sys.stderr)
+            globals().get("after_normal_exit_kept", lambda: None)()
         labtool.cli._exit_without_teardown = spy
         sys.argv = ["labtool", *{args!r}]
         labtool.cli.main()
@@ -60,10 +61,14 @@ def test_the_exit_code_is_the_commands():
 
 @pytest.mark.slow
 def test_a_working_thread_gets_the_normal_exit(tmp_path):
+    # The thread works until the exit has been decided, however slow the machine: a fixed sleep
+    # could end before the command does, and then the fast exit would be right.
     before = f"""
-        import threading, time
+        import threading
+        decided = threading.Event()
+        after_normal_exit_kept = decided.set
         def work():
-            time.sleep(0.5)
+            decided.wait(timeout=60)
             open({str(tmp_path / "thread.txt")!r}, "w").write("done")
         threading.Thread(target=work).start()       # not a daemon: the normal exit waits for it
         """
