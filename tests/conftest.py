@@ -8,6 +8,13 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# pytest-xdist's workers start with COLUMNS=80 and LINES=24 (seen with pytest-xdist 3.8, even with
+# no conftest), which labtool honours as the user's width: its tables would be cut as in a narrow
+# terminal and a test's "[m/s^2/V]" elided. The tests see a pipe, as without -n; one that wants a
+# width sets COLUMNS itself.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _name in ("COLUMNS", "LINES"):
+        os.environ.pop(_name, None)
 
 HOSTILE_KINDS = ("hang", "traceback", "full_disk", "concurrency", "silent_wrong", "injection",
                  "interrupted", "real_file")
