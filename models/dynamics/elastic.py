@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
+from common.datasets import dataset
 from common.errors import InputError, SolverError
 from models.dynamics import events, validity
 from models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
@@ -857,8 +858,7 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
     def var(data, units, long_name):
         return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
 
-    import xarray as xr
-    ds = xr.Dataset(
+    ds = dataset(
         data_vars={
             "phi1": var(tab.omega1 * t, "rad", "cam angle (0 at rise start)"),
             "omega1": var(np.full(t.size, tab.omega1), "rad/s", "cam angular velocity"),

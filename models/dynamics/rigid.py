@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
+from common.datasets import dataset
 from common.errors import InputError, SolverError
 from models.dynamics import events, validity
 from models.dynamics.contact import contact_stiffness
@@ -397,8 +398,7 @@ def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> xr.Dataset:
         "domega1": var(s["omega1"] - r["omega1"], "rad/s", "omega1rcj - omega1rfj (Figure 8c)"),
         **record,
     }
-    import xarray as xr
-    ds = xr.Dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time from the start of the rise"})})
+    ds = dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time from the start of the rise"})})
     ds.attrs.update({
         "title": "labtool rigid-element dynamic model (paper sec. 2.1.1, eqs 1-11)",
         "omega1_start_rad_s": omega1_0, "no_load_cam_speed_rad_s": no_load_cam_speed(scene.mechanism, scene.omega1_nominal),

@@ -20,6 +20,7 @@ if TYPE_CHECKING:  # loaded where a Dataset is built (a sweep's indicator path n
     import xarray as xr
 
 from models.mechanism.cam_profile import contact_geometry
+from common.datasets import dataset
 from common.errors import InputError
 from common.units import rpm_to_rad_s
 from models.mechanism.linkage import linkage_state, reduced_follower
@@ -116,8 +117,7 @@ def analyze(mech: Mechanism | None = None, program: CamProgram | None = None, rp
             for k, axis in enumerate("xy"):
                 data[f"{kind}{name}_{axis}"] = var(arr[k], unit, f"{axis} of {'position' if not kind else ('velocity' if kind == 'v' else 'acceleration')} of {name}")
     # one construction: adding 30 variables one by one re-aligns the Dataset each time (45 ms)
-    import xarray as xr
-    ds = xr.Dataset(data, coords={"phi1": ("phi1", phi1, {"units": "rad", "long_name": "cam angle from the start of the rise"})})
+    ds = dataset(data, coords={"phi1": ("phi1", phi1, {"units": "rad", "long_name": "cam angle from the start of the rise"})})
     ds.attrs.update({
         "title": "labtool kinematic analysis (cam as input, omega1 constant)",
         "mechanism": mech.name,
