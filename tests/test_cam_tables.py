@@ -123,6 +123,18 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     batched = evaluate_runs(runs, times)
     each = np.concatenate([r(tt) for r, tt in zip(runs, times)], axis=1)
     np.testing.assert_array_equal(batched, each)
+    # read in place on the integration's store, a subset of the runs too (the landings of
+    # complete_events), and the same as runs that are copies with no store (joined first)
+    from models.dynamics.kernels.dopri5 import DenseRun, evaluate_at_runs
+    assert all(r.store is runs[0].store for r in runs)
+    subset = runs[1::2]
+    which = np.repeat(np.arange(len(subset)), [tt.size for tt in times[1::2]])[::-1].copy()
+    tt_subset = np.concatenate(times[1::2])[::-1].copy()
+    in_place = evaluate_at_runs(subset, which, tt_subset)
+    each_subset = np.concatenate([subset[w](np.array([tt])) for w, tt in zip(which, tt_subset)], axis=1)
+    np.testing.assert_array_equal(in_place, each_subset)
+    copies = [DenseRun(r.t0s.copy(), r.hs.copy(), r.y0s.copy(), r.Qs.copy(), float(r.t[-1])) for r in subset]
+    np.testing.assert_array_equal(evaluate_at_runs(copies, which, tt_subset), each_subset)
     # the boundary instant belongs to both runs, each with its own state (the restart is nudged)
     end0 = runs[0](np.array([runs[0].t[-1]]))[0, 0]
     start1 = runs[1](np.array([runs[1].t[0]]))[0, 0]

@@ -93,6 +93,7 @@ MAX_STEPS = 2_000_000      # accepted steps per run (memory ~100 B a step)
 MAX_SEGMENTS = 1_000_000   # phases per run
 PERSISTENT_BOUNCES = 2.0   # a contact longer than this many bounce times is persistent
 DRIVE_POINTS = 17          # samples of the drive's impulse over a landing's impact window
+_DRIVE_FRACTIONS = np.linspace(0.0, 1.0, DRIVE_POINTS)
 
 
 @dataclass(frozen=True)
@@ -403,9 +404,10 @@ def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
     if sel.size:
         t_c = t_land[sel]
         t_w = t_c + np.minimum(duration, tau)[sel]
-        v_c, v_w = (_sample([segments[i] for i in k[sel]], list(np.column_stack([t_c, t_w])))[1].reshape(-1, 2).T)
-        frac = np.linspace(0.0, 1.0, DRIVE_POINTS)
-        tt = t_c[:, None] + (t_w - t_c)[:, None] * frac
+        contacts = np.arange(sel.size)
+        v_c, v_w = dp.evaluate_at_runs([segments[i][1] for i in k[sel]], np.concatenate([contacts, contacts]),
+                                       np.concatenate([t_c, t_w]))[1].reshape(2, -1)
+        tt = t_c[:, None] + (t_w - t_c)[:, None] * _DRIVE_FRACTIONS
         drive_impulse = np.trapezoid(np.interp(tt, tg, drive), tt, axis=1)
         M = 0.5 * (np.interp(t_c, tg, mass) + np.interp(t_w, tg, mass))
         rows[landing[sel], events.COL_PERCUSSION] = np.abs(M * (v_w - v_c) + drive_impulse)
@@ -681,21 +683,6 @@ def energy_error(cols, kc: float) -> float:
     W = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
     scale = max(float(np.max(np.abs(E))), float(np.max(np.abs(W))), 1e-300)
     return float(np.max(np.abs(E - E[0] - W)) / scale)
-
-
-def _sample(segments, times):
-    """x, x' of every phase at its own instants ``times[k]`` (compiled runs in one pass)."""
-    dense = [k for k, (_, run) in enumerate(segments) if isinstance(run, dp.DenseRun)]
-    out = [None] * len(segments)
-    if dense:
-        y = dp.evaluate_runs([segments[k][1] for k in dense], [times[k] for k in dense])
-        cuts = np.cumsum([times[k].size for k in dense])[:-1]
-        for k, part in zip(dense, np.split(y, cuts, axis=1)):
-            out[k] = part
-    for k, (_, run) in enumerate(segments):
-        if out[k] is None:
-            out[k] = np.asarray(run(times[k]), dtype=float).reshape(2, -1)
-    return np.concatenate(out, axis=1)
 
 
 def _outputs(tab: Tables, segments):

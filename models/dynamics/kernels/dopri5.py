@@ -576,8 +576,11 @@ class DenseRun:
     """A stretch of steps with the interface the models read from scipy: ``.t`` (step times, s),
     ``.sol(times)`` / ``__call__`` -> array (n_state, n_times), ``.nfev``."""
 
-    def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0):
+    def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0, store=None, first=0):
         self.t0s, self.hs, self.y0s, self.Qs = t0s, hs, y0s, Qs
+        # the whole integration's steps (t0s, hs, y0s, Qs) that these are rows first.. of, when
+        # they are (``unpack``): several runs are then evaluated in one pass without copying them
+        self.store, self.first = store, first
         self.t = np.empty(t0s.size + 1)     # the step times; the last step may end early, at an event
         self.t[:-1] = t0s
         self.t[-1] = t_end
@@ -600,11 +603,16 @@ def unpack(out, width):
     is the state size of a phase (its dense output keeps that many components)."""
     (status, t, y, nst, nph, nev, nfev, st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first, ev) = out
     phases = []
+    stores = {}
     for i in range(nph):
         a = ph_first[i]
         b = ph_first[i + 1] if i + 1 < nph else nst
         n = width(ph_row[i])
-        sol = DenseRun(st_t[a:b], st_h[a:b], st_y[a:b, :n], st_Q[a:b, :n], float(ph_t1[i]))
+        if n not in stores:
+            stores[n] = (st_t[:nst], st_h[:nst], st_y[:nst, :n], st_Q[:nst, :n])
+        store = stores[n]
+        sol = DenseRun(store[0][a:b], store[1][a:b], store[2][a:b], store[3][a:b], float(ph_t1[i]),
+                       store=store, first=int(a))
         phases.append(Phase(ph_row[i].copy(), float(ph_t0[i]), float(ph_t1[i]), sol))
     return int(status), float(t), y, phases, ev[:nev].copy(), int(nfev), int(nst)
 
@@ -633,13 +641,33 @@ def evaluate_runs(runs, times):
     state width. A time is evaluated on a step of its own run only, so an instant shared by two
     runs (a phase boundary) takes each run's own value. Returns (n_state, sum of len(times[k])).
     """
-    counts = np.array([np.size(tk) for tk in times])
-    sizes = np.array([r.t0s.size for r in runs])
-    first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    counts = [np.size(tk) for tk in times]
     tt = np.concatenate([np.atleast_1d(np.asarray(tk, dtype=float)) for tk in times])
-    return evaluate_steps(np.concatenate([r.t0s for r in runs]), np.concatenate([r.hs for r in runs]),
-                          np.concatenate([r.y0s for r in runs]), np.concatenate([r.Qs for r in runs]), tt,
-                          np.repeat(first, counts), np.repeat(first + sizes - 1, counts))
+    return evaluate_at_runs(runs, np.repeat(np.arange(len(runs)), counts), tt)
+
+
+def evaluate_at_runs(runs, which, times):
+    """Dense output at ``times[i]`` (s) on ``runs[which[i]]``, ``which`` an integer array:
+    array (n_state, len(times)), each value the one ``runs[which[i]](times[i])`` gives.
+
+    ``runs``: ``DenseRun``s of one integration in time order, of one state width. A time is read
+    on the steps of its own run only (``evaluate_steps``' first and last), so an instant shared by
+    two runs takes each run's own value. Runs that are rows of one store (``unpack``) are read in
+    place; others are joined first; a run that is not a ``DenseRun`` (a phase at rest, scipy's)
+    is called at each of its times."""
+    times = np.asarray(times, dtype=float)
+    which = np.asarray(which, dtype=np.int64)
+    if not all(isinstance(r, DenseRun) for r in runs):
+        return np.concatenate([np.asarray(runs[w](times[i:i + 1]), dtype=float).reshape(-1, 1)
+                               for i, w in enumerate(which)], axis=1)
+    sizes = np.array([r.t0s.size for r in runs], dtype=np.int64)
+    store = runs[0].store
+    if all(r.store is store for r in runs) and store is not None and sizes.all():
+        first = np.array([r.first for r in runs], dtype=np.int64)
+    else:
+        first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        store = tuple(np.concatenate([getattr(r, a) for r in runs]) for a in ("t0s", "hs", "y0s", "Qs"))
+    return evaluate_steps(*store, times, first[which], (first + sizes - 1)[which])
 
 
 @jit
