@@ -253,15 +253,23 @@ def _dense_states(phases: list[Phase], times, idx, Y) -> None:
     """The compiled phases' dense output at ``times`` (phase idx[m] for times[m]) into Y (4, n),
     in one compiled pass (kernels.dopri5.evaluate_at: each phase's own steps, as its ``sol``)."""
     sizes = np.array([ph.sol.t0s.size for ph in phases])
-    first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
     width = np.array([ph.sol.y0s.shape[1] for ph in phases])
-    n_steps = int(sizes.sum())
-    y0s, Qs = np.zeros((n_steps, 4)), np.zeros((n_steps, 4, 4))
-    for ph, f, w in zip(phases, first, width):
-        y0s[f:f + ph.sol.t0s.size, :w] = ph.sol.y0s
-        Qs[f:f + ph.sol.t0s.size, :w] = ph.sol.Qs
-    t0s_all = np.concatenate([ph.sol.t0s for ph in phases])
-    hs = np.concatenate([ph.sol.hs for ph in phases])
+    store = phases[0].sol.store
+    if store is not None and store[2].shape[1] == 4 and all(ph.sol.store is store for ph in phases) \
+            and phases[0].sol.first == 0 and phases[-1].sol.first + sizes[-1] == store[0].size:
+        # all the phases of one loop (dopri5.unpack): its step store, in place; a width-2 phase's
+        # last two columns there are never read (evaluate_at reads width[m] components)
+        first = np.array([ph.sol.first for ph in phases])
+        t0s_all, hs, y0s, Qs = store
+    else:
+        first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        n_steps = int(sizes.sum())
+        y0s, Qs = np.zeros((n_steps, 4)), np.zeros((n_steps, 4, 4))
+        for ph, f, w in zip(phases, first, width):
+            y0s[f:f + ph.sol.t0s.size, :w] = ph.sol.y0s
+            Qs[f:f + ph.sol.t0s.size, :w] = ph.sol.Qs
+        t0s_all = np.concatenate([ph.sol.t0s for ph in phases])
+        hs = np.concatenate([ph.sol.hs for ph in phases])
     dp.evaluate_at(np.ascontiguousarray(times, dtype=float), first[idx], (first + sizes - 1)[idx], width[idx],
                    t0s_all, hs, y0s, Qs, Y)
 

@@ -578,8 +578,9 @@ class DenseRun:
 
     def __init__(self, t0s, hs, y0s, Qs, t_end, nfev=0, store=None, first=0):
         self.t0s, self.hs, self.y0s, self.Qs = t0s, hs, y0s, Qs
-        # the whole integration's steps (t0s, hs, y0s, Qs) that these are rows first.. of, when
-        # they are (``unpack``): several runs are then evaluated in one pass without copying them
+        # the whole integration's steps (t0s, hs, y0s, Qs; the state at the loop's full width,
+        # of which this run's first y0s.shape[1] components are its own) that these are rows
+        # first.. of, when they are (``unpack``): several runs are then read in place, not copied
         self.store, self.first = store, first
         self.t = np.empty(t0s.size + 1)     # the step times; the last step may end early, at an event
         self.t[:-1] = t0s
@@ -603,16 +604,12 @@ def unpack(out, width):
     is the state size of a phase (its dense output keeps that many components)."""
     (status, t, y, nst, nph, nev, nfev, st_t, st_h, st_y, st_Q, ph_row, ph_t0, ph_t1, ph_first, ev) = out
     phases = []
-    stores = {}
+    store = (st_t[:nst], st_h[:nst], st_y[:nst], st_Q[:nst])     # every phase's steps, in order
     for i in range(nph):
         a = ph_first[i]
         b = ph_first[i + 1] if i + 1 < nph else nst
         n = width(ph_row[i])
-        if n not in stores:
-            stores[n] = (st_t[:nst], st_h[:nst], st_y[:nst, :n], st_Q[:nst, :n])
-        store = stores[n]
-        sol = DenseRun(store[0][a:b], store[1][a:b], store[2][a:b], store[3][a:b], float(ph_t1[i]),
-                       store=store, first=int(a))
+        sol = DenseRun(st_t[a:b], st_h[a:b], st_y[a:b, :n], st_Q[a:b, :n], float(ph_t1[i]), store=store, first=int(a))
         phases.append(Phase(ph_row[i].copy(), float(ph_t0[i]), float(ph_t1[i]), sol))
     return int(status), float(t), y, phases, ev[:nev].copy(), int(nfev), int(nst)
 
@@ -661,9 +658,10 @@ def evaluate_at_runs(runs, which, times):
         return np.concatenate([np.asarray(runs[w](times[i:i + 1]), dtype=float).reshape(-1, 1)
                                for i, w in enumerate(which)], axis=1)
     sizes = np.array([r.t0s.size for r in runs], dtype=np.int64)
-    store = runs[0].store
-    if all(r.store is store for r in runs) and store is not None and sizes.all():
+    store, n = runs[0].store, runs[0].y0s.shape[1]
+    if store is not None and sizes.all() and all(r.store is store and r.y0s.shape[1] == n for r in runs):
         first = np.array([r.first for r in runs], dtype=np.int64)
+        store = (store[0], store[1], store[2][:, :n], store[3][:, :n])
     else:
         first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
         store = tuple(np.concatenate([getattr(r, a) for r in runs]) for a in ("t0s", "hs", "y0s", "Qs"))
