@@ -406,3 +406,33 @@ def test_a_graze_inside_a_long_flight_step_is_a_landing(dip_s):
     assert stats["n_steps"] < 0.5 * t_root / cap                 # the flight's steps are longer than the cap
     assert rows.shape[0] >= 1 and rows[0, EV.COL_KIND] == EV.KIND_CONTACT
     assert rows[0, EV.COL_TIME] == pytest.approx(t_root, abs=1e-9)
+
+
+def _numpy_energy_error(cols) -> float:
+    """The energy balance as the numpy expression it was before the compiled pass."""
+    t, v, M, p, F, R31 = (np.asarray(cols[k]) for k in ("time", "dx_el", "reduced_mass", "deformation",
+                                                          "contact_force", "R31"))
+    En = 0.5 * M * v**2 + (9.0 / 19.0) * np.abs(F) * p
+    power = -R31 * v + 0.5 * np.gradient(M, t) * v**2
+    W = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
+    scale = max(float(np.max(np.abs(En))), float(np.max(np.abs(W))), 1e-300)
+    return float(np.max(np.abs(En - En[0] - W)) / scale)
+
+
+def test_energy_error_is_the_numpy_expression_on_a_run():
+    ds = simulate(Scene(backlash=0.016e-3, omega1_mode="var"), "elastic").dataset
+    assert E.energy_error(ds, 1.0) == _numpy_energy_error(ds)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 60), seed=st.integers(0, 2**31), uniform=st.booleans(), nan_at=st.integers(-1, 59))
+def test_energy_error_is_the_numpy_expression(n, seed, uniform, nan_at):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 2.0**-17 if uniform else np.cumsum(rng.uniform(1e-7, 1e-5, n))
+    cols = {"time": t, "dx_el": rng.normal(0, 1e-2, n), "reduced_mass": rng.uniform(0.5, 2.0, n),
+            "deformation": rng.uniform(0, 1e-5, n), "contact_force": rng.normal(0, 100.0, n),
+            "R31": rng.normal(0, 100.0, n)}
+    if 0 <= nan_at < n:
+        cols["dx_el"][nan_at] = np.nan
+    got, want = E.energy_error(cols, 1.0), _numpy_energy_error(cols)
+    assert got == want or (math.isnan(got) and math.isnan(want))
