@@ -68,6 +68,12 @@ def test_unknown_law_and_impossible_operating_point(capsys):
     assert "inertia factor" in _cli_error(capsys, ["kinematics", "--jt-factor", "0"])
 
 
+def test_a_length_that_underflows_in_si_is_refused():
+    # found by the hypothesis test below: 5e-324 mm passed the schema's > 0 and became 0.0 m
+    with pytest.raises(InputError, match="too small to be represented in SI"):
+        Mechanism.from_toml_text(TEXT.replace("l_DC_mm = 61.0", "l_DC_mm = 5e-324"))
+
+
 @settings(max_examples=40, deadline=None)
 @given(value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5), st.booleans()))
 def test_any_bad_value_for_a_length_is_an_input_error_or_accepted(value):

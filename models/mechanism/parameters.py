@@ -234,13 +234,20 @@ class Mechanism:
         ``sha256``: of the text it was parsed from (provenance), empty if none."""
         doc = SCHEMA.check(data, where=f"mechanism file {source}")
         values: dict = {}
+        def si(section, key, scale):
+            value = doc[section][key] * scale
+            if value == 0 and doc[section][key] != 0:   # 5e-324 mm is 0 m: refused, not read as zero
+                raise InputError(f"mechanism file {source}: [{section}] {key} = {doc[section][key]!r} is too "
+                                 "small to be represented in SI units")
+            return value
+
         for section, key, attr, _zero_ok, _negative_ok in _FIELDS:
             scale = next((s for suffix, s in _UNIT_SCALE.items() if key.endswith(suffix)), 1.0)
-            values[attr] = doc[section][key] * scale
+            values[attr] = si(section, key, scale)
         cam = doc["cam"]
-        values["cam_diameter"] = cam["diameter_mm"] * MM
-        values["rr_min"] = cam["rr_min_mm"] * MM if "rr_min_mm" in cam else None
-        values["rr_max"] = cam["rr_max_mm"] * MM if "rr_max_mm" in cam else None
+        values["cam_diameter"] = si("cam", "diameter_mm", MM)
+        values["rr_min"] = si("cam", "rr_min_mm", MM) if "rr_min_mm" in cam else None
+        values["rr_max"] = si("cam", "rr_max_mm", MM) if "rr_max_mm" in cam else None
         values["program"] = dict(doc["program"])
         mech = cls(name=doc.get("name", source), source=source, source_sha256=sha256, **values)
         mech.validate()
