@@ -261,18 +261,35 @@ def signals_interrupt(signals: Iterable[int] = (signal.SIGTERM, signal.SIGHUP)):
     old = {}
 
     def handler(signum, frame):
+        # kept as well as raised: raised inside a weakref callback or a __del__ (the garbage
+        # collector's), the exception is printed and dropped, and the command would go on (found by
+        # CI: a SIGTERM during labtool demo's acquire step, exit 0); commit() raises it again
+        _LOST_SIGNAL[0] = signum
         raise Interrupted(signum)
 
     for s in signals:
         with contextlib.suppress(ValueError, OSError):
             if signal.getsignal(s) in (signal.SIG_DFL, None):
                 old[s] = signal.signal(s, handler)
+    if old:
+        _LOST_SIGNAL[0] = None
     try:
         yield
     finally:
         for s, h in old.items():
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
+        if old:
+            _LOST_SIGNAL[0] = None
+
+
+_LOST_SIGNAL = [None]     # the signal signals_interrupt's handler last raised, while it is installed
+
+
+def lost_interrupt() -> int | None:
+    """The signal that ``signals_interrupt`` turned into Interrupted in its block, if any (None
+    otherwise): the exception may have been dropped where Python ignores exceptions."""
+    return _LOST_SIGNAL[0]
 
 
 @contextlib.contextmanager
@@ -371,8 +388,12 @@ class OutputSet:
     # -- ending --
     def commit(self) -> None:
         """Rename every temporary onto its final name; on failure restore what was there. Signals
-        wait until the renames are done (a few ms), so a set is never left half renamed."""
+        wait until the renames are done (a few ms), so a set is never left half renamed. A SIGTERM
+        or SIGHUP whose Interrupted was dropped (``signals_interrupt``) is raised here instead,
+        before anything is renamed."""
         with _signals_held():
+            if _LOST_SIGNAL[0] is not None:
+                self._raise_for(Interrupted(_LOST_SIGNAL[0]), None)
             self._commit()
 
     def _commit(self) -> None:

@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover
 
 from common.errors import Interrupted, LabtoolError, OutputError
 from common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
-                          signals_interrupt)
+                          lost_interrupt, signals_interrupt)
 from common.names import shown
 
 app = typer.Typer(
@@ -83,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
     _STATE["exit_at_disk_error"] = argv is None
     with command_scope(), signals_interrupt():
         code = _run(argv)
+        lost = lost_interrupt()
+        if lost is not None and code == 0:   # its Interrupted was dropped where Python ignores errors
+            typer.echo(f"labtool: interrupted ({signal.Signals(lost).name}); no output was left half-written",
+                       err=True)
+            code = 128 + int(lost)
     if argv is None:
         _exit_without_teardown(code)
         sys.exit(code)
