@@ -85,9 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         code = _run(argv)
         lost = lost_interrupt()
         if lost is not None and code == 0:   # its Interrupted was dropped where Python ignores errors
-            typer.echo(f"labtool: interrupted ({signal.Signals(lost).name}); no output was left half-written",
-                       err=True)
-            code = 128 + int(lost)
+            code = _interrupted(lost)
     if argv is None:
         _exit_without_teardown(code)
         sys.exit(code)
@@ -158,6 +156,12 @@ def _invoke(argv):
         return command.invoke(ctx)
 
 
+def _interrupted(signum: int) -> int:
+    """The interrupted line on stderr; the exit code 128 + signal."""
+    typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); no output was left half-written", err=True)
+    return 128 + int(signum)
+
+
 def _run(argv) -> int:
     try:
         rv = _invoke(argv)
@@ -174,9 +178,7 @@ def _run(argv) -> int:
         signum = cause.signum if isinstance(cause, Interrupted) else signal.SIGINT
         if inside_another_command():      # a step of another command (labtool demo): that one ends too
             raise (cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt()) from None
-        typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); no output was left half-written",
-                   err=True)
-        return 128 + int(signum)
+        return _interrupted(signum)
     except click_exc.UsageError as exc:
         hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx else ""
         return _error(f"{exc.format_message() or 'no command given'}{hint}")
@@ -194,8 +196,7 @@ def _run(argv) -> int:
         if isinstance(exc, SystemError) and _caused_by_interrupt(exc):
             # Ctrl-C inside a numba-compiled loop surfaces as a chain of "returned a result with an
             # exception set" with the KeyboardInterrupt at its root
-            typer.echo("labtool: interrupted (SIGINT); no output was left half-written", err=True)
-            return 128 + int(signal.SIGINT)
+            return _interrupted(signal.SIGINT)
         code = disk_error(exc)
         if code is not None:      # HDF5 and zlib say "errno = 28" in a RuntimeError or ValueError
             name = getattr(exc, "filename", None)
