@@ -20,10 +20,9 @@ def dataset(data_vars: dict, coords: dict, attrs: dict | None = None):
 
     ``data_vars``: name -> (dims, values, attrs), dims a name or a tuple of names; ``coords``:
     name -> (name, values, attrs), 1-D dimension coordinates only (each becomes the dimension's
-    index). Values are taken as numpy arrays (``np.asarray``, not copied; a masked array as the public
-    constructor takes it). A dimension with two
-    sizes, or a coordinate that is not a dimension coordinate, raises ValueError, as the public
-    constructor does."""
+    index). Values are taken as numpy arrays (``np.asarray``, not copied; a masked array as the
+    public constructor takes it). A dimension with two sizes, or a coordinate that is not a
+    dimension coordinate, raises ValueError, as the public constructor does."""
     import xarray as xr
 
     direct = getattr(xr.Dataset, "_construct_direct", None)

@@ -135,6 +135,12 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     np.testing.assert_array_equal(in_place, each_subset)
     copies = [DenseRun(r.t0s.copy(), r.hs.copy(), r.y0s.copy(), r.Qs.copy(), float(r.t[-1])) for r in subset]
     np.testing.assert_array_equal(evaluate_at_runs(copies, which, tt_subset), each_subset)
+    # the merged output instants read the store in place too, and equal those of copies
+    from models.dynamics.kernels.dopri5 import shared_store
+    copied = [(ph, DenseRun(r.t0s.copy(), r.hs.copy(), r.y0s.copy(), r.Qs.copy(), float(r.t[-1]))) for ph, r in segs]
+    assert shared_store(runs) is not None and shared_store([r for _, r in copied]) is None
+    for in_store, joined in zip(elastic._outputs(tab, segs), elastic._outputs(tab, copied)):
+        np.testing.assert_array_equal(in_store, joined)
     # the boundary instant belongs to both runs, each with its own state (the restart is nudged)
     end0 = runs[0](np.array([runs[0].t[-1]]))[0, 0]
     start1 = runs[1](np.array([runs[1].t[0]]))[0, 0]

@@ -733,20 +733,15 @@ def _outputs(tab: Tables, segments):
     ends. One compiled pass (kernels.dopri5.merge_outputs); a phase that is not a compiled run (at
     rest, or scipy's) is evaluated by itself at its instants afterwards."""
     t_uniform = output_grid(tab)
-    n_seg = len(segments)
-    starts, ends = np.empty(n_seg), np.empty(n_seg)
-    first, last = np.empty(n_seg, dtype=np.int64), np.empty(n_seg, dtype=np.int64)
-    parts, count = [], 0
-    for k, (_, run) in enumerate(segments):
-        starts[k], ends[k] = run.t[0], run.t[-1]
-        if isinstance(run, dp.DenseRun):
-            parts.append((run.t0s, run.hs, run.y0s, run.Qs))
-        else:                                   # its step times only, values filled in below
-            n = run.t.size - 1
-            parts.append((run.t[:-1], np.zeros(n), np.zeros((n, 2)), np.zeros((n, 2, 4))))
-        first[k], last[k] = count, count + parts[-1][0].size - 1
-        count += parts[-1][0].size
-    t0s, hs, y0s, Qs = (np.ascontiguousarray(np.concatenate([p[i] for p in parts])) for i in range(4))
+    starts = np.array([run.t[0] for _, run in segments])
+    ends = np.array([run.t[-1] for _, run in segments])
+    shared = dp.shared_store([run for _, run in segments])
+    if shared is not None and shared[0][2].shape[1] == 2:      # one loop's phases: its store, in place
+        (t0s, hs, y0s, Qs), first = shared
+        sizes = np.array([run.t0s.size for _, run in segments], dtype=np.int64)
+        last, count = first + sizes - 1, int(sizes.sum())
+    else:
+        t0s, hs, y0s, Qs, first, last, count = _joined_steps(segments)
     t, y, seg, grid_index = dp.merged(t_uniform, starts, ends, first, last, t0s, hs, y0s, Qs, count)
     for k, (_, run) in enumerate(segments):
         if not isinstance(run, dp.DenseRun):
@@ -754,6 +749,25 @@ def _outputs(tab: Tables, segments):
             y[:, sel] = np.asarray(run(t[sel]), dtype=float).reshape(2, -1)
     phases = np.array([ph for ph, _ in segments], dtype=np.int64)
     return t, y[0], y[1], phases[seg], grid_index
+
+
+def _joined_steps(segments):
+    """The phases' steps joined into arrays of their own (t0s, hs, y0s, Qs), each phase's first and
+    last row there and their count; a phase that is not a compiled run gives its step times with
+    zero values (``_outputs`` evaluates it afterwards)."""
+    n_seg = len(segments)
+    first, last = np.empty(n_seg, dtype=np.int64), np.empty(n_seg, dtype=np.int64)
+    parts, count = [], 0
+    for k, (_, run) in enumerate(segments):
+        if isinstance(run, dp.DenseRun):
+            parts.append((run.t0s, run.hs, run.y0s, run.Qs))
+        else:
+            n = run.t.size - 1
+            parts.append((run.t[:-1], np.zeros(n), np.zeros((n, 2)), np.zeros((n, 2, 4))))
+        first[k], last[k] = count, count + parts[-1][0].size - 1
+        count += parts[-1][0].size
+    t0s, hs, y0s, Qs = (np.ascontiguousarray(np.concatenate([p[i] for p in parts])) for i in range(4))
+    return t0s, hs, y0s, Qs, first, last, count
 
 
 def _raw_outputs(tab: Tables, out):

@@ -254,13 +254,11 @@ def _dense_states(phases: list[Phase], times, idx, Y) -> None:
     in one compiled pass (kernels.dopri5.evaluate_at: each phase's own steps, as its ``sol``)."""
     sizes = np.array([ph.sol.t0s.size for ph in phases])
     width = np.array([ph.sol.y0s.shape[1] for ph in phases])
-    store = phases[0].sol.store
-    if store is not None and store[2].shape[1] == 4 and all(ph.sol.store is store for ph in phases) \
-            and phases[0].sol.first == 0 and phases[-1].sol.first + sizes[-1] == store[0].size:
-        # all the phases of one loop (dopri5.unpack): its step store, in place; a width-2 phase's
-        # last two columns there are never read (evaluate_at reads width[m] components)
-        first = np.array([ph.sol.first for ph in phases])
-        t0s_all, hs, y0s, Qs = store
+    shared = dp.shared_store([ph.sol for ph in phases])
+    if shared is not None and shared[0][2].shape[1] == 4:
+        # the phases of one loop: its step store, in place; a width-2 phase's last two columns
+        # there are never read (evaluate_at reads width[m] components)
+        (t0s_all, hs, y0s, Qs), first = shared
     else:
         first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
         n_steps = int(sizes.sum())

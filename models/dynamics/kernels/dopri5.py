@@ -614,6 +614,17 @@ def unpack(out, width):
     return int(status), float(t), y, phases, ev[:nev].copy(), int(nfev), int(nst)
 
 
+def shared_store(runs):
+    """The one step store that every run of ``runs`` (``DenseRun``s) is rows of (``unpack``), and
+    each run's first row there: (store (t0s, hs, y0s, Qs), first (int64 array)), or None when they
+    are not (a run built otherwise, from another loop, or without steps). Reading the store in
+    place gives the values a joined copy would: each run's rows are its own steps."""
+    store = getattr(runs[0], "store", None) if runs else None
+    if store is None or not all(isinstance(r, DenseRun) and r.store is store and r.t0s.size for r in runs):
+        return None
+    return store, np.array([r.first for r in runs], dtype=np.int64)
+
+
 def evaluate_steps(t0s, hs, y0s, Qs, times, first=0, last=None):
     """Dense output of a run of steps at ``times`` (numpy, vectorised): array (n_state, n_times).
 
@@ -658,9 +669,9 @@ def evaluate_at_runs(runs, which, times):
         return np.concatenate([np.asarray(runs[w](times[i:i + 1]), dtype=float).reshape(-1, 1)
                                for i, w in enumerate(which)], axis=1)
     sizes = np.array([r.t0s.size for r in runs], dtype=np.int64)
-    store, n = runs[0].store, runs[0].y0s.shape[1]
-    if store is not None and sizes.all() and all(r.store is store and r.y0s.shape[1] == n for r in runs):
-        first = np.array([r.first for r in runs], dtype=np.int64)
+    shared, n = shared_store(runs), runs[0].y0s.shape[1]
+    if shared is not None and all(r.y0s.shape[1] == n for r in runs):
+        store, first = shared
         store = (store[0], store[1], store[2][:, :n], store[3][:, :n])
     else:
         first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
