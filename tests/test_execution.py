@@ -460,3 +460,17 @@ def test_a_part_with_text_where_a_number_belongs_is_refused_in_one_line(tmp_path
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and err[-1].startswith("labtool: error:") and "is damaged" in err[-1]
     assert not (tmp_path / "r.csv").exists()
+
+
+def test_a_part_cell_is_the_same_text_for_exact_and_derived_types():
+    """The exact-type fast path of parts._cell writes what the generic path writes."""
+    import numpy as np
+
+    from execution.parts import _cell
+
+    assert _cell(0.1) == _cell(np.float64(0.1)) == "0.10000000000000001"
+    assert _cell(float("nan")) == _cell(np.float64("nan")) == _cell(None) == ""
+    assert _cell(-0.0) == "-0"
+    assert _cell(3) == _cell(np.int64(3)) == "3"
+    assert _cell(True) == "True"
+    assert _cell("a,\r\"b") == "a,\r\"b"
