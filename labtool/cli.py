@@ -23,7 +23,7 @@ from common.files import (command_scope, describe_disk_error, disk_error, inside
                           lost_interrupt, signals_interrupt)
 from common.names import shown
 
-app = typer.Typer(
+_app = typer.Typer(
     name="labtool",
     help="Cam-follower test stand: acquire, process, simulate, DOE, report.",
     no_args_is_help=True,
@@ -53,12 +53,44 @@ COMMAND_MODULES = (
 )
 
 
+_REGISTERED: list[str] = []      # command modules registered on _app, in order
+
+
 def _register_all() -> None:
+    """Every command on the app, in COMMAND_MODULES' order (which --help lists)."""
+    if _REGISTERED == list(COMMAND_MODULES):
+        return
+    if _REGISTERED:              # one group registered alone before: start again, in order
+        _app.registered_commands.clear()
+        _app.registered_groups.clear()
+        _REGISTERED.clear()
     for name in COMMAND_MODULES:
-        importlib.import_module(name).register(app)
+        importlib.import_module(name).register(_app)
+        _REGISTERED.append(name)
 
 
-_register_all()
+def _register_for(args: list[str]) -> None:
+    """Register what the command line ``args`` needs: the module of its command group alone when
+    the first argument names one (``labtool doe run ...`` imports none of the other commands'
+    modules: ~0.1-0.2 s of the command's start), else every command (``--help``, an unknown or
+    misspelt command: its error lists them as before; a command that is not a group)."""
+    module = f"labtool.commands.{args[0]}" if args else None
+    if module not in COMMAND_MODULES:
+        _register_all()
+    elif module not in _REGISTERED and _REGISTERED != list(COMMAND_MODULES):
+        importlib.import_module(module).register(_app)
+        _REGISTERED.append(module)
+        if not _app.registered_groups and len(_app.registered_commands) == 1:
+            _register_all()      # typer would run a lone command as the app itself ("labtool kinematics"
+                                 # reading "kinematics" as an extra argument): only groups go alone
+
+
+def __getattr__(name: str):
+    """``labtool.cli.app``: the app with every command registered (tests, documentation tools)."""
+    if name == "app":
+        _register_all()
+        return _app
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:
@@ -150,8 +182,9 @@ def _disk_error_seen(code: int) -> int:
 def _invoke(argv):
     """Run the command without typer's own top-level handler (typer 0.29 turns Ctrl-C into a
     silent exit 130, so no cleanup message and no way to tell SIGTERM from SIGINT)."""
-    command = typer.main.get_command(app)
     args = sys.argv[1:] if argv is None else list(argv)
+    _register_for(args)
+    command = typer.main.get_command(_app)
     with command.make_context("labtool", args) as ctx:
         return command.invoke(ctx)
 
