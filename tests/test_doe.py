@@ -309,3 +309,34 @@ def test_doe_run_elastic_closed_gap_reproduces_table3_counts(tmp_path, capsys):
     lo, hi = ours[ours.B_j_level == 1].reset_index(drop=True), ours[ours.B_j_level == 2].reset_index(drop=True)
     pd.testing.assert_frame_equal(lo.drop(columns=["run", "B_j_level"]), hi.drop(columns=["run", "B_j_level"]))
     assert "gap closed" in capsys.readouterr().out
+
+
+def test_doe_run_to_a_pipe_loads_no_rich_and_a_forced_terminal_gets_the_bar(tmp_path):
+    """Off a terminal the command's stderr gets plain lines (LineProgress, the resuming line) and
+    rich is not imported (a shorter start); FORCE_COLOR makes rich take stderr for a terminal, and
+    the command then uses rich's progress bar as before."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+    from pathlib import Path
+
+    f = tmp_path / "f.csv"      # 9 x 8 = 72 runs: over 64, so no results table (rich) is printed
+    f.write_text("factor,symbol,unit," + ",".join(f"level_{k}" for k in range(1, 10)) + "\n"
+                 "A,Fu,N,0,5,10,15,20,25,30,35,40\nB,n1,rpm,180,190,200,210,220,230,240,250,\n")
+    code = textwrap.dedent(f"""
+        import sys
+        import labtool.cli as cli
+        rc = cli.main(["doe", "run", "--model", "kinematic", "--factors", {str(f)!r}, "--workers", "1",
+                       "-o", sys.argv[1]])
+        print("rc", rc, "rich", "rich" in sys.modules, "bar", "rich.progress" in sys.modules)
+        """)
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k not in ("FORCE_COLOR", "TTY_COMPATIBLE")}
+    plain = subprocess.run([sys.executable, "-c", code, str(tmp_path / "a.csv")], cwd=root, env=env,
+                           capture_output=True, text=True, timeout=300)
+    assert plain.stdout.strip().splitlines()[-1] == "rc 0 rich False bar False", plain.stderr
+    forced = subprocess.run([sys.executable, "-c", code, str(tmp_path / "b.csv")], cwd=root,
+                            env=dict(env, FORCE_COLOR="1"), capture_output=True, text=True, timeout=300)
+    assert forced.stdout.strip().splitlines()[-1] == "rc 0 rich True bar True", forced.stderr
+    assert (tmp_path / "a.csv").read_text() == (tmp_path / "b.csv").read_text()

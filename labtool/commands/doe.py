@@ -88,9 +88,9 @@ def run(
                + (f" --elastic-gap {elastic_gap}" if model == "elastic" else "")
                + (f" --factors {factors}" if factors else ""))
 
-    from labtool.output import console
+    from labtool.output import terminal_console
     from execution.progress import BarProgress, LineProgress
-    err = console(stderr=True)
+    err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
 
     def on_estimate(cost_s, n_left, n_workers):
         from execution.chunked import estimate_text
@@ -98,7 +98,7 @@ def run(
         if total <= CONFIRM_ABOVE_S or yes:
             return
         text = estimate_text(cost_s, n_left, n_workers)
-        if err.is_terminal and typer.get_text_stream("stdin").isatty():
+        if err is not None and typer.get_text_stream("stdin").isatty():
             if typer.confirm(f"doe run: {text}; run it?", default=False, err=True):
                 return
             raise InputError(f"not run: {text}")
@@ -107,12 +107,15 @@ def run(
 
     folder = parts_folder(output)
     if folder.exists() and not fresh:
-        err.print(f"resuming from the finished chunks in {folder} (--fresh discards them)", highlight=False,
-                  markup=False, soft_wrap=True)
+        text = f"resuming from the finished chunks in {folder} (--fresh discards them)"
+        if err is not None:
+            err.print(text, highlight=False, markup=False, soft_wrap=True)
+        else:
+            typer.echo(text, err=True)
     backend = backend_for(workers, scheduler)
     label = f"doe run ({model})"
     try:
-        if err.is_terminal:
+        if err is not None:
             with BarProgress(label, err, n_runs) as bar:
                 result = run_design(design, output, nc_path, backend, chunk_items=chunk_runs, fresh=fresh,
                                     on_estimate=on_estimate, progress=bar, history=history)
