@@ -72,7 +72,7 @@ def _build(f: h5py.File, src: str) -> Recording:
         if raw.size != nch:
             raise FileFormatError(f"{src}: ka_m_s2_per_v has {raw.size} values for {nch} channels")
         ka = raw.astype(float)
-    complete = bool(np.asarray(a.get("complete", False)).reshape(-1)[0])
+    complete = _complete_flag(a.get("complete", False), src)
     warns = []
     if not complete:
         warns.append(f"{src}: recording is marked incomplete (its recorder did not close cleanly); "
@@ -113,6 +113,17 @@ def _build(f: h5py.File, src: str) -> Recording:
                      n_samples=int(n), read=read, ka_m_s2_per_v=ka, start_time_utc=as_text(a.get("start_time_utc", "")),
                      complete=complete, cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns, close=f.close,
                      read_raw=read_raw, raw_dtype=raw_dtype.type)
+
+
+def _complete_flag(value, src: str) -> bool:
+    """The ``complete`` attribute: one boolean (h5py gives numpy.bool_); 0 and 1 are taken too.
+    A string such as "no" is refused: bool("no") is True and would pass a killed recording for a
+    clean one."""
+    arr = np.asarray(value)
+    if arr.size == 1 and (arr.dtype.kind == "b" or (arr.dtype.kind in "iu" and int(arr.reshape(-1)[0]) in (0, 1))):
+        return bool(arr.reshape(-1)[0])
+    raise FileFormatError(f"{src}: attribute complete = {_plain(value)!r} is not a boolean; expected true or false "
+                          "(false: the recorder did not close cleanly)")
 
 
 def _written_rows(sig: h5py.Dataset, src: str, warns: list[str]) -> int:
