@@ -37,6 +37,14 @@ def test_a_complete_flag_that_is_not_a_boolean_is_refused(tmp_path, capsys, volt
     assert not (tmp_path / "m.nc").exists()
 
 
+@pytest.mark.hostile("silent_wrong")
+def test_a_sample_rate_with_two_values_is_refused(tmp_path, capsys, volts):
+    """sample_rate_hz = [10000, 20000] was read as its first value without a word."""
+    rec = _recording(tmp_path, volts, sample_rate_hz=np.array([10000.0, 20000.0]))
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert "sample rate" in line and "one number" in line
+
+
 # --- traceback / silent wrong: loads and inertias past what a float holds -----------------------
 # --- traceback: factor files ------------------------------------------------------------------
 # --- silent wrong: measured files -------------------------------------------------------------

@@ -163,7 +163,9 @@ class Recording:
 
 
 def check_sample_rate(value, source: str) -> float:
-    """A usable sample rate (Hz): finite, positive, not absurd; otherwise InputError."""
+    """A usable sample rate (Hz): one finite, positive, not absurd number; otherwise InputError."""
+    if np.size(value) != 1:
+        raise InputError(f"{source}: sample rate {np.asarray(value).tolist()!r} is not one number; give one rate in Hz")
     try:
         fs = float(np.asarray(value).reshape(-1)[0]) if np.ndim(value) else float(value)
     except (TypeError, ValueError, IndexError):
