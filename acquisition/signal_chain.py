@@ -38,7 +38,7 @@ from scipy import signal
 
 from common.errors import InputError
 from models.dynamics.twin import TwinPhysics
-from models.mechanism.kinematics import follower_motion
+from models.mechanism.kinematics import check_load_and_inertia, follower_motion
 from models.mechanism import Mechanism
 from models.mechanism.motion_laws import CamProgram
 
@@ -126,6 +126,7 @@ class StandScene:
         for ok, msg in checks:
             if not ok:
                 raise InputError(msg)
+        check_load_and_inertia(self.Fu, self.jt_factor)
         self.mechanism.check_cam_speed(self.cam_speed_rpm)     # the one cam speed range of every command
         if self.twin.ripple != self.ripple:   # one ripple: the scene's
             object.__setattr__(self, "twin", self.twin.replace(ripple=self.ripple))

@@ -46,6 +46,37 @@ def test_a_sample_rate_with_two_values_is_refused(tmp_path, capsys, volts):
 
 
 # --- traceback / silent wrong: loads and inertias past what a float holds -----------------------
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("option, value", [("--jt-factor", "1e308"), ("--fu", "1e308")])
+def test_simulate_with_a_load_or_inertia_past_the_bound(capsys, option, value):
+    """simulate --model kinematic --jt-factor 1e308 printed MR13D_max_Nm null (inf) with exit 0."""
+    line = one_error_line(*cli(["simulate", "--model", "kinematic", "--law", "sine", "--rpm", "180",
+                                option, value, "--json"], capsys))
+    assert option.lstrip("-").split("-")[0] in line.lower() or "inertia factor" in line or "load Fu" in line
+    assert "1e+06" in line
+
+
+@pytest.mark.hostile("traceback")
+def test_kinematics_and_report_with_an_inertia_factor_of_1e308(tmp_path, capsys, measured_nc):
+    """report --jt-factor 1e308 was an internal error (ValueError: Axis limits cannot be NaN or Inf)."""
+    one_error_line(*cli(["kinematics", "--law", "sine", "--rpm", "180", "--jt-factor", "1e308",
+                         "-o", tmp_path / "k.nc"], capsys))
+    one_error_line(*cli(["report", measured_nc, *REPORT_FAST, "--jt-factor", "1e308",
+                         "-o", tmp_path / "r.html"], capsys))
+    assert not (tmp_path / "k.nc").exists() and not (tmp_path / "r.html").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("hang")
+@pytest.mark.parametrize("option", ["--fu", "--jt-factor"])
+def test_acquire_with_a_load_or_inertia_of_1e308_does_not_hang(tmp_path, option):
+    """The simulated stand's twin ran for ever on --fu 1e308 (and ignored SIGTERM)."""
+    code, err = run(["acquire", "--device", "sim", "--duration", "1", "--fast", option, "1e308",
+                     "-o", tmp_path / "r.h5"], timeout=120)
+    one_error_line(code, err)
+    assert not (tmp_path / "r.h5").exists()
+
+
 # --- traceback: factor files ------------------------------------------------------------------
 # --- silent wrong: measured files -------------------------------------------------------------
 def _measured(tmp_path, measured_nc, change):

@@ -12,6 +12,7 @@ import math
 from common.errors import InputError
 from common.units import rpm_to_rad_s
 from models.mechanism import Mechanism
+from models.mechanism.kinematics import check_load_and_inertia
 from models.mechanism.memo import cached
 from models.mechanism.motion_laws import CamProgram, get_law
 
@@ -78,6 +79,7 @@ class Scene:
         for ok, message in checks:
             if not ok:
                 raise InputError(message)
+        check_load_and_inertia(self.Fu, self.jt_factor)
 
     @property
     def omega1_nominal(self) -> float:

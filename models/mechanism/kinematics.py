@@ -152,6 +152,25 @@ def rise_summary(ds: xr.Dataset) -> dict:
     }
 
 
+# Bounds of the load and the inertia factor: far past anything the STB-216's follower bears (the
+# paper's levels: 0-65 N, x1-x4), well inside what a float holds through MR13D and the models'
+# energies. Past them kinematics overflowed to inf (simulate printed null, report crashed drawing
+# it) and the simulated stand's twin ran for ever.
+MAX_LOAD_N = 1e6
+MAX_JT_FACTOR = 1e6
+
+
+def check_load_and_inertia(Fu: float, jt_factor: float) -> None:
+    """InputError unless Fu (N) <= MAX_LOAD_N and jt_factor (-) <= MAX_JT_FACTOR (the lower
+    bounds, Fu >= 0 and jt_factor > 0, are each caller's own check)."""
+    if Fu > MAX_LOAD_N:
+        raise InputError(f"load Fu = {Fu:g} N is past what the models take (at most {MAX_LOAD_N:g} N; "
+                         "the paper's levels are 0 and 65 N)")
+    if jt_factor > MAX_JT_FACTOR:
+        raise InputError(f"inertia factor Jt = x{jt_factor:g} is past what the models take (at most "
+                         f"x{MAX_JT_FACTOR:g} of the nominal inertia; the paper's levels are x1 and x4)")
+
+
 def _check(rpm, Fu, jt_factor, n_points):
     if not (math.isfinite(rpm) and rpm > 0):
         raise InputError(f"cam speed must be a positive number of rpm, got {rpm}")
@@ -159,5 +178,6 @@ def _check(rpm, Fu, jt_factor, n_points):
         raise InputError(f"load Fu must be a finite force >= 0 N, got {Fu}")
     if not (math.isfinite(jt_factor) and jt_factor > 0):
         raise InputError(f"inertia factor Jt must be > 0, got {jt_factor}")
+    check_load_and_inertia(Fu, jt_factor)
     if n_points < 16:
         raise InputError("at least 16 points per revolution are needed")
