@@ -77,6 +77,15 @@ def test_acquire_with_a_load_or_inertia_of_1e308_does_not_hang(tmp_path, option)
     assert not (tmp_path / "r.h5").exists()
 
 
+@pytest.mark.hostile("traceback")
+def test_acquire_with_a_duration_past_any_sample_count(tmp_path, capsys):
+    """--duration 1e308 was an internal error (OverflowError: cannot convert float infinity to integer)."""
+    line = one_error_line(*cli(["acquire", "--device", "sim", "--duration", "1e308", "--fast",
+                                "-o", tmp_path / "r.h5"], capsys))
+    assert "--duration" in line
+    assert not (tmp_path / "r.h5").exists()
+
+
 # --- traceback: factor files ------------------------------------------------------------------
 # --- silent wrong: measured files -------------------------------------------------------------
 def _measured(tmp_path, measured_nc, change):

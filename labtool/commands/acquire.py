@@ -145,6 +145,7 @@ def acquire(
         raise InputError("--duration inf needs --realtime (a --fast run would never end)")
     if not (math.isfinite(float(opts["rate"])) and float(opts["rate"]) > 0):
         raise InputError(f"--rate must be a positive number of Hz, got {opts['rate']}")
+    _check_sample_count(dur, float(opts["rate"]))
     if output.is_dir():
         raise InputError(f"{output} is a folder; give a file name for the recording")
     check_output_path(output, force)
@@ -262,6 +263,18 @@ def _model_truth_for(scene, dur):
                      f"cam turns (restitution {scene.restitution:g}, contact damping {scene.contact_damping:g} s/m), "
                      f"so it cannot be repeated over {dur:g} s: give energy loss (--restitution < 1, --contact-damping > 0) "
                      f"or a --duration of at most {sc.MAX_MODEL_REVOLUTIONS} turns")
+
+
+MAX_SAMPLES = 1e15    # per channel: 3000 years at 10 kHz, and an exact integer in a float
+
+
+def _check_sample_count(duration_s: float, rate_hz: float) -> None:
+    """InputError when a finite --duration (s) at --rate (Hz) asks for more than MAX_SAMPLES
+    samples: --duration 1e308 overflowed the device's sample count (OverflowError, exit 70)."""
+    if math.isfinite(duration_s) and duration_s * rate_hz > MAX_SAMPLES:
+        raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is more samples than the {MAX_SAMPLES:g} "
+                         f"a recording can hold; give at most {MAX_SAMPLES / rate_hz:g} s, "
+                         "or --duration inf --realtime to record until Ctrl-C")
 
 
 def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, status_every: float = 5.0):
