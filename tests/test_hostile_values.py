@@ -87,6 +87,16 @@ def test_acquire_with_a_duration_past_any_sample_count(tmp_path, capsys):
 
 
 # --- traceback: factor files ------------------------------------------------------------------
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("text", ["factor = [1, 2]\n", 'factor = ["A"]\n', "factor = [[1, 2]]\n"])
+def test_a_toml_factor_file_whose_factors_are_not_tables(tmp_path, capsys, text):
+    """factor = [1, 2] was an internal error (TypeError: argument of type 'int' is not iterable)."""
+    path = tmp_path / "f.toml"
+    path.write_text(text)
+    line = one_error_line(*cli(["doe", "run", "--factors", path, "--yes", "-o", tmp_path / "r.csv"], capsys))
+    assert "[[factor]]" in line
+
+
 # --- silent wrong: measured files -------------------------------------------------------------
 def _measured(tmp_path, measured_nc, change):
     ds = xr.open_dataset(measured_nc).load()

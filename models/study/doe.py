@@ -106,6 +106,9 @@ def read_factors(path: str | Path) -> list[Factor]:
             raise FileFormatError(f"{path}: expected one [[factor]] table per factor")
         factors = []
         for i, e in enumerate(entries, 1):
+            if not isinstance(e, dict):
+                raise FileFormatError(f"{path}: factor #{i} is {e!r}, not a table; write one [[factor]] table per "
+                                      "factor with name, symbol, unit and levels")
             missing = [k for k in ("name", "symbol", "levels") if k not in e]
             if missing:
                 raise FileFormatError(f"{path}: factor #{i} lacks {', '.join(missing)}")
