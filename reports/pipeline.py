@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from common.cf import udunits
 from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing import impacts
@@ -20,6 +21,8 @@ from reports import align, events, metrics
 from reports.thresholds import Thresholds, evaluate
 
 SIGNALS = ("omega2", "epsilon2")
+# the units (UDUNITS spelling) the comparison reads the measured file in; another stated unit is refused
+MEASURED_UNITS = {"omega2": "rad s-1", "epsilon2": "rad s-2", "phi1": "rad"}
 MODELS = ("rigid", "elastic")
 MODES = ("const", "var")
 # the paper's experiment (sec. 2.4, 3.3): sine law, no load, j = 0.128 mm, nominal inertia
@@ -112,6 +115,16 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
             raise InputError(f"{where}: {name} is not a signal over time (dims {ds[name].dims})")
     if "phi1" not in ds:
         raise InputError(f"{where} has no cam angle phi1; run 'labtool process' on a recording with a tacho channel")
+    for name, unit in MEASURED_UNITS.items():
+        stated = ds[name].attrs.get("units")
+        if stated is not None and udunits(as_str(stated)) != unit:
+            raise InputError(f"{where}: {name} is in '{shown(as_str(stated))}', the report compares it in '{unit}' "
+                             f"(SI, as 'labtool process' writes it); convert {name} to {unit}")
+
+
+def as_str(value) -> str:
+    """An attribute as text (NetCDF gives str, bytes or a numpy string)."""
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
 
 
 def _attr_float(ds, *names):

@@ -105,3 +105,11 @@ def _measured(tmp_path, measured_nc, change):
     ds.to_netcdf(path)
     return path
 
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("var, unit", [("omega2", "deg/s"), ("epsilon2", "rpm"), ("phi1", "deg")])
+def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measured_nc, var, unit):
+    """omega2 with units "deg/s" was compared with the models' rad/s as if it were rad/s."""
+    path = _measured(tmp_path, measured_nc, lambda ds: ds[var].attrs.update(units=unit))
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert var in line and unit in line
