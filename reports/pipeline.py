@@ -138,6 +138,26 @@ def _attr_float(ds, *names):
     return None
 
 
+OPTIONS = {"Fu": "--fu", "backlash_mm": "--backlash-mm", "jt_factor": "--jt-factor"}
+
+
+def _stated_number(ds, name: str, option: str) -> float | None:
+    """The operating-point attribute ``name`` as one number, None when the file has none; an
+    attribute that is not one number is refused (it was taken for "not stated", and the paper's
+    value was used instead of what the file meant)."""
+    if name not in ds.attrs:
+        return None
+    raw = ds.attrs[name]
+    try:
+        if np.size(raw) != 1:
+            raise ValueError
+        return float(np.asarray(raw).ravel()[0])
+    except (TypeError, ValueError):
+        where = ds.encoding.get("source", "the measured file")
+        raise InputError(f"{shown(where)}: attribute {name} = {shown(as_str(raw))!r} is not a number; fix the file "
+                         f"or give {option}") from None
+
+
 def no_load_factor() -> float:
     """No-load over nominal cam speed of the models' drive with omega1 variable (n_sync / n_nominal)."""
     from models.mechanism import Mechanism
@@ -193,7 +213,7 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
         else:
             v, name = None, ""
             for n in attr_names:
-                v = _attr_float(ds, n)
+                v = _stated_number(ds, n, OPTIONS[key])
                 if v is not None:
                     name = n
                     break

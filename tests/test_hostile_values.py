@@ -107,6 +107,17 @@ def _measured(tmp_path, measured_nc, change):
 
 
 @pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("attr, value, option", [("Fu_N", "heavy", "--fu"), ("jt_factor", "x", "--jt-factor"),
+                                                 ("backlash_mm", "wide", "--backlash-mm")])
+def test_an_operating_point_attribute_that_is_not_a_number_is_refused(tmp_path, capsys, measured_nc, attr, value,
+                                                                      option):
+    """Fu_N = "heavy" was taken as "the file does not state Fu" and the paper's 0 N used instead."""
+    path = _measured(tmp_path, measured_nc, lambda ds: ds.attrs.update({attr: value}))
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert attr in line and option in line
+
+
+@pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("var, unit", [("omega2", "deg/s"), ("epsilon2", "rpm"), ("phi1", "deg")])
 def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measured_nc, var, unit):
     """omega2 with units "deg/s" was compared with the models' rad/s as if it were rad/s."""
