@@ -124,3 +124,21 @@ def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measur
     path = _measured(tmp_path, measured_nc, lambda ds: ds[var].attrs.update(units=unit))
     line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
     assert var in line and unit in line
+
+
+# --- silent wrong: export ---------------------------------------------------------------------
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("umask", [0o022, 0o002])
+def test_export_follows_the_users_umask(tmp_path, capsys, measured_nc, umask):
+    """export wrote its tables through mkstemp: 0600 whatever the umask."""
+    import os
+
+    old = os.umask(umask)
+    try:
+        code, err = cli(["export", measured_nc, "--csv", "-o", tmp_path / "m"], capsys)
+    finally:
+        os.umask(old)
+    assert code == 0, err
+    for name in ("m_cycles.csv", "m_series.csv"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~umask, name
+

@@ -85,27 +85,15 @@ def _label(ds, name: str) -> str:
 
 
 def _write_all(ds, targets: dict) -> dict:
-    """Write every table to a temporary file, then rename them together (both or neither)."""
-    import os
-    import tempfile
+    """Write every table as one OutputSet (both or neither, with the user's umask; a full disk is
+    one line saying nothing was exported)."""
+    from common.files import OutputSet
 
-    from common.errors import InputError
-
-    tmps, out = {}, {}
-    try:
+    out = {}
+    with OutputSet(kept="the measured file is untouched") as outputs:
         for name, path in targets.items():
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
-            os.close(fd)
-            tmps[name] = Path(tmp)
-            rows = (_cycles if name == "cycles" else _series)(ds, tmps[name])
-            out[name] = (path, rows)
-        for name, path in targets.items():
-            os.replace(tmps[name], path)
-    except OSError as exc:
-        raise InputError(f"cannot write {targets[name]}: {exc.strerror or exc}; nothing was exported") from None
-    finally:
-        for t in tmps.values():
-            t.unlink(missing_ok=True)
+            write = _cycles if name == "cycles" else _series
+            out[name] = (path, outputs.write(path, lambda tmp, write=write: write(ds, tmp), "-o"))
     return out
 
 
