@@ -142,3 +142,13 @@ def test_export_follows_the_users_umask(tmp_path, capsys, measured_nc, umask):
     for name in ("m_cycles.csv", "m_series.csv"):
         assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~umask, name
 
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("prefix", ["", "folder/"])
+def test_export_to_a_folder_or_an_empty_prefix_is_refused(tmp_path, capsys, measured_nc, monkeypatch, prefix):
+    """-o out/ wrote out_cycles.csv beside the folder, -o "" hidden ._cycles.csv files here."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "folder").mkdir()
+    line = one_error_line(*cli(["export", measured_nc, "--csv", "-o", prefix], capsys))
+    assert "-o" in line and "prefix" in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder"]

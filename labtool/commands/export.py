@@ -9,6 +9,7 @@ atomically; both or neither.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Optional
 
@@ -36,7 +37,7 @@ def export(
 
     if not csv:
         raise InputError("say which format to export: --csv")
-    prefix = output if output is not None else measured.with_suffix("")
+    prefix = _prefix(output, measured)
     targets = {"cycles": Path(f"{prefix}_cycles.csv"), "series": Path(f"{prefix}_series.csv")}
     if not series:
         del targets["series"]
@@ -49,6 +50,22 @@ def export(
         ds.close()
     for name, (path, rows) in written.items():
         typer.echo(f"wrote {path}: {rows} rows ({name})")
+
+
+def _prefix(output, measured: Path) -> str:
+    """The path prefix of the tables: -o as given (the input without .nc by default). An empty
+    -o or a folder is refused: Path("") became "." (hidden ._cycles.csv files) and "out/" lost its
+    slash (out_cycles.csv beside the folder)."""
+    from common.errors import InputError
+    from common.names import shown
+
+    if output is None:
+        return str(measured.with_suffix(""))
+    text = os.fspath(output)
+    if not text.strip() or text.endswith(os.sep) or Path(text).is_dir():
+        raise InputError(f"-o {shown(text)!r} is {'a folder' if text.strip() else 'empty'}: give a path prefix of the "
+                         "tables, e.g. -o out/run1 for out/run1_cycles.csv and out/run1_series.csv")
+    return text
 
 
 def _open(path: Path):
