@@ -152,3 +152,13 @@ def test_export_to_a_folder_or_an_empty_prefix_is_refused(tmp_path, capsys, meas
     line = one_error_line(*cli(["export", measured_nc, "--csv", "-o", prefix], capsys))
     assert "-o" in line and "prefix" in line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["folder"]
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_factor_csv_with_a_gap_in_its_level_columns_is_refused(tmp_path, capsys):
+    """level_1,level_3 (no level_2): the level_3 value became level 2 of the result table."""
+    path = tmp_path / "f.csv"
+    path.write_text("factor,symbol,unit,level_1,level_3\nA,Fu,N,0,65\n")
+    line = one_error_line(*cli(["doe", "run", "--factors", path, "--yes", "-o", tmp_path / "r.csv"], capsys))
+    assert "level_2" in line
+    assert not (tmp_path / "r.csv").exists()

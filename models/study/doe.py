@@ -153,6 +153,12 @@ def _factors_from_csv(text: str, source) -> list[Factor]:
     if repeated:
         raise FileFormatError(f"{source}: column(s) {', '.join(repeated)} repeated in the factor CSV")
     level_cols.sort(key=lambda c: int(c.split("_")[1]))
+    expected = [f"level_{k}" for k in range(1, len(level_cols) + 1)]
+    if level_cols != expected:
+        missing_levels = sorted(set(expected) - set(level_cols), key=lambda c: int(c.split("_")[1]))
+        raise FileFormatError(f"{source}: level columns {', '.join(level_cols)} skip "
+                              f"{', '.join(missing_levels) or 'a number'}; number them level_1, level_2, ... "
+                              "without a gap (a level's index is its number in the result table)")
     factors = []
     for line, cells in enumerate(table[1:], 2):
         if len(cells) > len(header):
