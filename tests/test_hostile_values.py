@@ -162,3 +162,12 @@ def test_a_factor_csv_with_a_gap_in_its_level_columns_is_refused(tmp_path, capsy
     line = one_error_line(*cli(["doe", "run", "--factors", path, "--yes", "-o", tmp_path / "r.csv"], capsys))
     assert "level_2" in line
     assert not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("kind, said", [("folder", "is a folder"), ("device", "not a regular file")])
+def test_a_factor_file_that_is_a_folder_or_a_device_is_named_so(tmp_path, capsys, kind, said):
+    """--factors out/ or /dev/null said "factor file ... does not exist" of a path that exists."""
+    path = tmp_path if kind == "folder" else "/dev/null"
+    line = one_error_line(*cli(["doe", "run", "--factors", path, "--yes", "-o", tmp_path / "r.csv"], capsys))
+    assert said in line and "does not exist" not in line

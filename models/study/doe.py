@@ -94,6 +94,10 @@ def table1_factors() -> list[Factor]:
 def read_factors(path: str | Path) -> list[Factor]:
     """Factors from a CSV or TOML file (see the module docstring for both layouts)."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"factor file {path} is a folder; give the CSV or TOML file inside it")
+    if path.exists() and not path.is_file():
+        raise InputError(f"factor file {path} is not a regular file (a pipe or a device); give a CSV or TOML file")
     if not path.is_file():
         raise InputError(f"factor file {path} does not exist")
     if path.suffix.lower() == ".toml":
