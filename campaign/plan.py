@@ -77,7 +77,7 @@ from common.names import shown
 from common.schema import Bool, Integer, ListOf, Number, SchemaError, String, Table, load_toml
 
 MAX_POINTS = 500
-MAX_RPM = 2000.0      # above the drive's synchronous speed; the models refuse beyond their own limit
+MAX_RPM = 2000.0      # the schema's bound; expand_points then holds each point to the models' own range
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")     # a point's folder name
 
 
@@ -269,6 +269,9 @@ def expand_points(doc) -> list[Point]:
                 raw.append(dict(zip(keys, combo)))
     if not raw:
         raise InputError("the plan has no operating points: add [[points]] with an rpm, or a [grid]")
+    from models.mechanism import Mechanism
+
+    mech = Mechanism.default()                     # the mechanism the campaign's scenes use
     out, names = [], set()
     for i, p in enumerate(raw):
         given = {k: v for k, v in p.items() if v is not None}
@@ -288,6 +291,10 @@ def expand_points(doc) -> list[Point]:
             if not (math.isfinite(float(v[key])) and test(float(v[key]))):
                 raise InputError(f"{where}: {key} = {v[key]!r} must be {what}")
         rpm = float(v["rpm"])
+        try:                                       # every point is compared with the models: their range
+            mech.check_cam_speed(rpm)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
         name = v.get("name") or _auto_name(i, rpm, v, raw)
         if name in names:
             raise InputError(f"{where}: two points are named {name}; give each a different 'name'")

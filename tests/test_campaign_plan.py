@@ -45,6 +45,8 @@ def test_a_grid_varies_rpm_fastest_and_names_what_varies(tmp_path):
     ("[[points]]\nrpm = -180\n", "rpm = -180: must not be negative"),
     ("[[points]]\nrpm = 1e6\n", "rpm = 1e+06: must be <= 2000 [rpm]"),
     ("[[points]]\nrpm = nan\n", "rpm = nan: must be a finite number"),
+    # inside the schema's bound but past the models' range: refused before any point runs
+    ("[grid]\nrpm = [180, 1500]\n", "grid point 2: cam speed 1500 rpm is outside the range the models take"),
     ("[[points]]\nrpm = 180\nrevolutions = 5\nduration_s = 3\n", "give revolutions or duration_s, not both"),
     ("[compare]\nmodels = ['rigid', 'fem']\n[[points]]\nrpm = 180\n", "[compare] models[1] = \"fem\": expected one of"),
     ("[device]\nkind = 'nidaqmx'\n[[points]]\nrpm = 180\n", "needs channels"),
