@@ -153,8 +153,10 @@ class KeyPath:
         return KeyPath(self.tables, f"{self.key}[{index}]")
 
     def __str__(self) -> str:
-        head = f"[{'.'.join(self.tables)}] " if self.tables else ""
-        return f"{head}{self.key}" if self.key is not None else (head.strip() or "the file")
+        # a quoted TOML key may hold any character: shown() keeps a newline in one from breaking
+        # the message's one line
+        head = f"[{'.'.join(shown(t) for t in self.tables)}] " if self.tables else ""
+        return f"{head}{shown(self.key)}" if self.key is not None else (head.strip() or "the file")
 
 
 class Field:
@@ -379,7 +381,7 @@ class Table(Field):
         prefix = f"{where}: " if where else ""
         sub = at.child(str(key))
         if isinstance(value, dict):    # a misnamed section reads as one: [extra], [frame.sub]
-            what = "table [" + ".".join(sub.tables + (sub.key,)) + "]"
+            what = "table [" + ".".join(shown(part) for part in sub.tables + (sub.key,)) + "]"
         else:
             what = f"key {sub}"
         known = ", ".join(self.fields) or "(none)"
