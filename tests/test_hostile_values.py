@@ -45,6 +45,17 @@ def test_a_sample_rate_with_two_values_is_refused(tmp_path, capsys, volts):
     assert "sample rate" in line and "one number" in line
 
 
+@pytest.mark.hostile("silent_wrong")
+def test_events_outside_the_samples_are_named_not_dropped_in_silence(tmp_path, capsys, volts):
+    """A gap at sample 10**12 or -5 marks no sample: the processing leaves it out, and now says so."""
+    rec = tmp_path / "rec.h5"
+    write_v1(rec, volts, events=[(10**12, "gap", "missing_samples=3"), (-5, "clip", ""), (100, "clip", "")])
+    rc, err = cli(["process", rec, "-o", tmp_path / "m.nc"], capsys)
+    assert rc == 0 and (tmp_path / "m.nc").exists()
+    assert "ignoring 2 recorder event(s) outside its samples 0..%d" % volts.shape[0] in err
+    assert "the first: gap at sample 1000000000000" in err
+
+
 # --- traceback / silent wrong: loads and inertias past what a float holds -----------------------
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("option, value", [("--jt-factor", "1e308"), ("--fu", "1e308")])

@@ -67,6 +67,12 @@ class Recording:
             self.channel_units = ["V"] * n
         if not self.unit_sources:
             self.unit_sources = ["format (volts)"] * n
+        outside = [e for e in self.events if not 0 <= e.index <= self.n_samples]
+        if outside:          # segments(), lost_samples() and clip_indices() leave them out: say so
+            first = outside[0]
+            self.warnings.append(f"{self.source}: ignoring {len(outside)} recorder event(s) outside its samples "
+                                 f"0..{self.n_samples} (the first: {first.kind} at sample {first.index}); "
+                                 "they mark no sample of this recording")
 
     def __enter__(self) -> "Recording":
         return self
