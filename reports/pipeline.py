@@ -17,6 +17,7 @@ from common.cf import udunits
 from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing import impacts
+from processing.readers.base import as_text
 from reports import align, events, metrics
 from reports.thresholds import Thresholds, evaluate
 
@@ -117,14 +118,9 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
         raise InputError(f"{where} has no cam angle phi1; run 'labtool process' on a recording with a tacho channel")
     for name, unit in MEASURED_UNITS.items():
         stated = ds[name].attrs.get("units")
-        if stated is not None and udunits(as_str(stated)) != unit:
-            raise InputError(f"{where}: {name} is in '{shown(as_str(stated))}', the report compares it in '{unit}' "
+        if stated is not None and udunits(as_text(stated)) != unit:
+            raise InputError(f"{where}: {name} is in '{shown(as_text(stated))}', the report compares it in '{unit}' "
                              f"(SI, as 'labtool process' writes it); convert {name} to {unit}")
-
-
-def as_str(value) -> str:
-    """An attribute as text (NetCDF gives str, bytes or a numpy string)."""
-    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
 
 
 def _attr_float(ds, *names):
@@ -154,7 +150,7 @@ def _stated_number(ds, name: str, option: str) -> float | None:
         return float(np.asarray(raw).ravel()[0])
     except (TypeError, ValueError):
         where = ds.encoding.get("source", "the measured file")
-        raise InputError(f"{shown(where)}: attribute {name} = {shown(as_str(raw))!r} is not a number; fix the file "
+        raise InputError(f"{shown(where)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file "
                          f"or give {option}") from None
 
 
@@ -217,8 +213,10 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
                 if v is not None:
                     name = n
                     break
-            if v is None and key == "backlash_mm" and _attr_float(ds, "backlash_m") is not None:
-                v, name = _attr_float(ds, "backlash_m") * 1e3, "backlash_m"
+            if v is None and key == "backlash_mm":
+                metres = _stated_number(ds, "backlash_m", OPTIONS[key])
+                if metres is not None:
+                    v, name = metres * 1e3, "backlash_m"
         if v is None:  # not in the file: the paper's experiment, said so (and noted on the page)
             out[key], out[f"{key}_source"] = EXPERIMENT[key], "not in the file: the paper's experiment"
             if key != "law":

@@ -129,6 +129,17 @@ def test_an_operating_point_attribute_that_is_not_a_number_is_refused(tmp_path, 
 
 
 @pytest.mark.hostile("silent_wrong")
+def test_a_backlash_in_metres_that_is_not_a_number_is_refused(tmp_path, capsys, measured_nc):
+    """The backlash_m fallback is read as strictly as backlash_mm: "wide" is not the paper's 0.128 mm."""
+    def edit(ds):
+        ds.attrs.pop("backlash_mm", None)
+        ds.attrs["backlash_m"] = "wide"
+    path = _measured(tmp_path, measured_nc, edit)
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert "backlash_m " in line and "--backlash-mm" in line
+
+
+@pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("var, unit", [("omega2", "deg/s"), ("epsilon2", "rpm"), ("phi1", "deg")])
 def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measured_nc, var, unit):
     """omega2 with units "deg/s" was compared with the models' rad/s as if it were rad/s."""
