@@ -117,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         code = _run(argv)
         lost = lost_interrupt()
         if lost is not None and code == 0:   # its Interrupted was dropped where Python ignores errors
+            if inside_another_command():     # as _run does: the command that runs this one ends too
+                raise Interrupted(lost) if lost != signal.SIGINT else KeyboardInterrupt()
             code = _interrupted(lost)
     if argv is None:
         _exit_without_teardown(code)

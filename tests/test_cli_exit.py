@@ -119,3 +119,33 @@ def test_a_sigterm_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path
                           cwd=ROOT, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 128 + signal.SIGTERM, proc.stderr[-2000:]
     assert "interrupted (SIGTERM)" in proc.stderr and not out.exists()
+
+
+def test_a_sigterm_dropped_in_a_step_after_its_commit_ends_the_command_that_runs_it(tmp_path):
+    # CI found it: in labtool demo's acquire step the signal was dropped after the step's last
+    # commit; the step ended 143 by itself and the demo reported "demo step 'acquire' failed",
+    # exit 2. A step inside another command raises instead, as an Interrupted it catches does.
+    out = tmp_path / "kin.nc"
+    code = f"""
+        import os, signal, sys, weakref
+        import common.files as files
+        real_commit = files.OutputSet.commit
+        def commit(self):
+            real_commit(self)
+            class Thing: pass
+            t = Thing()
+            weakref.finalize(t, os.kill, os.getpid(), signal.SIGTERM)
+            del t                                  # the signal arrives inside the finalizer
+        files.OutputSet.commit = commit
+        import labtool.cli
+        with files.command_scope(), files.signals_interrupt():     # as labtool demo runs a step
+            try:
+                rc = labtool.cli.main(["kinematics", "--points", "200", "-o", {str(out)!r}])
+            except KeyboardInterrupt as exc:
+                print("raised", getattr(exc, "signum", None))
+            else:
+                print("returned", rc)
+        """
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.stdout.strip().splitlines()[-1] == f"raised {int(signal.SIGTERM)}", proc.stderr[-2000:]
