@@ -75,6 +75,27 @@ def test_base_circles_match_paper_eq18_and_reduced_masses():
     assert M1[1] == pytest.approx(4 * 0.2 / 0.04**2) and M2[1] == pytest.approx(4 * 0.008 / 0.1**2)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.floats(-1e4, 1e4), st.just(float("nan"))), min_size=1, max_size=40),
+       st.lists(st.one_of(st.floats(1e-3, 10.0), st.just(float("nan"))), min_size=1, max_size=40))
+def test_tolerance_scales_are_numpys_max_and_min(r31, mass):
+    """_tolerances reads the largest |R31| and the smallest M without a branch an element: its
+    scales must be numpy's max and min of them, NaN included (then the tolerances are NaN)."""
+    from models.dynamics.contact import penetration_under
+    n = min(len(r31), len(mass))
+    R31, M = np.array(r31[:n]), np.array(mass[:n])
+    atol, caps = E._tolerances(R31, M, KC, 1e-7, 8.0, False, 1.0)
+    f = max(np.max(np.abs(R31)), 1.0) if not np.isnan(R31).any() else np.nan
+    m_min = np.min(M)
+    if np.isnan(f) or np.isnan(m_min):
+        assert np.isnan(atol[1]) and np.isnan(caps[0])
+        return
+    period = E.contact_period(KC, m_min, f)
+    assert atol[0] == 1e-7 * penetration_under(f, KC)
+    assert atol[1] == 1e-7 * penetration_under(f, KC) * 2.0 * math.pi / period
+    assert caps[0] == min(period / 8.0, 1.0) and caps[1] == 1.0
+
+
 # ------------------------------------------------------------------ the contact oscillator
 
 def _const_grid(value, t_end=0.05):

@@ -86,8 +86,11 @@ def contact_potential(penetration, kc: float):
 
 @jit
 def penetration_under(force, kc):
-    """Penetration (m) that carries a compressive force (N >= 0): (F / Kc)^(9/10); 0 for F <= 0."""
-    return (force / kc) ** (1.0 / N_EXP) if force > 0.0 else 0.0
+    """Penetration (m) that carries a compressive force (N >= 0): (F / Kc)^(9/10); 0 for F <= 0,
+    NaN for NaN (not 0: the elastic model's scales divide by it, and a NaN scale says why)."""
+    if force > 0.0:
+        return (force / kc) ** (1.0 / N_EXP)
+    return 0.0 if force <= 0.0 else force
 
 
 @jit
