@@ -96,6 +96,21 @@ def test_tolerance_scales_are_numpys_max_and_min(r31, mass):
     assert caps[0] == min(period / 8.0, 1.0) and caps[1] == 1.0
 
 
+def test_the_stall_check_alone_reads_the_same_slack():
+    """The indicator path asks _energy_budget for the slack only (lowest_too=False, two divisions
+    an angle saved): the slack must be the full balance's, bit for bit."""
+    from models.dynamics import validity
+    rng = np.random.default_rng(3)
+    n = 500
+    t = np.linspace(0.0, 0.05, n)
+    args = (t, 20.0 * t, rng.uniform(5, 50, n), rng.uniform(0.05, 0.1, n), rng.normal(0, 3, n),
+            rng.normal(0, 20, n), 0.05, 20.0, 2.0)
+    full, alone = np.empty(n), np.empty(n)
+    lowest = validity._energy_budget(*args, full)
+    assert validity._energy_budget(*args, alone, False) == np.inf and np.isfinite(lowest)
+    np.testing.assert_array_equal(alone, full)
+
+
 # ------------------------------------------------------------------ the contact oscillator
 
 def _const_grid(value, t_end=0.05):

@@ -554,7 +554,7 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
                       omega1, Fu, jt_factor, J_cam, rows)
     if check_motor:
         slack = np.empty(n)
-        validity._energy_budget(t, block[0], rows[4], block[9], rows[0], rows[2], J_cam, omega1, motor0, slack)
+        validity._energy_budget(t, block[0], rows[4], block[9], rows[0], rows[2], J_cam, omega1, motor0, slack, False)
         k = validity.stall_index(slack)
         if k >= 0:
             vals[_K_STALL] = k

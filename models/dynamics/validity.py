@@ -130,11 +130,12 @@ def speed_drop(scene, tab) -> tuple[float, np.ndarray]:
 
 
 @jit
-def _energy_budget(t, phi1, M2, Db2, omega2, MR13D, J_cam, omega1, motor0, slack):
+def _energy_budget(t, phi1, M2, Db2, omega2, MR13D, J_cam, omega1, motor0, slack, lowest_too=True):
     """``speed_drop``'s balance in one pass (the numpy expressions' arithmetic, in their order):
     the work W of the trapezoidal MR13D omega2 integral, J'' = M2 Db2^2 / 4 (eq. 16 inverted),
     energy = Jred(0) omega1^2 - 2 (W - (T'' - T''(0))); writes slack = energy / 2 + motor0 (phi1 -
-    phi1(0)) and returns min(energy / Jred) (NaN if any is)."""
+    phi1(0)) and returns min(energy / Jred) (NaN if any is), or inf without ``lowest_too`` (the
+    stall check alone reads the slack: two divisions an angle saved)."""
     n = t.size
     J0 = M2[0] * Db2[0] ** 2 / 4.0
     T0 = 0.5 * J0 * omega2[0] ** 2
@@ -147,11 +148,11 @@ def _energy_budget(t, phi1, M2, Db2, omega2, MR13D, J_cam, omega1, motor0, slack
         if i > 0:
             W += 0.5 * (MR13D[i] * omega2[i] + MR13D[i - 1] * omega2[i - 1]) * (t[i] - t[i - 1])
         W_static = W - (0.5 * J * omega2[i] ** 2 - T0)
-        J_red = J_cam + J * (omega2[i] / omega1) ** 2
         energy = e_start - 2.0 * W_static
-        r = energy / J_red
-        if r < lowest or r != r:
-            lowest = r
+        if lowest_too:
+            r = energy / (J_cam + J * (omega2[i] / omega1) ** 2)
+            if r < lowest or r != r:
+                lowest = r
         slack[i] = 0.5 * energy + motor0 * (phi1[i] - phi1[0])
     return lowest
 
