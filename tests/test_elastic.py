@@ -69,10 +69,36 @@ def test_base_circles_match_paper_eq18_and_reduced_masses():
     Db1_paper = 2 * (mech.l * np.cos(a) - mech.d * np.cos(mech.psi0 + psi + a))
     np.testing.assert_allclose(g["Db1"], np.abs(Db1_paper), atol=2e-6)
     np.testing.assert_allclose(g["Db2"], 2 * mech.l * np.cos(a), rtol=1e-9)
-    M1, M2, M = np.array([E._reduced_mass(0.2, 0.008, Db1, Db2) for Db1, Db2 in ((0.0, 0.12), (0.04, 0.1))]).T
+    Db1, Db2 = np.array([0.0, 0.04]), np.array([0.12, 0.1])
+    c1, c2, rho, _ = E.mass_factors(Db1, Db2, np.ones(2))
+    M1, M2, M = np.array([E._reduced_mass(0.2, 1 / 0.2, 0.008, *f) for f in zip(c1, c2, rho)]).T
     assert M1[0] == np.inf and M[0] == pytest.approx(M2[0])
     assert M[1] == pytest.approx(M1[1] * M2[1] / (M1[1] + M2[1]))
     assert M1[1] == pytest.approx(4 * 0.2 / 0.04**2) and M2[1] == pytest.approx(4 * 0.008 / 0.1**2)
+
+
+@pytest.mark.parametrize("run", [1, 16])
+def test_tables_are_eq16_and_the_moment_over_its_arm(run):
+    """The per-run tables take one division an angle (mass_factors precomputed): they must be the
+    textbook forms, M1 = 4 Jcam/Db1^2, M2 = 4 J''/Db2^2, M = M1 M2/(M1 + M2), R31 = MR13D/arm,
+    evaluated with numpy from the same angle terms, to a few ulps."""
+    from models.mechanism.cam_tables import grid_terms
+    from models.mechanism.motor import cam_inertia, transmission_ratio
+    scene = _scene(run)
+    span, n = E._span(scene)
+    tab = E.grid_tables(scene, span, n)
+    terms = grid_terms(scene.mechanism, scene.program, span, n, E._until(scene))
+    J_cam = cam_inertia(scene.mechanism, transmission_ratio(scene.mechanism, scene.omega1_nominal))
+    J = scene.jt_factor * terms.J0
+    M1 = np.where(terms.Db1 > 0, 4 * J_cam / np.where(terms.Db1 > 0, terms.Db1, 1.0) ** 2, np.inf)
+    M2 = 4 * J / terms.Db2**2
+    with np.errstate(invalid="ignore"):          # inf / inf where Db1 = 0: M2 there
+        M = np.where(np.isinf(M1), M2, M1 * M2 / (M1 + M2))
+    np.testing.assert_array_equal(np.isinf(tab.M1), np.isinf(M1))
+    np.testing.assert_allclose(tab.M1[np.isfinite(M1)], M1[np.isfinite(M1)], rtol=4e-16, atol=0)
+    np.testing.assert_allclose(tab.M2, M2, rtol=4e-16, atol=0)
+    np.testing.assert_allclose(tab.M, M, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(tab.R31, tab.MR13D / (scene.mechanism.l * np.cos(terms.alpha)), rtol=4e-16, atol=0)
 
 
 @settings(max_examples=60, deadline=None)

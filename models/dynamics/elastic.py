@@ -117,30 +117,45 @@ class Tables:
     omega1: float          # rad/s
 
 
+def mass_factors(Db1, Db2, arm) -> tuple:
+    """The speed-independent factors of eq. (16) and of R31 = MR13D / arm at each angle, so that a
+    run's tables take one division an angle instead of five: (4 / Db1^2 (inf where Db1 <= 0: the
+    normal passes through A), 4 / Db2^2, Db1^2 / Db2^2 (0 there), 1 / arm), in 1/m^2, 1/m^2, 1
+    and 1/m (Db, arm m; arrays)."""
+    Db1, Db2, arm = (np.asarray(a, dtype=float) for a in (Db1, Db2, arm))
+    through_a = ~(Db1 > 0)
+    with np.errstate(divide="ignore"):
+        c1 = np.where(through_a, np.inf, 4.0 / np.where(through_a, 1.0, Db1) ** 2)
+    rho = np.where(through_a, 0.0, Db1**2 / Db2**2)
+    return c1, 4.0 / Db2**2, rho, 1.0 / arm
+
+
 @kernel(inline="always")
-def _reduced_mass(J_cam, J_follower, Db1, Db2):
+def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
     """M1, M2, M (kg) of eq. (16) at one angle: M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2,
-    M = M1 M2/(M1+M2) (J kg m^2, Db m). Where the normal passes through A (Db1 = 0) the cam cannot
-    move along it: M1 = inf, M = M2."""
-    M1 = 4.0 * J_cam / Db1**2 if Db1 > 0 else np.inf
-    M2 = 4.0 * J_follower / Db2**2
-    return M1, M2, M2 / (1.0 + M2 / M1)          # = M1 M2 / (M1 + M2), and M2 where M1 = inf
+    M = M1 M2/(M1+M2) = M2 / (1 + M2/M1), with M2/M1 = (Jfollower/Jcam) Db1^2/Db2^2 (J kg m^2;
+    inv_J_cam = 1/Jcam; c1, c2, rho the angle's ``mass_factors``). Where the normal passes through
+    A (Db1 = 0) the cam cannot move along it: M1 = inf, M = M2."""
+    M2 = J_follower * c2
+    return J_cam * c1, M2, M2 / (1.0 + J_follower * inv_J_cam * rho)
 
 
 _point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
 
 
 @kernel
-def _operating_tables(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, arm, Db1, Db2, omega1, Fu, jt_factor, J_cam,
+def _operating_tables(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, c1, c2, rho, inv_arm, omega1, Fu, jt_factor, J_cam,
                       out):
     """``_tables``' per-angle arithmetic in one pass (cam_tables.operating_point, _reduced_mass and
-    R31 = MR13D / arm): rows of ``out`` omega2, epsilon2, MR13D, M1, M2, M, R31."""
+    R31 = MR13D / arm; c1 .. inv_arm the ``mass_factors``): rows of ``out`` omega2, epsilon2,
+    MR13D, M1, M2, M, R31."""
+    inv_J_cam = 1.0 / J_cam
     for i in range(dpsi.size):
         omega2, epsilon2, moment, J = _point(dpsi[i], ddpsi[i], J0[i], dJ0[i], M_gravity[i], m_load[i],
                                              omega1, Fu, jt_factor)
-        M1, M2, M = _reduced_mass(J_cam, J, Db1[i], Db2[i])
+        M1, M2, M = _reduced_mass(J_cam, inv_J_cam, J, c1[i], c2[i], rho[i])
         out[0, i], out[1, i], out[2, i] = omega2, epsilon2, moment
-        out[3, i], out[4, i], out[5, i], out[6, i] = M1, M2, M, moment / arm[i]
+        out[3, i], out[4, i], out[5, i], out[6, i] = M1, M2, M, moment * inv_arm[i]
 
 
 def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None,
@@ -164,14 +179,8 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     """
     omega1 = cam_speed(scene)
     terms = grid_terms(scene.mechanism, scene.program, span, n_points, _until(scene))
-    return _tables(scene, terms, terms.phi1 / omega1, omega1, _grid_arm(scene, span, n_points))
-
-
-def _grid_arm(scene: Scene, span: float, n_points: int) -> np.ndarray:
-    """``_arm`` on grid_tables' cam-angle grid, per process (speed-independent)."""
-    mech, until = scene.mechanism, _until(scene)
-    return cached(("elastic_arm", mech.cache_key, scene.program, float(span), int(n_points), until),
-                  lambda: _arm(mech, grid_terms(mech, scene.program, span, n_points, until).alpha))
+    block = _angle_block(scene, span, n_points)
+    return _tables(scene, terms, terms.phi1 / omega1, omega1, block[_ARM], block[_FACTORS])
 
 
 def _until(scene: Scene):
@@ -186,15 +195,16 @@ def _arm(mech, alpha):
     return mech.l * np.cos(alpha)
 
 
-def _tables(scene: Scene, terms, t, omega1: float, arm=None) -> Tables:
-    """``arm``: ``_arm`` of terms.alpha when the caller has it (speed-independent, cached)."""
+def _tables(scene: Scene, terms, t, omega1: float, arm=None, factors=None) -> Tables:
+    """``arm``, ``factors``: ``_arm`` of terms.alpha and the ``mass_factors`` when the caller has
+    them (speed-independent, cached)."""
     mech = scene.mechanism
     arm = _arm(mech, terms.alpha) if arm is None else arm
+    factors = mass_factors(terms.Db1, terms.Db2, arm) if factors is None else factors
     it = transmission_ratio(mech, scene.omega1_nominal)
     rows = np.empty((7, t.size))
     _operating_tables(*(np.ascontiguousarray(a, dtype=float) for a in (terms.dpsi, terms.ddpsi, terms.J0, terms.dJ0,
-                                                                       terms.M_gravity, terms.m_load, arm, terms.Db1,
-                                                                       terms.Db2)),
+                                                                       terms.M_gravity, terms.m_load, *factors)),
                       float(omega1), float(scene.Fu), float(scene.jt_factor), float(cam_inertia(mech, it)), rows)
     omega2, epsilon2, MR13D, M1, M2, M, R31 = rows
     return Tables(t=t, phi1=terms.phi1, R31=R31, M=M, M1=M1, M2=M2, arm=arm, phi2=terms.phi2, omega2=omega2,
@@ -510,18 +520,23 @@ def _span(scene: Scene) -> tuple:
     return span, (GRID_POINTS if scene.rise_only else int(GRID_POINTS * span / scene.program.rise_angle))
 
 
-_ANGLE_ROWS = ("phi1", "dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load", "arm", "Db1", "Db2")
+_ANGLE_ROWS = ("phi1", "dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load", "Db2", "arm", "c1", "c2", "rho",
+               "inv_arm")
+_ARM = _ANGLE_ROWS.index("arm")
+_FACTORS = slice(_ANGLE_ROWS.index("c1"), _ANGLE_ROWS.index("inv_arm") + 1)     # mass_factors' rows
 
 
 def _angle_block(scene: Scene, span: float, n_points: int) -> np.ndarray:
-    """``grid_tables``' speed-independent inputs stacked, rows _ANGLE_ROWS (arm ``_grid_arm``, the
-    rest grid_terms'), per process."""
+    """``grid_tables``' speed-independent inputs stacked, rows _ANGLE_ROWS (the grid_terms', the
+    arm ``_arm`` and the ``mass_factors``), per process."""
     mech, until = scene.mechanism, _until(scene)
 
     def build():
         terms = grid_terms(mech, scene.program, span, n_points, until)
-        arm = _grid_arm(scene, span, n_points)
-        return np.vstack([arm if name == "arm" else getattr(terms, name) for name in _ANGLE_ROWS])
+        arm = _arm(mech, terms.alpha)
+        factors = dict(zip(("c1", "c2", "rho", "inv_arm"), mass_factors(terms.Db1, terms.Db2, arm)))
+        return np.vstack([arm if name == "arm" else factors[name] if name in factors else getattr(terms, name)
+                          for name in _ANGLE_ROWS])
     return cached(("elastic_angle_block", mech.cache_key, scene.program, float(span), int(n_points), until), build)
 
 
@@ -550,11 +565,12 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     n = block.shape[1]
     t = block[0] / omega1
     rows = np.empty((7, n))
-    _operating_tables(block[1], block[2], block[3], block[4], block[5], block[6], block[7], block[8], block[9],
-                      omega1, Fu, jt_factor, J_cam, rows)
+    # block rows (_ANGLE_ROWS): 1-6 the angle terms, 7 Db2, 9-12 the mass_factors
+    _operating_tables(block[1], block[2], block[3], block[4], block[5], block[6], block[9], block[10], block[11],
+                      block[12], omega1, Fu, jt_factor, J_cam, rows)
     if check_motor:
         slack = np.empty(n)
-        validity._energy_budget(t, block[0], rows[4], block[9], rows[0], rows[2], J_cam, omega1, motor0, slack, False)
+        validity._energy_budget(t, block[0], rows[4], block[7], rows[0], rows[2], J_cam, omega1, motor0, slack, False)
         k = validity.stall_index(slack)
         if k >= 0:
             vals[_K_STALL] = k
