@@ -597,7 +597,7 @@ def _indicator_pass(block, omega1, Fu, jt_factor, J_cam, check_motor, motor0, si
     vals[_T_FAIL], vals[_NFEV], vals[_NSTEPS] = out[1], out[6], out[3]
     if status != dp.OK:
         return status, vals, no_rows
-    out_t, out_y, out_seg, _ = dp.merge_run(grid, out)
+    out_t, out_y, out_seg, _ = dp.merge_run(grid, out, 1)       # x alone: its extremes
     x_max, x_min, d_max, k = -np.inf, np.inf, -np.inf, 0
     for i in range(out_t.size):                      # x.max(), x.min(), _deformation's max and argmax
         x = out_y[0, i]
@@ -792,7 +792,7 @@ def _raw_outputs(tab: Tables, out):
     """``_outputs`` of a compiled run from the loop's own arrays (``integrate(raw=True)``): the same
     instants and values (the same ``merge_outputs`` pass over the same steps), without a Python
     object per phase."""
-    t, y, seg, grid_index = dp.merge_run(output_grid(tab), out)
+    t, y, seg, grid_index = dp.merge_run(output_grid(tab), out, 2)
     return t, y[0], y[1], out[11][:out[4], 0].astype(np.int64)[seg], grid_index
 
 

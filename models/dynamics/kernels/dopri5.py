@@ -738,15 +738,17 @@ def merged(grid, starts, ends, first, last, t0s, hs, y0s, Qs, n_steps):
 
 
 @jit
-def merge_run(grid, out):
+def merge_run(grid, out, width):
     """``merged`` of a run from ``run``'s own return value ``out`` (its step store and phase
-    table), without a Python object per phase."""
+    table), without a Python object per phase, for the first ``width`` state components (the
+    others are not evaluated)."""
     nst, nph = out[3], out[4]
     first = out[14][:nph]
     last = np.empty(nph, dtype=np.int64)
     last[:-1] = first[1:] - 1
     last[-1] = nst - 1
-    return merged(grid, out[12][:nph], out[13][:nph], first, last, out[7], out[8], out[9], out[10], nst)
+    return merged(grid, out[12][:nph], out[13][:nph], first, last, out[7], out[8], out[9][:, :width],
+                  out[10][:, :width], nst)
 
 
 @kernel(inline="always")
