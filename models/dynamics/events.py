@@ -215,22 +215,24 @@ def settles(ev, side: str | None = None) -> int:
 _SIDE_BY_NAME = {name: code for code, name in SIDE_CODES.items()}
 
 
-def _row_side(rows, side: str | None) -> np.ndarray:
+def _count_rows(rows, kind: int, side: str | None) -> int:
+    """Rows of ``kind`` (on ``side``): as few numpy calls as possible, a run's rows are ~10-100."""
+    of_kind = rows[:, COL_KIND] == kind
     if side is None:
-        return np.ones(rows.shape[0], dtype=bool)
+        return int(np.count_nonzero(of_kind))
     if side not in _SIDE_BY_NAME:
         raise ValueError(f"side must be {INTERIOR!r} or {EXTERIOR!r}, got {side!r}")
-    return rows[:, COL_SIDE] == _SIDE_BY_NAME[side]
+    return int(np.count_nonzero(of_kind & (rows[:, COL_SIDE] == _SIDE_BY_NAME[side])))
 
 
 def flights_in_rows(rows, side: str | None = None) -> int:
     """``flights`` of event rows (n, >= N_SHARED)."""
-    return int(np.count_nonzero((rows[:, COL_KIND] == KIND_SEPARATION) & _row_side(rows, side)))
+    return _count_rows(rows, KIND_SEPARATION, side)
 
 
 def impacts_in_rows(rows, side: str | None = None) -> int:
     """``impacts`` of event rows (n, >= N_SHARED)."""
-    return int(np.count_nonzero((rows[:, COL_KIND] == KIND_CONTACT) & _row_side(rows, side)))
+    return _count_rows(rows, KIND_CONTACT, side)
 
 
 def in_rise(ev, rise_angle: float) -> np.ndarray:
