@@ -93,7 +93,7 @@ POINT_FIELDS = {
     "Fu_N": _opt(Number(ge=0, le=1e4, unit="N")),
     "backlash_mm": _opt(Number(ge=0, le=10, unit="mm")),
     "jt_factor": _opt(Number(gt=0, le=100)),
-    "revolutions": _opt(Number(ge=2, le=10000)),
+    "revolutions": _opt(Number(ge=2, le=10000, whole=True)),       # whole revolutions: 8.5 is refused
     "duration_s": _opt(Number(gt=0, le=3600, unit="s")),
     "seed": _opt(Integer(ge=0, le=2**32 - 1)),
 }

@@ -205,15 +205,16 @@ class Number(Field):
     """A finite real number (TOML integer or float, not a boolean), returned as float.
 
     ``gt``/``ge``/``lt``/``le``: bounds; ``nonzero``: refuse 0; ``unit``: shown in messages;
-    ``allow_inf``: accept TOML ``inf`` (never ``nan``), e.g. "record until stopped"."""
+    ``allow_inf``: accept TOML ``inf`` (never ``nan``), e.g. "record until stopped"; ``whole``:
+    a count that TOML may write as 10 or 10.0, never 8.5."""
 
     types = (int, float)
 
     def __init__(self, *, gt=None, ge=None, lt=None, le=None, nonzero: bool = False, unit: str = "",
-                 allow_inf: bool = False, **kw):
+                 allow_inf: bool = False, whole: bool = False, **kw):
         super().__init__(**kw)
         self.gt, self.ge, self.lt, self.le, self.nonzero, self.unit = gt, ge, lt, le, nonzero, unit
-        self.allow_inf = allow_inf
+        self.allow_inf, self.whole = allow_inf, whole
 
     def _u(self) -> str:
         return f" [{self.unit}]" if self.unit else ""
@@ -247,6 +248,8 @@ class Number(Field):
             self._fail(where, at, value, f"must be <= {f(self.le)}{u}")
         if self.nonzero and number == 0:
             self._fail(where, at, value, f"must not be zero{u}")
+        if self.whole and number != math.floor(number):
+            self._fail(where, at, value, f"must be a whole number{u}")
 
     def _check(self, value, where, at):
         number = self._number(value, where, at)

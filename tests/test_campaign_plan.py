@@ -48,6 +48,8 @@ def test_a_grid_varies_rpm_fastest_and_names_what_varies(tmp_path):
     # inside the schema's bound but past the models' range: refused before any point runs
     ("[grid]\nrpm = [180, 1500]\n", "grid point 2: cam speed 1500 rpm is outside the range the models take"),
     ("[[points]]\nrpm = 180\nrevolutions = 5\nduration_s = 3\n", "give revolutions or duration_s, not both"),
+    # whole revolutions are recorded and averaged: 8.5 would record 9.5 periods and average 8
+    ("[defaults]\nrevolutions = 8.5\n[[points]]\nrpm = 180\n", "[defaults] revolutions = 8.5: must be a whole number"),
     ("[compare]\nmodels = ['rigid', 'fem']\n[[points]]\nrpm = 180\n", "[compare] models[1] = \"fem\": expected one of"),
     ("[device]\nkind = 'nidaqmx'\n[[points]]\nrpm = 180\n", "needs channels"),
     ("[device]\nchannels = 'Dev1/ai0:2'\n[[points]]\nrpm = 180\n", "describe a nidaqmx device"),

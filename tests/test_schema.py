@@ -55,6 +55,15 @@ def test_bad_values_name_the_key_and_what_it_takes(frame, expected):
     assert expected in _error({"frame": frame})
 
 
+def test_a_whole_number_may_be_written_as_a_float_but_not_with_a_fraction():
+    """``whole=True`` (a count of revolutions): 10 and 10.0 are 10.0; 8.5 is refused naming the key."""
+    field = Table({"revolutions": Number(ge=2, whole=True)})
+    assert field.check({"revolutions": 10}, "plan") == {"revolutions": 10.0}
+    assert field.check({"revolutions": 10.0}, "plan") == {"revolutions": 10.0}
+    with pytest.raises(SchemaError, match=r"revolutions = 8\.5: must be a whole number"):
+        field.check({"revolutions": 8.5}, "plan")
+
+
 def test_unknown_tables_and_keys_are_named():
     assert "unknown table [framE] (did you mean frame?)" in _error({**GOOD, "framE": {}})
     assert "unknown key colour" in _error({**GOOD, "colour": 1})
