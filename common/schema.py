@@ -248,7 +248,7 @@ class Number(Field):
             self._fail(where, at, value, f"must be <= {f(self.le)}{u}")
         if self.nonzero and number == 0:
             self._fail(where, at, value, f"must not be zero{u}")
-        if self.whole and number != math.floor(number):
+        if self.whole and math.isfinite(number) and number != math.floor(number):
             self._fail(where, at, value, f"must be a whole number{u}")
 
     def _check(self, value, where, at):

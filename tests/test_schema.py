@@ -62,6 +62,8 @@ def test_a_whole_number_may_be_written_as_a_float_but_not_with_a_fraction():
     assert field.check({"revolutions": 10.0}, "plan") == {"revolutions": 10.0}
     with pytest.raises(SchemaError, match=r"revolutions = 8\.5: must be a whole number"):
         field.check({"revolutions": 8.5}, "plan")
+    endless = Table({"revolutions": Number(ge=2, whole=True, allow_inf=True)})      # "until stopped"
+    assert endless.check({"revolutions": math.inf}, "plan") == {"revolutions": math.inf}
 
 
 def test_unknown_tables_and_keys_are_named():
