@@ -423,11 +423,12 @@ def event_many(model, ph, which, ts, Y, out):
 
 @kernel
 def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, span, t, yv, y_new, tmp, Q, K,
-           h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst):
-    """Steps of one phase from (t, yv) (K[0] = f(t, yv), g_old its event values) until an event
-    fires (yv is then the state at it), the time bound, a failure or the step cap, storing each
-    step; it returns early, ``full``, when the step store is full (``run`` enlarges it and calls
-    again: the state, K[0], g_old and h_abs carry over). Allocates nothing (no reference counts
+           h_abs, g, st_t, st_h, st_y, st_Q, nst):
+    """Steps of one phase from (t, yv) (K[0] = f(t, yv), g[0] its event values; g[1] receives
+    those at a step's end) until an event fires (yv is then the state at it), the time bound, a
+    failure or the step cap, storing each step; it returns early, ``full``, when the step store is
+    full (``run`` enlarges it and calls again: the state, K[0], g[0] and h_abs carry over).
+    Allocates nothing (no reference counts
     in the per-step work). ``span`` (s): the finest step cap of the run's modes; an offset event's
     sign is read at least every span / nsub s, so a mode whose steps may be longer (the elastic
     flight) is checked as finely as the others. Returns (status, full, t, h_abs, nst, rhs calls,
@@ -435,7 +436,8 @@ def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, spa
 
     The controls come as scalars, not as the ``Controls`` tuple: a tuple that holds arrays,
     passed into the per-step functions, made the elastic loop 35-40 % slower (an unused extra
-    array in it measured so, 2026-12-02)."""
+    array in it measured so, 2026-12-02); the events' old and new values are one array for the
+    same reason (2 % of the elastic loop, 2026-12-04)."""
     nfev = 0
     while t < t_bound:
         if nst >= max_steps:
@@ -458,14 +460,14 @@ def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, spa
         best = 2.0
         hit = -1
         for e in range(ne):
-            g_new[e] = event(model, ph, e, t_new, y_new)
+            g[1, e] = event(model, ph, e, t_new, y_new)
             c = event_offset(model, ph, e)
             if c < 0:
-                s = crossing(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], nsub, tmp)
-            elif _out_of_reach(g_old[e], g_new[e], yv[c], h, Q, c):
+                s = crossing(model, ph, e, t, yv, h, Q, g[0, e], g[1, e], nsub, tmp)
+            elif _out_of_reach(g[0, e], g[1, e], yv[c], h, Q, c):
                 continue                               # no sign change is possible in this step
             else:
-                s = crossing_bounded(model, ph, e, t, yv, h, Q, g_old[e], g_new[e], c,
+                s = crossing_bounded(model, ph, e, t, yv, h, Q, g[0, e], g[1, e], c,
                                      min(1.0, span / h) / nsub, tmp)
             if s <= 1.0 and (best - s) * h > TIE * (1.0 + abs(t)):
                 best = s
@@ -480,7 +482,7 @@ def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, spa
             yv[i] = y_new[i]
             K[0, i] = K[6, i]
         for e in range(ne):
-            g_old[e] = g_new[e]
+            g[0, e] = g[1, e]
     return OK, False, t, h_abs, nst, nfev, -1
 
 
@@ -506,8 +508,7 @@ def run(model, ctl, ph0, y0, t0):
     ynew_all = np.empty(nmax)
     tmp_all = np.empty(nmax)
     Q_all = np.empty((nmax, 4))
-    g_old = np.empty(MAX_EVENTS_PER_PHASE)
-    g_new = np.empty(MAX_EVENTS_PER_PHASE)
+    g = np.empty((2, MAX_EVENTS_PER_PHASE))
     y = np.zeros(nmax)
     y[: y0.size] = y0
     span = ctl.max_step.min()
@@ -537,12 +538,12 @@ def run(model, ctl, ph0, y0, t0):
         h_abs = first_step(model, ph, t, yv, K[0], ctl.t_bound, max_step, ctl.rtol, atol, tmp, y_new)
         nfev += 2
         for e in range(ne):
-            g_old[e] = event(model, ph, e, t, yv)
+            g[0, e] = event(model, ph, e, t, yv)
         hit = -1
         while True:
             status, full, t, h_abs, nst, calls, hit = _steps(model, ph, n, ne, ctl.rtol, ctl.t_bound, ctl.max_steps,
                                                             ctl.nsub, atol, max_step, span, t, yv, y_new, tmp, Q,
-                                                            K, h_abs, g_old, g_new, st_t, st_h, st_y, st_Q, nst)
+                                                            K, h_abs, g, st_t, st_h, st_y, st_Q, nst)
             nfev += calls
             if not full:
                 break
