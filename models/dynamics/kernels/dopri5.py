@@ -436,8 +436,8 @@ def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, spa
 
     The controls come as scalars, not as the ``Controls`` tuple: a tuple that holds arrays,
     passed into the per-step functions, made the elastic loop 35-40 % slower (an unused extra
-    array in it measured so, 2026-12-02); the events' old and new values are one array for the
-    same reason (2 % of the elastic loop, 2026-12-04)."""
+    array in it measured so, 2026-12-02; perhaps a slow episode of the VM, docs/performance.md);
+    the events' old and new values are one array (2 % of the elastic loop, 2026-12-04)."""
     nfev = 0
     while t < t_bound:
         if nst >= max_steps:
