@@ -193,3 +193,14 @@ def test_a_factor_file_that_is_a_folder_or_a_device_is_named_so(tmp_path, capsys
     path = tmp_path if kind == "folder" else "/dev/null"
     line = one_error_line(*cli(["doe", "run", "--factors", path, "--yes", "-o", tmp_path / "r.csv"], capsys))
     assert said in line and "does not exist" not in line
+
+
+# --- silent wrong: processing options and attributes that were passed over -------------------
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("value", ["0.3 s", np.array([0.3, 0.5])])
+def test_an_ac_coupling_constant_that_is_not_one_number_is_refused(tmp_path, capsys, volts, value):
+    """ac_coupling_tau_s = "0.3 s" was taken for "no AC coupling": it was left in without a word."""
+    rec = _recording(tmp_path, volts, ac_coupling_tau_s=value)
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert "ac_coupling_tau_s" in line and "--ac-tau" in line
+    assert not (tmp_path / "m.nc").exists()
