@@ -204,3 +204,14 @@ def test_an_ac_coupling_constant_that_is_not_one_number_is_refused(tmp_path, cap
     line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
     assert "ac_coupling_tau_s" in line and "--ac-tau" in line
     assert not (tmp_path / "m.nc").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_sample_rate_option_the_file_contradicts_is_refused(tmp_path, capsys, volts):
+    """process rec.h5 --sample-rate 5000 on a file stating 10000 Hz ran at 10000 Hz without a word."""
+    rec = _recording(tmp_path, volts)
+    line = one_error_line(*cli(["process", rec, "--sample-rate", "5000", "-o", tmp_path / "m.nc"], capsys))
+    assert "--sample-rate 5000" in line and "10000 Hz" in line
+    assert not (tmp_path / "m.nc").exists()
+    code, err = cli(["process", rec, "--sample-rate", "10000", "-o", tmp_path / "m.nc"], capsys)
+    assert code == 0, err

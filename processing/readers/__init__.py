@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from common.errors import FileFormatError, InputError
+from common.names import shown
 from processing.readers.base import Event, Recording
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -73,4 +74,8 @@ def open_recording(path, sample_rate_hz: float | None = None, group: str | None 
     if rec.n_samples == 0:
         rec.close()
         raise FileFormatError(f"{path}: the recording holds no samples")
+    if sample_rate_hz is not None and abs(rec.sample_rate_hz - sample_rate_hz) > 1e-6 * rec.sample_rate_hz:
+        rec.close()   # the file's own rate won: the option was passed over without a word
+        raise InputError(f"{shown(path)}: the file states {rec.sample_rate_hz:g} Hz; --sample-rate {sample_rate_hz:g} "
+                         "is for files that state none (or a text table's time column): leave it out or fix the file")
     return rec
