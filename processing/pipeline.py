@@ -167,6 +167,12 @@ def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
     tau = opts.ac_tau_s if opts.ac_tau_s is not None else _stated_tau(rec)
     if tau is not None and not (math.isfinite(tau) and tau > 0):
         raise InputError(f"AC-coupling time constant {tau!r} s must be a positive number")
+    if tau and tau <= 1.0 / (math.pi * fs):
+        # corner 1/(2 pi tau) at or above Nyquist: such a coupling removed all it sampled, and
+        # undoing it divides by fs tau (1e-300 s wrote omega2 = inf with exit 0)
+        raise InputError(f"AC-coupling time constant {tau:g} s puts the coupling's corner at "
+                         f"{1.0 / (2.0 * math.pi * tau):.3g} Hz, at or above half the sample rate ({fs / 2:g} Hz): "
+                         f"nothing sampled would be left (--ac-tau, s)")
     if tau:
         hist.add(H.UndoAcCoupling(tau_s=tau))
     tables = KinematicTables(mech, program)

@@ -215,3 +215,13 @@ def test_a_sample_rate_option_the_file_contradicts_is_refused(tmp_path, capsys, 
     assert not (tmp_path / "m.nc").exists()
     code, err = cli(["process", rec, "--sample-rate", "10000", "-o", tmp_path / "m.nc"], capsys)
     assert code == 0, err
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("tau", ["1e-300", "1e-6"])
+def test_an_ac_coupling_constant_shorter_than_the_sampling_is_refused(tmp_path, capsys, volts, tau):
+    """--ac-tau 1e-300 wrote omega2 = inf ("inf % rms of peak") with exit 0."""
+    rec = _recording(tmp_path, volts)
+    line = one_error_line(*cli(["process", rec, "--ac-tau", tau, "-o", tmp_path / "m.nc"], capsys))
+    assert "--ac-tau" in line or "AC-coupling" in line
+    assert not (tmp_path / "m.nc").exists()
