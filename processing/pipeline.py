@@ -41,7 +41,7 @@ from processing import cam_angle, cycles, events, filters, follower, kernels, sp
 from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
-from processing.readers.base import check_finite
+from processing.readers.base import check_finite, stated_number
 from processing.workspace import Workspace
 from processing.writer import CoreBlock, MeasuredWriter
 
@@ -164,7 +164,8 @@ def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
     hist.add(H.Lowpass(kind="butterworth", order=opts.filter_order, cutoff_hz=cutoff, zero_phase=True,
                        rule=f"{opts.harmonics:g} x cam frequency, at most 0.4 fs" if not opts.lowpass_hz else "given",
                        chunk_samples=int(opts.chunk_samples), overlap_samples=margin))
-    tau = opts.ac_tau_s if opts.ac_tau_s is not None else _stated_tau(rec)
+    tau = opts.ac_tau_s if opts.ac_tau_s is not None else stated_number(rec.attrs, "ac_coupling_tau_s", rec.source,
+                                                                         "--ac-tau")
     if tau is not None and not (math.isfinite(tau) and tau > 0):
         raise InputError(f"AC-coupling time constant {tau!r} s must be a positive number")
     if tau and tau <= 1.0 / (math.pi * fs):
@@ -419,20 +420,6 @@ class KinematicTables:
     def index(self, phi1):
         k = (phi1 * (self.N / (2.0 * math.pi)) + 0.5).astype(np.int64)
         return k & (self.N - 1)
-
-
-def _stated_tau(rec) -> float | None:
-    """The recording's ``ac_coupling_tau_s`` (s), None when it has none; a value that is not one
-    number is refused (it was taken for "no AC coupling", which was then left in without a word)."""
-    raw = rec.attrs.get("ac_coupling_tau_s")
-    if raw is None:
-        return None
-    tau = _float_attr(raw) if np.size(raw) == 1 else None
-    if tau is None:
-        text = np.asarray(raw).tolist() if isinstance(raw, np.ndarray) else raw
-        raise InputError(f"{shown(rec.source)}: attribute ac_coupling_tau_s = {text!r} is not one number (s); "
-                         "fix the file or give --ac-tau")
-    return tau
 
 
 def _float_attr(v):

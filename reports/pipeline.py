@@ -17,7 +17,7 @@ from common.cf import udunits
 from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing import impacts
-from processing.readers.base import as_text
+from processing.readers.base import as_text, stated_number
 from reports import align, events, metrics
 from reports.thresholds import Thresholds, evaluate
 
@@ -138,20 +138,9 @@ OPTIONS = {"Fu": "--fu", "backlash_mm": "--backlash-mm", "jt_factor": "--jt-fact
 
 
 def _stated_number(ds, name: str, option: str) -> float | None:
-    """The operating-point attribute ``name`` as one number, None when the file has none; an
-    attribute that is not one number is refused (it was taken for "not stated", and the paper's
-    value was used instead of what the file meant)."""
-    if name not in ds.attrs:
-        return None
-    raw = ds.attrs[name]
-    try:
-        if np.size(raw) != 1:
-            raise ValueError
-        return float(np.asarray(raw).ravel()[0])
-    except (TypeError, ValueError):
-        where = ds.encoding.get("source", "the measured file")
-        raise InputError(f"{shown(where)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file "
-                         f"or give {option}") from None
+    """The measured file's operating-point attribute ``name`` (``stated_number``): a value that is
+    not one number is refused, not replaced by the paper's."""
+    return stated_number(ds.attrs, name, ds.encoding.get("source", "the measured file"), option)
 
 
 def no_load_factor() -> float:

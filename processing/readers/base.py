@@ -14,6 +14,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from common.errors import FileFormatError, InputError
+from common.names import shown
 
 EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
 # events that mean the samples before and after the index are not contiguous in time
@@ -188,6 +189,23 @@ def check_finite(block: np.ndarray, start: int, names: list[str], source: str) -
         i, j = np.argwhere(bad)[0]
         raise InputError(f"{source}: sample {start + i} of channel '{names[j]}' is {block[i, j]} (NaN/Inf); "
                          "the recording is damaged")
+
+
+def stated_number(attrs, name: str, source, option: str) -> float | None:
+    """The attribute ``name`` of ``attrs`` (a file's attributes) as one number, None when the file
+    has none; one that is not one number is InputError naming ``source`` and the option ``option``
+    that gives the value instead. (Read loosely, such an attribute was taken for "not stated": a
+    default replaced what the file meant.)"""
+    raw = attrs.get(name)
+    if raw is None:
+        return None
+    try:
+        if np.size(raw) != 1:
+            raise ValueError
+        return float(np.asarray(raw).ravel()[0])
+    except (TypeError, ValueError):
+        raise InputError(f"{shown(source)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file "
+                         f"or give {option}") from None
 
 
 def as_text(value) -> str:
