@@ -27,22 +27,27 @@ def _recording(tmp_path, volts, **root_attrs):
 
 
 # --- silent wrong: recording attributes --------------------------------------------------------
+# a recording's root attribute that is not what it must be, and what it was read as before
+BAD_ATTRIBUTES = [
+    # complete = "no" was read as bool("no") = True: a killed recording passed for a clean one
+    *[pytest.param({"complete": v}, ("complete", "true or false"), id=f"complete={v!r}")
+      for v in ("no", "false", "0", np.array([1, 0]))],
+    # sample_rate_hz = [10000, 20000] was read as its first value without a word
+    pytest.param({"sample_rate_hz": np.array([10000.0, 20000.0])}, ("sample rate", "one number"),
+                 id="sample_rate_hz=[10000, 20000]"),
+    # ac_coupling_tau_s = "0.3 s" was taken for "no AC coupling": it was left in without a word
+    *[pytest.param({"ac_coupling_tau_s": v}, ("ac_coupling_tau_s", "--ac-tau"), id=f"ac_coupling_tau_s={v!r}")
+      for v in ("0.3 s", np.array([0.3, 0.5]))],
+]
+
+
 @pytest.mark.hostile("silent_wrong")
-@pytest.mark.parametrize("value", ["no", "false", "0", np.array([1, 0])])
-def test_a_complete_flag_that_is_not_a_boolean_is_refused(tmp_path, capsys, volts, value):
-    """complete = "no" was read as bool("no") = True: a killed recording passed for a clean one."""
-    rec = _recording(tmp_path, volts, complete=value)
+@pytest.mark.parametrize("attrs, words", BAD_ATTRIBUTES)
+def test_a_recording_attribute_that_is_not_what_it_must_be_is_refused(tmp_path, capsys, volts, attrs, words):
+    rec = _recording(tmp_path, volts, **attrs)
     line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
-    assert "complete" in line and "true or false" in line
+    assert all(w in line for w in words), line
     assert not (tmp_path / "m.nc").exists()
-
-
-@pytest.mark.hostile("silent_wrong")
-def test_a_sample_rate_with_two_values_is_refused(tmp_path, capsys, volts):
-    """sample_rate_hz = [10000, 20000] was read as its first value without a word."""
-    rec = _recording(tmp_path, volts, sample_rate_hz=np.array([10000.0, 20000.0]))
-    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
-    assert "sample rate" in line and "one number" in line
 
 
 @pytest.mark.hostile("silent_wrong")
@@ -195,17 +200,7 @@ def test_a_factor_file_that_is_a_folder_or_a_device_is_named_so(tmp_path, capsys
     assert said in line and "does not exist" not in line
 
 
-# --- silent wrong: processing options and attributes that were passed over -------------------
-@pytest.mark.hostile("silent_wrong")
-@pytest.mark.parametrize("value", ["0.3 s", np.array([0.3, 0.5])])
-def test_an_ac_coupling_constant_that_is_not_one_number_is_refused(tmp_path, capsys, volts, value):
-    """ac_coupling_tau_s = "0.3 s" was taken for "no AC coupling": it was left in without a word."""
-    rec = _recording(tmp_path, volts, ac_coupling_tau_s=value)
-    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
-    assert "ac_coupling_tau_s" in line and "--ac-tau" in line
-    assert not (tmp_path / "m.nc").exists()
-
-
+# --- silent wrong: processing options that were passed over ----------------------------------
 @pytest.mark.hostile("silent_wrong")
 def test_a_sample_rate_option_the_file_contradicts_is_refused(tmp_path, capsys, volts):
     """process rec.h5 --sample-rate 5000 on a file stating 10000 Hz ran at 10000 Hz without a word."""
