@@ -390,20 +390,46 @@ def contact_gap(scene: Scene) -> float:
 DRIVE_POINTS = 17          # samples of the drive's impulse over a landing's impact window
 
 
-def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
-    """The impact columns of the landings (module doc) and the persistence of every row, in place.
+@dataclass(frozen=True)
+class PhaseTable:
+    """A run's contact phases in time order: their first and last instants (s) and its dense
+    output, ``state_at(which, times)`` -> array (2, n): (x m, x' m/s) at times[i] (s) on phase
+    which[i] (an integer array), each time read on the steps of its own phase only."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    state_at: object
+
+
+def phase_table(segments=None, raw=None) -> PhaseTable:
+    """The ``PhaseTable`` of ``integrate``'s segments, or of its raw loop arrays (``raw=True``):
+    the same instants and values (the same steps, read by the same ``dp.evaluate_steps``)."""
+    if raw is None:
+        runs = [run for _, run in segments]
+        return PhaseTable(np.array([run.t[0] for run in runs]), np.array([run.t[-1] for run in runs]),
+                          lambda which, times: dp.evaluate_at_runs(runs, which, times))
+    nst, nph = raw[3], raw[4]
+    first = raw[14][:nph]
+    last = np.append(first[1:] - 1, nst - 1)
+    store = (raw[7][:nst], raw[8][:nst], raw[9][:nst, :2], raw[10][:nst, :2])
+    return PhaseTable(raw[12][:nph], raw[13][:nph],
+                      lambda which, times: dp.evaluate_steps(*store, times, first[which], last[which]))
+
+
+def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tables):
+    """The impact columns of the landings (module doc) and the persistence of every row, in place;
+    ``phases``: the run's contact phases (``phase_table``).
 
     Over a landing's impact window [t_c, t_w] the equation of motion M x'' = F - drive gives the
     contact force's impulse as the momentum change plus the drive's impulse, M (v_w - v_c) +
     int drive dt (M varies by far less than 1e-3 over a window): two dense-output values a landing."""
     if not rows.size:
         return rows
-    starts = np.array([run.t[0] for _, run in segments])
-    ends = np.array([run.t[-1] for _, run in segments])
+    starts, ends = phases.starts, phases.ends
     landing = np.flatnonzero(rows[:, events.COL_KIND] == events.KIND_CONTACT)
     t_land = rows[landing, events.COL_TIME]
     # the contact a landing starts: the last phase beginning at its instant (none at the run's end)
-    k = np.clip(np.searchsorted(starts, t_land, side="right") - 1, 0, len(segments) - 1)
+    k = np.clip(np.searchsorted(starts, t_land, side="right") - 1, 0, starts.size - 1)
     has = starts[k] == t_land
     duration = np.where(has, ends[k] - t_land, 0.0)
     tg, mass, drive = model.tab[eq.TG], model.tab[eq.MASS], model.tab[eq.DRIVE]
@@ -416,9 +442,7 @@ def complete_events(rows, segments, model: eq.ElasticModel, tab: Tables):
     if sel.size:
         t_c = t_land[sel]
         t_w = t_c + np.minimum(duration, tau)[sel]
-        contacts = np.arange(sel.size)
-        v_c, v_w = dp.evaluate_at_runs([segments[i][1] for i in k[sel]], np.concatenate([contacts, contacts]),
-                                       np.concatenate([t_c, t_w]))[1].reshape(2, -1)
+        v_c, v_w = phases.state_at(np.concatenate([k[sel], k[sel]]), np.concatenate([t_c, t_w]))[1].reshape(2, -1)
         tt = t_c[:, None] + (t_w - t_c)[:, None] * _DRIVE_FRACTIONS
         drive_impulse = np.trapezoid(np.interp(tt, tg, drive), tt, axis=1)
         M = 0.5 * (np.interp(t_c, tg, mass) + np.interp(t_w, tg, mass))
@@ -444,11 +468,13 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     ``solver`` ("compiled" or "scipy") and ``preset`` (a dict like PRESETS[...]) override what
     ``scene.accuracy`` selects; ``stats`` (dict) receives nfev, n_steps and loop_s (s in the loop).
     """
-    run = _solve(scene, reading, solver, preset, stats)
-    complete_events(run.rows, run.segments, run.model, run.tab)
+    run = _solve(scene, reading, solver, preset, stats, raw=True)
+    phases = phase_table(run.segments, run.raw)
+    complete_events(run.rows, phases, run.model, run.tab)
     record = events.from_rows(run.rows)
-    ds, cols = _dataset(scene, run, reading, record, _outputs(run.tab, run.segments))
-    ind = _indicators(scene, cols, events.columns(record), run.segments, reading, run.kc)
+    outputs = _outputs(run.tab, run.segments) if run.raw is None else _raw_outputs(run.tab, run.raw)
+    ds, cols = _dataset(scene, run, reading, record, outputs)
+    ind = _indicators(scene, cols, events.columns(record), phases.starts.size, reading, run.kc)
     warnings = run.warnings + validity.elastic_after(scene, cols, ind)
     ds.attrs["validity_warnings"] = validity.attribute(warnings)
     return SimulationResult(ds, ind, "elastic", warnings=warnings)
@@ -672,8 +698,9 @@ def _deformation(x, gap: float):
     return np.where(x < 0, -x, np.where(x > gap, x - gap, 0.0))
 
 
-def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: float) -> dict:
-    """The indicators from the dataset's columns (numpy arrays, ``_dataset``) and event record."""
+def _indicators(scene: Scene, cols: dict, ev: dict, n_phases: int, reading: str, kc: float) -> dict:
+    """The indicators from the dataset's columns (numpy arrays, ``_dataset``), event record and
+    number of contact phases."""
     x, m_contact = cols["x_el"], cols["MR13D"]
     ind = empty_indicators()
     ind.update(
@@ -681,7 +708,7 @@ def _indicators(scene: Scene, cols: dict, ev: dict, segments, reading: str, kc: 
         MR13D_contact_max_Nm=float(m_contact.max()), MR13D_contact_min_Nm=float(m_contact.min()),
         deformation_max_mm=float(cols["deformation"].max() * 1e3),
         separations=events.flights(ev), lift_offs=events.lift_offs(ev), settles=events.settles(ev),
-        contact_phases=len(segments), reading=reading, elastic_gap=scene.elastic_gap,
+        contact_phases=int(n_phases), reading=reading, elastic_gap=scene.elastic_gap,
         contact_length_mm=scene.contact_length * 1e3, Kc_SI=kc,
         energy_error=energy_error(cols, kc) if scene.contact_damping == 0.0 else None,
     )
