@@ -169,3 +169,40 @@ def test_rigid_plant_tables_are_shared_and_a_warm_run_equals_a_cold_one():
     assert not pa.cam.flags.writeable and not pa.fol.flags.writeable
     warm = simulate(b, "rigid").indicators
     assert warm == cold                                        # bit for bit
+
+
+@pytest.mark.parametrize("law,rise_only", [("sine", True), ("modtrap", True), ("cosine", False)])
+def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_only):
+    # output_terms' compiled pass (the spline in scipy's order of operations, pitch_geometry
+    # compiled) against cam_tables.angle_terms(linkage="spline") at the solver's step instants
+    # and the cached grid at the others; the pressure angle through libm's atan2, not numpy's
+    s = Scene(law=law, backlash=0.016e-3, omega1_mode="var", rise_only=rise_only, revolutions=1)
+    run = elastic._solve(s, "consistent", None, None, None, raw=True)
+    t, _, _, _, grid_index = elastic._raw_outputs(run.tab, run.raw)
+    steps = grid_index < 0
+    assert steps.sum() > 100 and (~steps).sum() > 100
+    got = elastic.output_terms(s, run.tab, t, grid_index)
+    want = cam_tables.angle_terms(s.mechanism, s.program, run.tab.omega1 * t[steps], elastic._until(s),
+                                  linkage="spline")
+    grid = elastic._grid_terms(s, run.tab.omega1, float(run.tab.t[-1]))
+    for name in elastic._TERMS:
+        a, b = getattr(got, name), getattr(want, name)
+        if name == "alpha":
+            np.testing.assert_allclose(a[steps], b, rtol=0, atol=1e-15)   # rad; libm vs numpy
+        else:
+            np.testing.assert_array_equal(a[steps], b, err_msg=name)
+        np.testing.assert_array_equal(a[~steps], getattr(grid, name)[grid_index[~steps]], err_msg=name)
+
+
+def test_compiled_step_terms_refuse_a_stroke_beyond_the_spline():
+    s = Scene()
+    sp = cam_tables.stroke_spline(s.mechanism)
+    phi2_0 = s.mechanism.phiD + s.mechanism.psi0
+    psi = np.array([0.0, sp.x[-1] - phi2_0 + 1e-9])          # the second angle just past the last knot
+    out = np.empty((len(elastic._TERMS), 2))
+    args = (np.empty((len(elastic._TERMS), 1)), np.array([-1, -1]), psi, np.zeros(2), np.zeros(2), np.ones(2), phi2_0,
+            sp.x, sp.c, float(s.mechanism.xD), float(s.mechanism.yD), float(s.mechanism.l), 1.0, out)
+    assert not elastic._step_terms(*args)
+    psi[1] = sp.x[-1] - phi2_0                                 # on the last knot: inside, scipy's last interval
+    assert elastic._step_terms(*args)
+    np.testing.assert_array_equal(out[4:7, 1], sp(sp.x[-1])[:3])

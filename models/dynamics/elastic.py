@@ -60,7 +60,8 @@ from models.dynamics.kinematic import cam_speed
 from models.dynamics.result import SimulationResult, empty_indicators
 from models.dynamics.scene import Scene
 from models.dynamics.jit import jit, kernel
-from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, operating_point
+from models.mechanism.cam_profile import cached_sense, pitch_geometry
+from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, load_arm, operating_point, stroke_spline
 from models.mechanism.memo import cached
 from models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
 
@@ -141,6 +142,8 @@ def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
 
 
 _point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
+_pitch = kernel(inline="always")(pitch_geometry)        # the groove's geometry, compiled
+_load_arm = kernel(inline="always")(load_arm)
 
 
 @kernel
@@ -880,34 +883,84 @@ def _output_size(t_end: float) -> int:
 
 
 _TERMS = ("psi", "dpsi", "ddpsi", "phi2", "J0", "dJ0", "M_gravity", "m_load", "alpha", "Db1", "Db2")
-_MOMENT_TERMS = ("dpsi", "ddpsi", "J0", "dJ0", "M_gravity", "m_load")      # what at_speed reads
 
 
-def _grid_block(scene: Scene, omega1: float, t_end: float, names: tuple) -> np.ndarray:
-    """The terms ``names`` of ``_grid_terms`` stacked, (len(names), grid size), per process."""
-    geometry = names == _TERMS
-    return cached(_grid_key(scene, omega1, t_end, geometry) + ("block", names),
-                  lambda: np.vstack([getattr(_grid_terms(scene, omega1, t_end, geometry), name) for name in names]))
+def _grid_block(scene: Scene, omega1: float, t_end: float) -> np.ndarray:
+    """The terms _TERMS of ``_grid_terms`` stacked, (len(_TERMS), grid size), per process."""
+    return cached(_grid_key(scene, omega1, t_end, True) + ("block", _TERMS),
+                  lambda: np.vstack([getattr(_grid_terms(scene, omega1, t_end), name) for name in _TERMS]))
 
 
-def output_terms(scene: Scene, tab: Tables, t, grid_index, geometry: bool = True):
+def output_terms(scene: Scene, tab: Tables, t, grid_index):
     """The kinematic terms (cam_tables.angle_terms) at the output instants t (s) of ``_outputs``:
     those on the uniform output grid (grid_index >= 0) from a per-process table shared by every run
     of the same mechanism, law, cam speed and span (a sweep over the load, Jt, j or Kc reuses it,
     ``_grid_terms``), the solver's step instants computed with the linkage from its stroke spline
-    (1e-13 relative of the exact linkage, 4x cheaper at thousands of arbitrary instants).
-    ``geometry=False``: what the kinetostatic moment alone needs (``AngleTerms.at_speed``): the
-    contact geometry and phi2 are left out (None)."""
+    (1e-13 relative of the exact linkage, 4x cheaper at thousands of arbitrary instants): the motion
+    law in numpy, the rest in one compiled pass (``_step_terms``) that gives angle_terms(...,
+    linkage="spline")'s values (tests/test_cam_tables.py); where the stroke leaves the spline's
+    range, angle_terms itself (the exact linkage)."""
     mech, program, omega1 = scene.mechanism, scene.program, tab.omega1
-    names = _TERMS if geometry else _MOMENT_TERMS
-    on_grid = _grid_block(scene, tab.omega1, float(tab.t[-1]), names)
+    on_grid = _grid_block(scene, tab.omega1, float(tab.t[-1]))
     at_step = np.flatnonzero(grid_index < 0)
-    at_steps = angle_terms(mech, program, omega1 * t[at_step], _until(scene), linkage="spline", geometry=geometry)
-    block = np.empty((len(names), t.size))        # row k = names[k]
-    _interleave(on_grid, grid_index, np.vstack([getattr(at_steps, name) for name in names]), block)
-    fields = dict.fromkeys(_TERMS)
-    fields.update(zip(names, block))
-    return AngleTerms(phi1=omega1 * t, **fields)
+    phi1 = omega1 * t[at_step]
+    until = _until(scene)
+    at = phi1 if until is None else np.minimum(phi1, until)
+    psi, dpsi, ddpsi, _ = program(at)
+    spline = stroke_spline(mech)
+    block = np.empty((len(_TERMS), t.size))        # row k = _TERMS[k]
+    if not _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, program.direction(at), mech.phiD + mech.psi0,
+                       spline.x, spline.c, float(mech.xD), float(mech.yD), float(mech.l),
+                       float(cached_sense(mech, program)), block):
+        at_steps = angle_terms(mech, program, phi1, until, linkage="spline")
+        _interleave(on_grid, grid_index, np.vstack([getattr(at_steps, name) for name in _TERMS]), block)
+    return AngleTerms(phi1=omega1 * t, **dict(zip(_TERMS, block)))
+
+
+@kernel
+def _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, direction, phi2_0, knots, coeffs, xD, yD, l, sense, out):
+    """``output_terms``' block (rows _TERMS) in one pass: out[:, i] = on_grid[:, grid_index[i]]
+    where grid_index[i] >= 0, else the terms at the next step instant (in order) of its motion
+    (psi, dpsi, ddpsi, direction: the program at those angles) with the linkage columns from the
+    stroke spline (knots rad, coeffs: scipy PPoly's (4, knots - 1, 5), evaluated in scipy's
+    order of operations) and the groove's geometry (``_pitch``). False (out incomplete) if a
+    follower angle leaves the spline's knots."""
+    j = 0
+    last = knots.size - 1
+    inv_h = last / (knots[last] - knots[0])
+    for i in range(grid_index.size):
+        g = grid_index[i]
+        if g >= 0:
+            for k in range(out.shape[0]):
+                out[k, i] = on_grid[k, g]
+            continue
+        phi2 = phi2_0 + psi[j]
+        if not knots[0] <= phi2 <= knots[last]:
+            return False
+        # scipy's interval, knots[lo] <= phi2 < knots[lo + 1] (the last one closed): the knots are
+        # uniform, so the quotient is within one of it and the comparisons settle it
+        lo = min(max(int((phi2 - knots[0]) * inv_h), 0), last - 1)
+        while lo > 0 and knots[lo] > phi2:
+            lo -= 1
+        while lo < last - 1 and knots[lo + 1] <= phi2:
+            lo += 1
+        s = phi2 - knots[lo]
+        _, _, _, _, _, alpha, Db1, Db2, _ = _pitch(xD, yD, l, sense, phi2, dpsi[j], ddpsi[j])
+        out[0, i], out[1, i], out[2, i], out[3, i] = psi[j], dpsi[j], ddpsi[j], phi2
+        out[4, i], out[5, i], out[6, i] = _cubic(coeffs, lo, 0, s), _cubic(coeffs, lo, 1, s), _cubic(coeffs, lo, 2, s)
+        out[7, i] = _load_arm(_cubic(coeffs, lo, 4, s), direction[j], _cubic(coeffs, lo, 3, s))
+        out[8, i], out[9, i], out[10, i] = alpha, Db1, Db2
+        j += 1
+    return True
+
+
+@kernel(inline="always")
+def _cubic(coeffs, interval, column, s):
+    """A PPoly cubic's value at s (rad) into its interval: scipy's evaluate_poly1 (the powers of s
+    accumulated, the highest-order coefficient first in coeffs)."""
+    z = s * s
+    return ((coeffs[3, interval, column] + coeffs[2, interval, column] * s) + coeffs[1, interval, column] * z
+            + coeffs[0, interval, column] * (z * s))
 
 
 @kernel

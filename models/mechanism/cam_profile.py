@@ -18,51 +18,46 @@ from models.mechanism.memo import cached
 from models.mechanism.motion_laws import CamProgram
 
 
-def _perp(v):
-    return np.stack([-v[1], v[0]])
-
-
 def _rotate(v, angle):
     c, s = np.cos(angle), np.sin(angle)
     return np.stack([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
 
-def _cross(a, b):
-    return a[0] * b[1] - a[1] * b[0]
-
-
-def roller_centre(mech: Mechanism, program: CamProgram, phi1, motion=None):
-    """C and its first two derivatives wrt phi1 in the fixed frame, arrays (2, n) in m.
-    ``motion`` = program(phi1) when the caller has it already."""
-    psi, dpsi, ddpsi, _ = program(phi1) if motion is None else motion
-    phi2 = mech.phiD + mech.psi0 + psi
-    r = mech.l * np.stack([np.cos(phi2), np.sin(phi2)])
-    C = mech.D[:, None] + r
-    dC = dpsi * _perp(r)
-    ddC = ddpsi * _perp(r) - dpsi**2 * r
-    return C, dC, ddC, phi2
+def pitch_geometry(xD, yD, l, sense, phi2, dpsi, ddpsi):
+    """The pitch curve at follower angles phi2 (rad, the roller centre C on a circle of radius
+    l m about D = (xD, yD) m) with the stroke's derivatives dpsi (rad/rad) and ddpsi (rad/rad^2),
+    the cam turning with ``sense`` (module doc): (C_x, C_y m; the unit normal n_x, n_y, oriented
+    away from the cam axis A; the signed radius of curvature rho m; the pressure angle alpha rad,
+    folded to (-pi/2, pi/2]; Db1, Db2 m of eq. (18); the curvature's sign). Plain arithmetic on
+    arrays or floats, so that compiled code (models.dynamics.elastic) runs this same source."""
+    rx, ry = l * np.cos(phi2), l * np.sin(phi2)
+    Cx, Cy = xD + rx, yD + ry
+    dCx, dCy = dpsi * -ry, dpsi * rx                        # C' = psi' perp(r)
+    ddCx, ddCy = ddpsi * -ry - dpsi**2 * rx, ddpsi * rx - dpsi**2 * ry
+    tx, ty = dCx + sense * Cy, dCy - sense * Cx             # pitch-curve tangent, fixed-frame components
+    sx, sy = ddCx + 2.0 * sense * dCy - Cx, ddCy - 2.0 * sense * dCx - Cy     # its second derivative
+    speed = np.hypot(tx, ty)
+    nx, ny = -ty / speed, tx / speed
+    outward = nx * Cx + ny * Cy
+    flip = np.sign(outward) + (outward == 0)                # orient the normal away from A
+    nx, ny = nx * flip, ny * flip
+    bend = tx * sy - ty * sx
+    rho = speed**3 / bend                                   # signed radius of curvature of the pitch curve
+    # pressure angle: between the contact normal and the velocity of C on the follower
+    wx, wy = -(Cy - yD) / l, (Cx - xD) / l
+    alpha = np.arctan2(wx * ny - wy * nx, wx * nx + wy * ny)
+    alpha = (alpha + math.pi / 2) % math.pi - math.pi / 2   # a line's direction: fold to (-90, 90] deg
+    Db1 = 2.0 * abs(nx * Cy - ny * Cx)                      # twice the distance from A to the normal line
+    Db2 = 2.0 * abs(nx * (Cy - yD) - ny * (Cx - xD))        # ... and from D
+    return Cx, Cy, nx, ny, rho, alpha, Db1, Db2, np.sign(bend) * sense
 
 
 def _geometry(mech, program, phi1, sense, motion=None):
-    C, dC, ddC, phi2 = roller_centre(mech, program, phi1, motion)
-    t_fixed = dC - sense * _perp(C)               # pitch-curve tangent, seen in the fixed frame
-    second = ddC - 2.0 * sense * _perp(dC) - C    # second derivative, fixed-frame components
-    speed = np.hypot(t_fixed[0], t_fixed[1])
-    normal = _perp(t_fixed) / speed               # unit normal
-    # orient the normal away from the cam axis A
-    flip = np.sign(np.einsum("ij,ij->j", normal, C))
-    flip[flip == 0] = 1.0
-    normal = normal * flip
-    curvature_sign = np.sign(_cross(t_fixed, second)) * sense
-    rho = speed**3 / _cross(t_fixed, second)     # signed radius of curvature of the pitch curve
-    # pressure angle: between the contact normal and the velocity of C on the follower
-    w = _perp(C - mech.D[:, None]) / mech.l
-    alpha = np.arctan2(_cross(w, normal), np.einsum("ij,ij->j", w, normal))
-    alpha = (alpha + math.pi / 2) % math.pi - math.pi / 2     # a line's direction: fold to (-90, 90] deg
-    dist_A = np.abs(_cross(normal, C))                         # distance from A to the normal line
-    dist_D = np.abs(_cross(normal, C - mech.D[:, None]))
-    return dict(C=C, normal=normal, rho_pitch=rho, pressure_angle=alpha,
-                Db1=2.0 * dist_A, Db2=2.0 * dist_D, phi2=phi2, curvature_sign=curvature_sign)
+    psi, dpsi, ddpsi, _ = program(phi1) if motion is None else motion
+    phi2 = mech.phiD + mech.psi0 + psi
+    Cx, Cy, nx, ny, rho, alpha, Db1, Db2, bend = pitch_geometry(mech.xD, mech.yD, mech.l, sense, phi2, dpsi, ddpsi)
+    return dict(C=np.stack([Cx, Cy]), normal=np.stack([nx, ny]), rho_pitch=rho, pressure_angle=alpha,
+                Db1=Db1, Db2=Db2, phi2=phi2, curvature_sign=bend)
 
 
 def choose_sense(mech: Mechanism, program: CamProgram) -> int:

@@ -95,14 +95,20 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None 
         J0, dJ0, M_gravity, vNx, slide = spline(phi2).T
     else:
         J0, dJ0, M_gravity, vNx, slide = linkage_columns(mech, phi2)
-    # models.mechanism.kinematics.load_force_x per N of Fu (its sign opposes the rod's sliding), times its
-    # arm (the x velocity coefficient of N)
-    m_load = np.sign(slide) * program.direction(at) * vNx
+    m_load = load_arm(slide, program.direction(at), vNx)
     geo = (contact_geometry(mech, program, at, sense=cached_sense(mech, program), motion=motion) if geometry
            else dict.fromkeys(("pressure_angle", "Db1", "Db2")))
     return AngleTerms(phi1=phi1, psi=psi, dpsi=dpsi, ddpsi=ddpsi, phi2=phi2, J0=J0, dJ0=dJ0,
                       M_gravity=M_gravity, m_load=m_load, alpha=geo["pressure_angle"],
                       Db1=geo["Db1"], Db2=geo["Db2"])
+
+
+def load_arm(slide, direction, vNx):
+    """The moment about D of a unit load (N m per N): models.mechanism.kinematics.load_force_x per N
+    of Fu (its sign opposes the rod's sliding ``slide``, zero in a dwell: ``direction`` +1 rise, -1
+    return, 0 dwell) times its arm, the x velocity coefficient of N ``vNx`` (m/rad). Plain
+    arithmetic on arrays or floats, so that compiled code (models.dynamics.elastic) runs it too."""
+    return np.sign(slide) * direction * vNx
 
 
 STROKE_POINTS = 2049    # spline knots over the stroke (+-5 %): h = 1.3e-4 rad
