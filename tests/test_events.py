@@ -101,3 +101,33 @@ def test_both_models_write_the_same_record_and_count_from_it(model):
         inv_arm = (ds["phi2"] - ds["phi2_kin"]).values[i] / ds["x_el"].values[i]      # 1 / (l cos alpha), eq. 19
         assert -ev["event_domega2"].values[k] == pytest.approx(2 * v * inv_arm, rel=0.3)
         assert ev["event_percussion"].values[k] == pytest.approx(2 * ds["reduced_mass"].values[i] * v, rel=0.3)
+
+
+def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
+    # complete_events takes the impulse from the momentum balance, M dv + int drive dt; here the
+    # contact force itself is integrated over each landing's window on the dense output
+    from models.dynamics import elastic
+    from models.dynamics.kernels import elastic_nb as eq
+    s = Scene(backlash=0.016e-3, omega1_mode="var")                     # Table 1 run 1: a dozen landings
+    run = elastic._solve(s, "consistent", None, None, None, raw=True)
+    phases = elastic.phase_table(run.segments, run.raw)
+    rows = elastic.complete_events(run.rows.copy(), phases, run.model, run.tab)
+    tg, mass = run.model.tab[eq.TG], run.model.tab[eq.MASS]
+    checked = 0
+    for i in np.flatnonzero(rows[:, events.COL_KIND] == events.KIND_CONTACT):
+        t_c = rows[i, events.COL_TIME]
+        k = np.flatnonzero(phases.starts == t_c)
+        if not k.size:
+            continue
+        tau = elastic.bounce_time(run.model.kc, float(np.interp(t_c, tg, mass)), rows[i, events.COL_V_REL])
+        t_w = t_c + min(phases.ends[k[-1]] - t_c, tau)
+        tt = np.linspace(t_c, t_w, 4001)
+        x, v = phases.state_at(np.full(tt.size, k[-1]), tt)
+        flank = eq.INTERIOR if rows[i, events.COL_SIDE] == events.SIDE_INTERIOR else eq.EXTERIOR
+        F = np.empty(tt.size)
+        eq.forces(run.model, np.full(tt.size, flank, dtype=np.int64), x, v, F)
+        assert rows[i, events.COL_PERCUSSION] == pytest.approx(abs(np.trapezoid(F, tt)), rel=1e-3)   # M varies over a window
+        arm = np.interp(t_c, run.tab.t, run.tab.arm)
+        assert rows[i, events.COL_DOMEGA2] == pytest.approx((v[-1] - v[0]) / arm, rel=1e-9)
+        checked += 1
+    assert checked >= 5

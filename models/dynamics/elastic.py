@@ -370,13 +370,18 @@ _BOUNCE_INTEGRAL = (math.gamma(1.0 / (N_EXP + 1.0)) * math.gamma(0.5) / math.gam
                     / (N_EXP + 1.0))
 
 
-def bounce_time(kc: float, m, v):
+def bounce_time(kc: float, m: float, v: float) -> float:
     """Duration (s) of a free undamped landing of a mass m (kg) at speed v (m/s) on the contact law:
-    2 p_max / v * int_0^1 du / sqrt(1 - u^(n+1)), p_max = ((n+1) m v^2 / (2 Kc))^(1/(n+1))."""
-    v = np.abs(np.asarray(v, dtype=float))
-    with np.errstate(divide="ignore"):
-        p_max = ((N_EXP + 1.0) * np.asarray(m) * v * v / (2.0 * kc)) ** (1.0 / (N_EXP + 1.0))
-        return np.where(v > 0, 2.0 * p_max / np.where(v > 0, v, 1.0) * _BOUNCE_INTEGRAL, np.inf)
+    2 p_max / v * int_0^1 du / sqrt(1 - u^(n+1)), p_max = ((n+1) m v^2 / (2 Kc))^(1/(n+1)); inf
+    at v = 0. Floats; compiled inline into ``complete_events``' kernels too."""
+    v = abs(v)
+    if not v > 0.0:
+        return math.inf
+    p_max = ((N_EXP + 1.0) * m * v * v / (2.0 * kc)) ** (1.0 / (N_EXP + 1.0))
+    return 2.0 * p_max / v * _BOUNCE_INTEGRAL
+
+
+_bounce_time = kernel(inline="always")(bounce_time)
 
 
 def contact_gap(scene: Scene) -> float:
@@ -406,7 +411,8 @@ class PhaseTable:
 
 def phase_table(segments=None, raw=None) -> PhaseTable:
     """The ``PhaseTable`` of ``integrate``'s segments, or of its raw loop arrays (``raw=True``):
-    the same instants and values (the same steps, read by the same ``dp.evaluate_steps``)."""
+    the same instants and values (the same steps, read with ``dp.evaluate_steps``' arithmetic;
+    compiled, ``dp.evaluate_at``, on the raw arrays)."""
     if raw is None:
         runs = [run for _, run in segments]
         return PhaseTable(np.array([run.t[0] for run in runs]), np.array([run.t[-1] for run in runs]),
@@ -414,9 +420,14 @@ def phase_table(segments=None, raw=None) -> PhaseTable:
     nst, nph = raw[3], raw[4]
     first = raw[14][:nph]
     last = np.append(first[1:] - 1, nst - 1)
-    store = (raw[7][:nst], raw[8][:nst], raw[9][:nst, :2], raw[10][:nst, :2])
-    return PhaseTable(raw[12][:nph], raw[13][:nph],
-                      lambda which, times: dp.evaluate_steps(*store, times, first[which], last[which]))
+    store = (raw[7][:nst], raw[8][:nst], raw[9][:nst], raw[10][:nst])
+
+    def state_at(which, times):
+        out = np.empty((2, times.size))              # evaluate_steps' values, compiled
+        dp.evaluate_at(times, first[which], last[which], np.full(times.size, 2, dtype=np.int64), *store, out)
+        return out
+
+    return PhaseTable(raw[12][:nph], raw[13][:nph], state_at)
 
 
 def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tables):
@@ -425,41 +436,112 @@ def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tab
 
     Over a landing's impact window [t_c, t_w] the equation of motion M x'' = F - drive gives the
     contact force's impulse as the momentum change plus the drive's impulse, M (v_w - v_c) +
-    int drive dt (M varies by far less than 1e-3 over a window): two dense-output values a landing."""
+    int drive dt (M varies by far less than 1e-3 over a window): two dense-output values a landing.
+    Two compiled passes around the dense output (a run has a handful of landings, and numpy's
+    calls on arrays that short cost ~0.15 ms a run, as much as the impulses' arithmetic 100 times)."""
     if not rows.size:
         return rows
-    starts, ends = phases.starts, phases.ends
-    landing = np.flatnonzero(rows[:, events.COL_KIND] == events.KIND_CONTACT)
-    t_land = rows[landing, events.COL_TIME]
-    # the contact a landing starts: the last phase beginning at its instant (none at the run's end)
-    k = np.clip(np.searchsorted(starts, t_land, side="right") - 1, 0, starts.size - 1)
-    has = starts[k] == t_land
-    duration = np.where(has, ends[k] - t_land, 0.0)
     tg, mass, drive = model.tab[eq.TG], model.tab[eq.MASS], model.tab[eq.DRIVE]
-    tau = bounce_time(model.kc, np.interp(t_land, tg, mass), rows[landing, events.COL_V_REL])
-    persistent = np.zeros(rows.shape[0], dtype=bool)
-    persistent[landing] = ~has | (duration > PERSISTENT_BOUNCES * tau) | (ends[k] >= ends[-1])
-    rows[landing, events.COL_PERCUSSION] = 0.0
-    rows[landing, events.COL_DOMEGA2] = 0.0
-    sel = np.flatnonzero(has)
-    if sel.size:
-        t_c = t_land[sel]
-        t_w = t_c + np.minimum(duration, tau)[sel]
-        v_c, v_w = phases.state_at(np.concatenate([k[sel], k[sel]]), np.concatenate([t_c, t_w]))[1].reshape(2, -1)
-        tt = t_c[:, None] + (t_w - t_c)[:, None] * _DRIVE_FRACTIONS
-        drive_impulse = np.trapezoid(np.interp(tt, tg, drive), tt, axis=1)
-        M = 0.5 * (np.interp(t_c, tg, mass) + np.interp(t_w, tg, mass))
-        rows[landing[sel], events.COL_PERCUSSION] = np.abs(M * (v_w - v_c) + drive_impulse)
-        rows[landing[sel], events.COL_DOMEGA2] = (v_w - v_c) / np.interp(t_c, tab.t, tab.arm)
-    # a separation ends the contact the last landing (or the start of the run) began
+    row, which, times, persistent = _landing_windows(rows, phases.starts, phases.ends, tg, mass, model.kc)
+    v = phases.state_at(which, times)[1] if row.size else times
+    _landing_impulses(rows, row, times, v, tg, mass, drive, tab.t, tab.arm, _DRIVE_FRACTIONS, persistent)
+    return rows
+
+
+@kernel(inline="always")
+def _interp(x, xp, fp):
+    """np.interp(x, xp, fp) at one float x (xp increasing): numpy's own arithmetic (the slope of
+    the interval, then from its right end where the left one gives NaN), compiled without numba's
+    np.interp, which allocates for a scalar."""
+    n = xp.size
+    if not x > xp[0]:
+        return fp[0]
+    if not x < xp[n - 1]:
+        return fp[n - 1]
+    lo, hi = 0, n - 1                                   # xp[lo] <= x < xp[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    if xp[lo] == x:
+        return fp[lo]
+    slope = (fp[hi] - fp[lo]) / (xp[hi] - xp[lo])
+    y = slope * (x - xp[lo]) + fp[lo]
+    if y != y:
+        y = slope * (x - xp[hi]) + fp[hi]
+        if y != y and fp[lo] == fp[hi]:
+            y = fp[lo]
+    return y
+
+
+@jit
+def _landing_windows(rows, starts, ends, tg, mass, kc):
+    """``complete_events``' first pass over the event rows (columns events.COL_*): zero every
+    landing's impact columns, and return (the rows of the landings that start a contact phase,
+    the phase each starts twice over, their windows' first instants t_c then their last ones t_w
+    (s), the landings' persistence by row). A landing's contact is the last phase beginning at its
+    instant (none at the run's end); its window is the bounce time or the contact, the shorter."""
+    n, last = rows.shape[0], starts.size - 1
+    persistent = np.zeros(n, dtype=np.bool_)
+    phase = np.full(n, -1, dtype=np.int64)
+    t_end = np.empty(n)
+    m = 0
+    for i in range(n):
+        if rows[i, events.COL_KIND] != events.KIND_CONTACT:
+            continue
+        t = rows[i, events.COL_TIME]
+        k = min(max(np.searchsorted(starts, t, side="right") - 1, 0), last)
+        has = starts[k] == t
+        duration = ends[k] - t if has else 0.0
+        tau = _bounce_time(kc, _interp(t, tg, mass), rows[i, events.COL_V_REL])
+        persistent[i] = not has or duration > PERSISTENT_BOUNCES * tau or ends[k] >= ends[last]
+        rows[i, events.COL_PERCUSSION] = 0.0
+        rows[i, events.COL_DOMEGA2] = 0.0
+        if has:
+            phase[i] = k
+            t_end[i] = t + min(duration, tau)
+            m += 1
+    row = np.empty(m, dtype=np.int64)
+    which = np.empty(2 * m, dtype=np.int64)
+    times = np.empty(2 * m)
+    q = 0
+    for i in range(n):
+        if phase[i] >= 0:
+            row[q], which[q], which[m + q] = i, phase[i], phase[i]
+            times[q], times[m + q] = rows[i, events.COL_TIME], t_end[i]
+            q += 1
+    return row, which, times, persistent
+
+
+@kernel
+def _landing_impulses(rows, row, times, v, tg, mass, drive, tab_t, tab_arm, fractions, persistent):
+    """``complete_events``' second pass: the impact columns of the landings ``row`` from their
+    windows ``times`` and the velocities x' (m/s) ``v`` there (``_landing_windows``' order), the
+    drive's impulse by the trapezoidal rule on ``fractions`` of the window (numpy.trapezoid's
+    terms, summed in order); then every row's persistence (a separation ends the contact the last
+    landing, or the start of the run, began)."""
+    m = row.size
+    for q in range(m):
+        t_c, t_w = times[q], times[m + q]
+        dv = v[m + q] - v[q]
+        impulse, t0, d0 = 0.0, t_c, _interp(t_c + (t_w - t_c) * fractions[0], tg, drive)
+        for f in range(1, fractions.size):
+            t1 = t_c + (t_w - t_c) * fractions[f]
+            d1 = _interp(t1, tg, drive)
+            impulse += (t1 - t0) * (d1 + d0) / 2.0
+            t0, d0 = t1, d1
+        M = 0.5 * (_interp(t_c, tg, mass) + _interp(t_w, tg, mass))
+        rows[row[q], events.COL_PERCUSSION] = abs(M * dv + impulse)
+        rows[row[q], events.COL_DOMEGA2] = dv / _interp(t_c, tab_t, tab_arm)
     since = True
     for i in range(rows.shape[0]):
         if rows[i, events.COL_KIND] == events.KIND_SEPARATION:
             persistent[i], since = since, True
         else:
             since = persistent[i]
-    rows[:, events.COL_PERSISTENT] = persistent
-    return rows
+        rows[i, events.COL_PERSISTENT] = 1.0 if persistent[i] else 0.0
 
 
 # ---------------------------------------------------------------- the model
