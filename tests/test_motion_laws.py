@@ -100,3 +100,17 @@ def test_a_program_keeps_its_hash_but_does_not_pickle_it():
     assert hash(program) == h == hash(dataclasses.replace(program))
     copy = pickle.loads(pickle.dumps(program))
     assert "_hash" not in copy.__dict__ and copy == program and hash(copy) == h
+
+
+@pytest.mark.parametrize("law", ["sine", "cosine", "modtrap"])
+def test_a_program_gives_each_angle_the_same_value_alone_or_among_others(law):
+    # an array within one segment is evaluated without masks, a mixed one through them: the
+    # values must not depend on the company an angle keeps (edges, their neighbours, NaN)
+    prog = CamProgram.rise_dwell_return_dwell(law, rise=math.radians(70), ret=math.radians(100), upper_dwell=0.3)
+    edges = np.cumsum([0.0] + [s.beta for s in prog.segments])
+    phi = np.concatenate([edges, np.nextafter(edges, -1), np.nextafter(edges, 9),
+                          np.random.default_rng(3).uniform(-7, 14, 200), [np.nan, 2 * math.pi]])
+    together = np.array(prog(phi))
+    alone = np.array([np.array(prog(np.array([p]))).ravel() for p in phi]).T
+    np.testing.assert_array_equal(together, alone)
+    np.testing.assert_array_equal(prog.direction(phi), [prog.direction(np.array([p]))[0] for p in phi])

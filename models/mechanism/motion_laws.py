@@ -182,6 +182,7 @@ class CamProgram:
         # a string's hash differs between processes: another process makes its own
         state = dict(self.__dict__)
         state.pop("_hash", None)
+        state.pop("_edge_table", None)
         return state
 
     @classmethod
@@ -233,30 +234,47 @@ class CamProgram:
     def rise_angle(self) -> float:
         return self.segments[0].beta
 
+    def _edges(self) -> tuple:
+        """The segments' first angles and end (rad, from 0: the sums __call__ makes) and their
+        directions (+1 rise, -1 return, 0 dwell), made once a program."""
+        got = self.__dict__.get("_edge_table")
+        if got is None:
+            got = (np.cumsum([0.0] + [s.beta for s in self.segments]),
+                   np.array([{"rise": 1.0, "return": -1.0}.get(s.kind, 0.0) for s in self.segments]))
+            object.__setattr__(self, "_edge_table", got)
+        return got
+
     def segment_index(self, phi1) -> np.ndarray:
         """Index of the segment each cam angle falls in (0 = rise)."""
         phi = np.mod(np.asarray(phi1, dtype=float), TWO_PI)
-        edges = np.cumsum([0.0] + [s.beta for s in self.segments])
-        return np.clip(np.searchsorted(edges, phi, side="right") - 1, 0, len(self.segments) - 1)
+        edges = self._edges()[0]
+        # phi >= 0 = edges[0]: only the upper end needs the clip (an angle at or past the last edge, NaN)
+        return np.minimum(np.searchsorted(edges, phi, side="right") - 1, len(self.segments) - 1)
 
     def direction(self, phi1) -> np.ndarray:
         """+1 during a rise, -1 during a return, 0 in a dwell (the follower's nominal direction)."""
-        idx = self.segment_index(phi1)
-        table = np.array([{"rise": 1.0, "return": -1.0}.get(s.kind, 0.0) for s in self.segments])
-        return table[idx]
+        return self._edges()[1][self.segment_index(phi1)]
 
     def __call__(self, phi1):
         """(psi, dpsi/dphi1, d2psi/dphi1^2, d3psi/dphi1^3) in rad, rad/rad, ... at cam angles phi1."""
         phi = np.mod(np.asarray(phi1, dtype=float), TWO_PI)
         out = [np.zeros_like(phi) for _ in range(4)]
+        # the angles' range decides most segments without a mask (a run over one rise: one
+        # segment, no masked copies); NaN angles fail every comparison and take the masks
+        lo, hi = (phi.min(), phi.max()) if phi.size else (math.inf, -math.inf)
         start = 0.0
         level = 0.0
         for seg in self.segments:
             end = start + seg.beta
-            mask = (phi >= start) & (phi < end) if end < TWO_PI else (phi >= start)
-            # the angles of this segment: all of them (a run over one rise: no masked copies), none
-            # (nothing to evaluate), or some
-            sel = Ellipsis if mask.all() else mask if mask.any() else None
+            closed = not end < TWO_PI                     # the last segment takes the angles up to 2 pi
+            # the angles of this segment: all of them, none (nothing to evaluate), or some
+            if lo >= start and (closed or hi < end):
+                sel = Ellipsis
+            elif hi < start or (not closed and lo >= end):
+                sel = None
+            else:
+                mask = (phi >= start) & (phi < end) if not closed else (phi >= start)
+                sel = Ellipsis if mask.all() else mask if mask.any() else None
             if seg.kind == "dwell":
                 if sel is not None:
                     out[0][sel] = level
