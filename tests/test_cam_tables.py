@@ -181,7 +181,7 @@ def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_
     t, _, _, _, grid_index = elastic._raw_outputs(run.tab, run.raw)
     steps = grid_index < 0
     assert steps.sum() > 100 and (~steps).sum() > 100
-    got = elastic.output_terms(s, run.tab, t, grid_index)
+    got, arm, factors = elastic.output_terms(s, run.tab, t, grid_index)
     want = cam_tables.angle_terms(s.mechanism, s.program, run.tab.omega1 * t[steps], elastic._until(s),
                                   linkage="spline")
     grid = elastic._grid_terms(s, run.tab.omega1, float(run.tab.t[-1]))
@@ -192,6 +192,16 @@ def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_
         else:
             np.testing.assert_array_equal(a[steps], b, err_msg=name)
         np.testing.assert_array_equal(a[~steps], getattr(grid, name)[grid_index[~steps]], err_msg=name)
+    # the arm l cos(alpha) and eq. (16)'s factors from the block's own alpha, Db1, Db2, in numpy
+    want_arm = s.mechanism.l * np.cos(got.alpha)
+    np.testing.assert_allclose(arm, want_arm, rtol=2.3e-16, atol=0)
+    Db1, Db2 = got.Db1, got.Db2
+    through_a = ~(Db1 > 0)
+    with np.errstate(divide="ignore"):
+        np.testing.assert_array_equal(factors[0], np.where(through_a, np.inf, 4.0 / Db1**2))
+    np.testing.assert_array_equal(factors[1], 4.0 / Db2**2)
+    np.testing.assert_array_equal(factors[2], np.where(through_a, 0.0, Db1**2 / Db2**2))
+    np.testing.assert_allclose(factors[3], 1.0 / want_arm, rtol=4.5e-16, atol=0)
 
 
 def test_compiled_step_terms_refuse_a_stroke_beyond_the_spline():
@@ -199,10 +209,12 @@ def test_compiled_step_terms_refuse_a_stroke_beyond_the_spline():
     sp = cam_tables.stroke_spline(s.mechanism)
     phi2_0 = s.mechanism.phiD + s.mechanism.psi0
     psi = np.array([0.0, sp.x[-1] - phi2_0 + 1e-9])          # the second angle just past the last knot
-    out = np.empty((len(elastic._TERMS), 2))
-    args = (np.empty((len(elastic._TERMS), 1)), np.array([-1, -1]), psi, np.zeros(2), np.zeros(2), np.ones(2), phi2_0,
+    out = np.empty((elastic._BLOCK_ROWS, 2))
+    args = (np.empty((elastic._BLOCK_ROWS, 1)), np.array([-1, -1]), psi, np.zeros(2), np.zeros(2), np.ones(2), phi2_0,
             sp.x, sp.c, float(s.mechanism.xD), float(s.mechanism.yD), float(s.mechanism.l), 1.0, out)
     assert not elastic._step_terms(*args)
     psi[1] = sp.x[-1] - phi2_0                                 # on the last knot: inside, scipy's last interval
     assert elastic._step_terms(*args)
     np.testing.assert_array_equal(out[4:7, 1], sp(sp.x[-1])[:3])
+    with pytest.raises(ValueError, match="rows"):                # a block too small is refused, not overrun
+        elastic._step_terms(*args[:-1], np.empty((len(elastic._TERMS), 2)))

@@ -118,17 +118,33 @@ class Tables:
     omega1: float          # rad/s
 
 
-def mass_factors(Db1, Db2, arm) -> tuple:
-    """The speed-independent factors of eq. (16) and of R31 = MR13D / arm at each angle, so that a
+def mass_factor(Db1: float, Db2: float, arm: float) -> tuple:
+    """The speed-independent factors of eq. (16) and of R31 = MR13D / arm at one angle, so that a
     run's tables take one division an angle instead of five: (4 / Db1^2 (inf where Db1 <= 0: the
     normal passes through A), 4 / Db2^2, Db1^2 / Db2^2 (0 there), 1 / arm), in 1/m^2, 1/m^2, 1
-    and 1/m (Db, arm m; arrays)."""
-    Db1, Db2, arm = (np.asarray(a, dtype=float) for a in (Db1, Db2, arm))
-    through_a = ~(Db1 > 0)
-    with np.errstate(divide="ignore"):
-        c1 = np.where(through_a, np.inf, 4.0 / np.where(through_a, 1.0, Db1) ** 2)
-    rho = np.where(through_a, 0.0, Db1**2 / Db2**2)
-    return c1, 4.0 / Db2**2, rho, 1.0 / arm
+    and 1/m (Db, arm m; floats). Compiled inline into ``_mass_factors`` and ``_step_terms``."""
+    if Db1 > 0.0:
+        c1, rho = 4.0 / (Db1 * Db1), (Db1 * Db1) / (Db2 * Db2)
+    else:
+        c1, rho = math.inf, 0.0
+    return c1, 4.0 / (Db2 * Db2), rho, 1.0 / arm
+
+
+_mass_factor = kernel(inline="always")(mass_factor)
+
+
+@kernel
+def _mass_factors(Db1, Db2, arm, out):
+    for i in range(arm.size):
+        out[0, i], out[1, i], out[2, i], out[3, i] = _mass_factor(Db1[i], Db2[i], arm[i])
+
+
+def mass_factors(Db1, Db2, arm) -> tuple:
+    """``mass_factor`` at each angle (Db1, Db2, arm m, arrays of one size): (c1, c2, rho, inv_arm)."""
+    Db1, Db2, arm = (np.ascontiguousarray(a, dtype=float).ravel() for a in (Db1, Db2, arm))
+    out = np.empty((4, arm.size))
+    _mass_factors(Db1, Db2, arm, out)
+    return tuple(out)
 
 
 @kernel(inline="always")
@@ -967,14 +983,23 @@ def _output_size(t_end: float) -> int:
 _TERMS = ("psi", "dpsi", "ddpsi", "phi2", "J0", "dJ0", "M_gravity", "m_load", "alpha", "Db1", "Db2")
 
 
+_FACTOR_ROWS = ("arm", "c1", "c2", "rho", "inv_arm")     # _tables' arm and mass_factors, after _TERMS
+_BLOCK_ROWS = len(_TERMS) + len(_FACTOR_ROWS)
+
+
 def _grid_block(scene: Scene, omega1: float, t_end: float) -> np.ndarray:
-    """The terms _TERMS of ``_grid_terms`` stacked, (len(_TERMS), grid size), per process."""
-    return cached(_grid_key(scene, omega1, t_end, True) + ("block", _TERMS),
-                  lambda: np.vstack([getattr(_grid_terms(scene, omega1, t_end), name) for name in _TERMS]))
+    """The terms _TERMS of ``_grid_terms`` and their _FACTOR_ROWS stacked, (len(_TERMS) + 5, grid
+    size), per process."""
+    def build():
+        g = _grid_terms(scene, omega1, t_end)
+        arm = _arm(scene.mechanism, g.alpha)
+        return np.vstack([getattr(g, name) for name in _TERMS] + [arm, *mass_factors(g.Db1, g.Db2, arm)])
+    return cached(_grid_key(scene, omega1, t_end, True) + ("block", _TERMS + _FACTOR_ROWS), build)
 
 
 def output_terms(scene: Scene, tab: Tables, t, grid_index):
-    """The kinematic terms (cam_tables.angle_terms) at the output instants t (s) of ``_outputs``:
+    """The kinematic terms (cam_tables.angle_terms) at the output instants t (s) of ``_outputs``,
+    with their arm (m, ``_arm``) and ``mass_factors``: (AngleTerms, arm, factors) for ``_tables``;
     those on the uniform output grid (grid_index >= 0) from a per-process table shared by every run
     of the same mechanism, law, cam speed and span (a sweep over the load, Jt, j or Kc reuses it,
     ``_grid_terms``), the solver's step instants computed with the linkage from its stroke spline
@@ -990,23 +1015,28 @@ def output_terms(scene: Scene, tab: Tables, t, grid_index):
     at = phi1 if until is None else np.minimum(phi1, until)
     psi, dpsi, ddpsi, _ = program(at)
     spline = stroke_spline(mech)
-    block = np.empty((len(_TERMS), t.size))        # row k = _TERMS[k]
+    block = np.empty((_BLOCK_ROWS, t.size))        # rows _TERMS, _FACTOR_ROWS
     if not _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, program.direction(at), mech.phiD + mech.psi0,
                        spline.x, spline.c, float(mech.xD), float(mech.yD), float(mech.l),
                        float(cached_sense(mech, program)), block):
         at_steps = angle_terms(mech, program, phi1, until, linkage="spline")
-        _interleave(on_grid, grid_index, np.vstack([getattr(at_steps, name) for name in _TERMS]), block)
-    return AngleTerms(phi1=omega1 * t, **dict(zip(_TERMS, block)))
+        arm = _arm(mech, at_steps.alpha)
+        rows = [getattr(at_steps, name) for name in _TERMS] + [arm, *mass_factors(at_steps.Db1, at_steps.Db2, arm)]
+        _interleave(on_grid, grid_index, np.vstack(rows), block)
+    n = len(_TERMS)
+    return AngleTerms(phi1=omega1 * t, **dict(zip(_TERMS, block))), block[n], tuple(block[n + 1:])
 
 
 @kernel
 def _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, direction, phi2_0, knots, coeffs, xD, yD, l, sense, out):
-    """``output_terms``' block (rows _TERMS) in one pass: out[:, i] = on_grid[:, grid_index[i]]
-    where grid_index[i] >= 0, else the terms at the next step instant (in order) of its motion
-    (psi, dpsi, ddpsi, direction: the program at those angles) with the linkage columns from the
-    stroke spline (knots rad, coeffs: scipy PPoly's (4, knots - 1, 5), evaluated in scipy's
-    order of operations) and the groove's geometry (``_pitch``). False (out incomplete) if a
-    follower angle leaves the spline's knots."""
+    """``output_terms``' block (rows _TERMS, _FACTOR_ROWS) in one pass: out[:, i] =
+    on_grid[:, grid_index[i]] where grid_index[i] >= 0, else the terms at the next step instant
+    (in order) of its motion (psi, dpsi, ddpsi, direction: the program at those angles) with the
+    linkage columns from the stroke spline (knots rad, coeffs: scipy PPoly's (4, knots - 1, 5),
+    evaluated in scipy's order of operations), the groove's geometry (``_pitch``), the arm and
+    the ``mass_factor``. False (out incomplete) if a follower angle leaves the spline's knots."""
+    if out.shape[0] != _BLOCK_ROWS or on_grid.shape[0] != _BLOCK_ROWS or out.shape[1] != grid_index.size:
+        raise ValueError("_step_terms: out and on_grid must have the block's rows, out one column an instant")
     j = 0
     last = knots.size - 1
     inv_h = last / (knots[last] - knots[0])
@@ -1032,6 +1062,9 @@ def _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, direction, phi2_0, knots,
         out[4, i], out[5, i], out[6, i] = _cubic(coeffs, lo, 0, s), _cubic(coeffs, lo, 1, s), _cubic(coeffs, lo, 2, s)
         out[7, i] = _load_arm(_cubic(coeffs, lo, 4, s), direction[j], _cubic(coeffs, lo, 3, s))
         out[8, i], out[9, i], out[10, i] = alpha, Db1, Db2
+        arm = l * math.cos(alpha)                                 # _arm
+        out[11, i] = arm
+        out[12, i], out[13, i], out[14, i], out[15, i] = _mass_factor(Db1, Db2, arm)
         j += 1
     return True
 
@@ -1076,7 +1109,8 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
     t, x, v, phase, grid_index = outputs
     # kinematics at the output instants, not interpolated in time (the linkage from its stroke
     # spline, accurate to rounding)
-    exact = _tables(scene, output_terms(scene, tab, t, grid_index), t, tab.omega1)
+    terms, arm, factors = output_terms(scene, tab, t, grid_index)
+    exact = _tables(scene, terms, t, tab.omega1, arm, factors)
     arm, R31, M = exact.arm, exact.R31, exact.M
     F = np.empty(t.size)
     eq.forces(model, phase.astype(np.int64), x, v, F)
