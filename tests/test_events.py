@@ -3,6 +3,8 @@ definition of each count, a file round trip."""
 import numpy as np
 import pytest
 import xarray as xr
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from common.errors import FileFormatError
 from models.dynamics import events
@@ -131,3 +133,19 @@ def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
         assert rows[i, events.COL_DOMEGA2] == pytest.approx((v[-1] - v[0]) / arm, rel=1e-9)
         checked += 1
     assert checked >= 5
+
+
+@settings(max_examples=300, deadline=None)
+@given(xp=st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=40, unique=True),
+       fp=st.lists(st.floats(-1e6, 1e6), min_size=40, max_size=40),
+       x=st.one_of(st.floats(-2e3, 2e3), st.sampled_from([np.nan, np.inf, -np.inf])),
+       on_node=st.integers(0, 39))
+def test_the_landings_scalar_interp_is_numpys(xp, fp, x, on_node):
+    # complete_events' compiled passes read the drive, the mass and the arm with elastic._interp,
+    # which promises np.interp's value bit for bit: between nodes, on a node, outside, NaN
+    from models.dynamics import elastic
+    xp = np.sort(np.array(xp))
+    fp = np.array(fp[:xp.size])
+    for at in (x, xp[on_node % xp.size]):
+        want, got = np.interp(at, xp, fp), elastic._interp(at, xp, fp)
+        assert got == want or (np.isnan(got) and np.isnan(want)), (at, got, want)

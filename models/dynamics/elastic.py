@@ -470,9 +470,11 @@ def _interp(x, xp, fp):
     the interval, then from its right end where the left one gives NaN), compiled without numba's
     np.interp, which allocates for a scalar."""
     n = xp.size
-    if not x > xp[0]:
+    if x != x:
+        return x
+    if x <= xp[0]:
         return fp[0]
-    if not x < xp[n - 1]:
+    if x >= xp[n - 1]:
         return fp[n - 1]
     lo, hi = 0, n - 1                                   # xp[lo] <= x < xp[hi]
     while hi - lo > 1:
