@@ -27,6 +27,7 @@ bench: $(STAMP)
 	  echo "bench: numbalsoda could not be built (it needs gfortran and cmake: apt-get install -y gfortran cmake); its peers are skipped"
 	$(BIN)/python benchmarks/run_all.py
 	$(BIN)/python benchmarks/peers_bench.py
+	$(BIN)/python benchmarks/whole_call_bound.py
 	$(BIN)/python benchmarks/bench_doe.py
 
 clean:
