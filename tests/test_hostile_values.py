@@ -220,3 +220,43 @@ def test_an_ac_coupling_constant_shorter_than_the_sampling_is_refused(tmp_path, 
     line = one_error_line(*cli(["process", rec, "--ac-tau", tau, "-o", tmp_path / "m.nc"], capsys))
     assert "--ac-tau" in line or "AC-coupling" in line
     assert not (tmp_path / "m.nc").exists()
+
+
+# --- silent wrong: kinematics options that replaced the mechanism file's own values -------------
+def _program_mechanism(tmp_path):
+    """The STB-216 with a 3-4-5 rise of 70 deg (dwells left to their defaults) and a 20 deg stroke."""
+    from hostile import MECHANISM
+
+    text = MECHANISM.read_text().replace('law = "sine"', 'law = "poly345"').replace("rise_deg = 58.0", "rise_deg = 70.0")
+    text = text.replace("psi_a_deg = 15.0", "psi_a_deg = 20.0")
+    text = "\n".join(line for line in text.splitlines()
+                     if not line.startswith(("upper_dwell_deg", "return_deg", "lower_dwell_deg")))
+    path = tmp_path / "mech.toml"
+    path.write_text(text + "\n")
+    return path
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_kinematics_takes_the_law_rise_and_stroke_of_its_mechanism_file(tmp_path, capsys):
+    """kinematics --mechanism with law = "poly345", rise_deg = 70 wrote a sine rise of 58 deg, exit 0."""
+    mech = _program_mechanism(tmp_path)
+    code, err = cli(["kinematics", "--mechanism", mech, "-o", tmp_path / "k.nc"], capsys)
+    assert code == 0, err
+    with xr.open_dataset(tmp_path / "k.nc") as ds:
+        rise_end = np.degrees(float(ds.phi1[int(np.argmax(ds.psi.values))]))
+        assert rise_end == pytest.approx(70.0, abs=0.5)
+        assert np.degrees(float(ds.psi.max())) == pytest.approx(20.0, rel=1e-6)
+        assert "--law poly345" in ds.attrs["history"] and "--rise-deg 70.0 --stroke-deg 20.0 " in ds.attrs["history"]
+    # given, an option still wins, even when it is the paper's value
+    code, err = cli(["kinematics", "--mechanism", mech, "--stroke-deg", "15", "-o", tmp_path / "k.nc", "--force"], capsys)
+    assert code == 0, err
+    with xr.open_dataset(tmp_path / "k.nc") as ds:
+        assert np.degrees(float(ds.psi.max())) == pytest.approx(15.0, rel=1e-6)
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_kinematics_with_an_empty_law_is_refused(tmp_path, capsys):
+    """--law "" ran the mechanism's (the paper's) sine law without a word; simulate refuses it."""
+    line = one_error_line(*cli(["kinematics", "--law", "", "-o", tmp_path / "k.nc"], capsys))
+    assert "motion law ''" in line
+    assert not (tmp_path / "k.nc").exists()

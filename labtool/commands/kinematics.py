@@ -18,12 +18,15 @@ def register(app: typer.Typer) -> None:
 
 
 def kinematics(
-    law: str = typer.Option("sine", help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine"),
+    law: Optional[str] = typer.Option(None, help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine "
+                                      "(default: the mechanism's [program] law, sine for the STB-216)"),
     rpm: float = typer.Option(180.0, help="cam speed n1 [rpm], constant (cam as input)"),
     fu: float = typer.Option(0.0, "--fu", help="load Fu at point N [N], opposing the rod's sliding"),
     jt_factor: float = typer.Option(1.0, help="inertia factor of the follower side Jt [-] (paper: 1 or 4)"),
-    rise_deg: float = typer.Option(58.0, help="cam angle of the rise phi_u [deg]"),
-    stroke_deg: float = typer.Option(15.0, help="follower stroke psi_a [deg]"),
+    rise_deg: Optional[float] = typer.Option(None, help="cam angle of the rise phi_u [deg] (default: the "
+                                             "mechanism's [program] rise_deg, 58 for the STB-216)"),
+    stroke_deg: Optional[float] = typer.Option(None, help="follower stroke psi_a [deg] (default: the mechanism's "
+                                               "psi_a_deg, 15 for the STB-216)"),
     points: int = typer.Option(1441, help="points per cam revolution [-]"),
     mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
     groove_csv: Optional[Path] = typer.Option(None, help="also write the pitch curve and both flanks [mm] as CSV"),
@@ -40,7 +43,7 @@ def kinematics(
     from models.mechanism.cam_profile import export_groove_csv, undercut
     from models.mechanism.kinematics import analyze, rise_summary
     from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
+    from models.mechanism.motion_laws import CamProgram, get_law
     from common.errors import InputError
 
     check_outputs({"-o": output, "--groove-csv": groove_csv}, force)
@@ -48,9 +51,15 @@ def kinematics(
     if points < 16:
         raise InputError(f"--points must be at least 16 per revolution, got {points}")
     mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
-    mech = mech.replace(psi_a=stroke_deg * DEG) if stroke_deg != 15.0 else mech
+    # an option not given is the mechanism file's own value: its [program] law and rise_deg and its
+    # psi_a_deg were replaced by the paper's sine, 58 deg and 15 deg without a word
+    mech = mech.replace(psi_a=stroke_deg * DEG) if stroke_deg is not None else mech
     mech.check_cam_speed(rpm)
-    program = CamProgram.for_mechanism(mech, law=law, rise=rise_deg * DEG, stroke=mech.psi_a)
+    if law is None:
+        law = mech.program.get("law", "sine")
+    program = CamProgram.for_mechanism(mech, law=get_law(law), rise=None if rise_deg is None else rise_deg * DEG,
+                                       stroke=mech.psi_a)
+    rise_deg, stroke_deg = round(program.rise_angle / DEG, 9), round(mech.psi_a / DEG, 9)   # 58.0, not 58.00000000000001
     if points > PROBE_ABOVE_POINTS:
         # measured (docs/robustness.md): peak memory 2.1x the Dataset, plus the NetCDF image when
         # written; the time per point at 1e6-3e6 points is ~2x that at 5e4
