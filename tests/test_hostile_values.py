@@ -260,3 +260,23 @@ def test_kinematics_with_an_empty_law_is_refused(tmp_path, capsys):
     line = one_error_line(*cli(["kinematics", "--law", "", "-o", tmp_path / "k.nc"], capsys))
     assert "motion law ''" in line
     assert not (tmp_path / "k.nc").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_simulate_takes_the_law_of_its_mechanism_file(tmp_path, capsys):
+    """simulate --mechanism with law = "poly345" ran the sine law (MR13D max 5.196 N m), exit 0."""
+    import json
+
+    from hostile import MECHANISM
+    from labtool.cli import main
+
+    mech = tmp_path / "mech.toml"
+    mech.write_text(MECHANISM.read_text().replace('law = "sine"', 'law = "poly345"'))
+    got = {}
+    for name, args in (("file", ["--mechanism", str(mech)]), ("option", ["--law", "poly345"]),
+                       ("sine", ["--law", "sine"])):
+        capsys.readouterr()
+        assert main(["simulate", "--model", "kinematic", *args, "--json"]) == 0
+        got[name] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["MR13D_max_Nm"]
+    assert got["file"] == pytest.approx(got["option"], rel=1e-9)
+    assert got["file"] != pytest.approx(got["sine"], rel=1e-3)

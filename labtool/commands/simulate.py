@@ -38,7 +38,8 @@ def _json_value(v):
 
 def simulate(
     model: str = typer.Option("auto", help="model level: auto, kinematic, rigid, elastic"),
-    law: str = typer.Option("sine", help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine"),
+    law: Optional[str] = typer.Option(None, help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine "
+                                      "(default: the mechanism's [program] law, sine for the STB-216)"),
     rpm: float = typer.Option(180.0, help="nominal cam speed n1 [rpm]"),
     fu: float = typer.Option(0.0, "--fu", help="load Fu at point N [N], opposing the rod's sliding"),
     backlash_mm: float = typer.Option(0.016, help="groove backlash j [mm]"),
@@ -77,6 +78,8 @@ def simulate(
         if not math.isfinite(value):
             raise InputError(f"{name} must be a finite number, got {value}")
     mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
+    if law is None:     # the file's [program] law: it was replaced by "sine" without a word
+        law = mech.program.get("law", "sine")
     scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * MM, jt_factor=jt_factor,
                   omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
                   rise_only=rise_only, contact_length=contact_length_mm * MM, kc_factor=kc_factor,
