@@ -280,3 +280,28 @@ def test_simulate_takes_the_law_of_its_mechanism_file(tmp_path, capsys):
         got[name] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["MR13D_max_Nm"]
     assert got["file"] == pytest.approx(got["option"], rel=1e-9)
     assert got["file"] != pytest.approx(got["sine"], rel=1e-3)
+
+
+# --- doe analyze: results tables that were read wrong -----------------------------------------
+def _table2(tmp_path, change):
+    """Table 2 (the paper's rigid results) as CSV text lines, changed by ``change(header, rows)``."""
+    import csv
+
+    from hostile import ROOT
+
+    rows = list(csv.reader((ROOT / "models" / "data" / "table2_rigid.csv").read_text().splitlines()))
+    change(rows[0], rows[1:])
+    path = tmp_path / "results.csv"
+    with open(path, "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    return path
+
+
+@pytest.mark.hostile("traceback")
+def test_doe_analyze_with_two_columns_of_one_name_is_one_line(tmp_path, capsys):
+    """A header with "jumps" and " jumps" was an internal error (TypeError: arg must be a list, ...)."""
+    def rename(header, rows):
+        header[5] = " jumps"
+    line = one_error_line(*cli(["doe", "analyze", _table2(tmp_path, rename), "--json"], capsys))
+    assert "jumps" in line and "more than once" in line
+
