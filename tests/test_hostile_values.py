@@ -305,3 +305,13 @@ def test_doe_analyze_with_two_columns_of_one_name_is_one_line(tmp_path, capsys):
     line = one_error_line(*cli(["doe", "analyze", _table2(tmp_path, rename), "--json"], capsys))
     assert "jumps" in line and "more than once" in line
 
+
+@pytest.mark.hostile("silent_wrong")
+def test_doe_analyze_with_a_response_too_small_to_square_is_refused(tmp_path, capsys):
+    """MR13D_max_Nm in units of 1e300 N m was "the response is constant: no effect can be tested", exit 0
+    (its squares underflow to 0)."""
+    def shrink(header, rows):
+        for r in rows:
+            r[5] = repr(float(r[5]) * 1e-300)
+    line = one_error_line(*cli(["doe", "analyze", _table2(tmp_path, shrink), "--json"], capsys))
+    assert "MR13D_max_Nm" in line and "rescale" in line

@@ -276,6 +276,11 @@ def analyze_response(data: FactorialData, response: str, alpha: float = 0.05,
     if not math.isfinite(ss_total):
         raise InputError(f"{data.source}: response {response} has values too large to square "
                          f"(max |value| {np.abs(y).max():.3g}); rescale the column")
+    spread = float(np.abs(y - grand).max())
+    if spread > 0 and spread * spread * _REL_ZERO < np.finfo(float).tiny:
+        # its squares underflow: a varying response was "constant", its effects all zero
+        raise InputError(f"{data.source}: response {response} varies too little to square (largest deviation "
+                         f"from its mean {spread:.3g}); rescale the column")
 
     frame = _model_frame(data, response)
     fit = smf.ols(_formula(tested), data=frame).fit()
