@@ -315,3 +315,13 @@ def test_doe_analyze_with_a_response_too_small_to_square_is_refused(tmp_path, ca
             r[5] = repr(float(r[5]) * 1e-300)
     line = one_error_line(*cli(["doe", "analyze", _table2(tmp_path, shrink), "--json"], capsys))
     assert "MR13D_max_Nm" in line and "rescale" in line
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_the_stands_twin_refuses_a_groove_no_cam_realises(tmp_path, capsys):
+    """acquire --device sim --backlash-mm 1e6 (a 1 km gap: the groove is undercut) wrote a recording,
+    exit 0, where simulate and the rigid and elastic truths refuse that groove."""
+    line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", "--duration", "0.1", "--backlash-mm", "1e6",
+                                "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
+    assert "undercut" in line
+    assert not (tmp_path / "r.h5").exists()

@@ -258,8 +258,10 @@ class TwinRun:
 
     def __init__(self, scene: Scene, physics: TwinPhysics | None = None, keep_events: bool = True,
                  start: dict | None = None):
+        from models.dynamics import validity
         from models.dynamics.kernels import twin_nb as nb
 
+        validity.check_scene(scene)   # a groove no cam realises (an undercut, a backlash past R): refused, as the models do
         self.scene, self.physics = scene, physics or TwinPhysics()
         self.plant = build_plant(scene, self.physics)
         self.keep_events = keep_events
