@@ -3,7 +3,8 @@
 In order: a calibration file's entry (with a warning when it is more than 20 % off the Ka the
 recording states: a conditioner gain changed since the calibration); the recording's own
 ``ka_m_s2_per_v``; the paper's Ka (86.43 m/s^2/V) with a warning. A recording that states Ka = 0, a negative or an infinite Ka is
-damaged: refused, never replaced by the paper's. A channel the file already gives in m/s^2 (a
+damaged, as is one outside a calibration file's bounds (1e-3 .. 1e6 m/s^2/V): refused, never
+replaced by the paper's. A channel the file already gives in m/s^2 (a
 TDMS ``unit_string`` as DAQmx writes for an accelerometer; the readers convert g and mm/s^2 to
 m/s^2) takes no Ka: factor 1, and a calibration entry for it is refused as contradictory.
 """
@@ -13,7 +14,7 @@ import math
 
 from common import history as H
 from common.errors import InputError
-from processing.calibration_file import PAPER_KA_M_S2_PER_V
+from processing.calibration_file import KA_MAX, KA_MIN, PAPER_KA_M_S2_PER_V
 
 CHANNELS = ("aE_t", "aE_n")
 
@@ -42,9 +43,10 @@ def ka_for_channels(rec, calibration: dict | None, calibration_source: str, warn
                      "was the calibration made with the same conditioner gain?")
             continue
         if not math.isnan(stated):
-            if not (math.isfinite(stated) and stated > 0):
+            if not (math.isfinite(stated) and KA_MIN < stated < KA_MAX):
                 raise InputError(f"{rec.source}: the recording states Ka = {stated!r} m/s^2/V for channel '{name}', "
-                                 "which is not usable; give a calibration with --calibration")
+                                 f"which is not usable (a chain's Ka lies between {KA_MIN:g} and {KA_MAX:g} m/s^2/V, "
+                                 "as in a calibration file); give a calibration with --calibration")
             out[name] = _ka(stated, math.nan, "recording attribute ka_m_s2_per_v")
         else:
             out[name] = _ka(PAPER_KA_M_S2_PER_V, math.nan, f"paper default (Ka = {PAPER_KA_M_S2_PER_V} m/s^2/V)")

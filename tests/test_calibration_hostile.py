@@ -302,7 +302,8 @@ def test_the_papers_default_ka_is_never_used_silently(tmp_path, capsys):
 
 
 @pytest.mark.hostile("silent_wrong")
-@pytest.mark.parametrize("bad", [0.0, np.inf, -50.0])
+# 1e308 and 1e-300 (acquire --ka took them) were used: omega2 "265.6 % rms of peak" off, exit 0
+@pytest.mark.parametrize("bad", [0.0, np.inf, -50.0, 1e308, 1e-300])
 def test_an_unusable_ka_in_the_recording_does_not_fall_back_to_the_papers(tmp_path, capsys, bad):
     rec = tmp_path / "run.h5"
     stand_recording(rec, duration_s=1.5, ka=[bad, 864.3, np.nan])
