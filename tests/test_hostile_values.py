@@ -325,3 +325,14 @@ def test_the_stands_twin_refuses_a_groove_no_cam_realises(tmp_path, capsys):
                                 "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
     assert "undercut" in line
     assert not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("ka", ["1e308", "1e-300", "0"])
+def test_acquire_refuses_a_ka_no_chain_has(tmp_path, capsys, ka):
+    """acquire --device sim --ka 1e308 wrote a recording stating Ka = 1e308 (exit 0), which process
+    then used: |omega2| vs sqrt(aE_n/DE) 265.6 % rms of peak."""
+    line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", "--duration", "0.1", "--ka", ka,
+                                "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
+    assert "--ka" in line and "1e+06" in line
+    assert not (tmp_path / "r.h5").exists()

@@ -146,6 +146,12 @@ def acquire(
     if not (math.isfinite(float(opts["rate"])) and float(opts["rate"]) > 0):
         raise InputError(f"--rate must be a positive number of Hz, got {opts['rate']}")
     _check_sample_count(dur, float(opts["rate"]))
+    if opts["ka"] is not None:   # --ka 1e308 was stored, and processing used it
+        from processing.calibration_file import KA_MAX, KA_MIN
+
+        if not (math.isfinite(float(opts["ka"])) and KA_MIN < float(opts["ka"]) < KA_MAX):
+            raise InputError(f"--ka must lie between {KA_MIN:g} and {KA_MAX:g} m/s^2/V (as in a calibration file), "
+                             f"got {float(opts['ka']):g}")
     if output.is_dir():
         raise InputError(f"{output} is a folder; give a file name for the recording")
     check_output_path(output, force)
