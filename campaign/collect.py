@@ -75,8 +75,25 @@ def load_point_folder(folder: Path, name: str | None = None, page_base: Path | N
         cycles = xr.open_dataset(c, engine="h5netcdf").load()
     except (OSError, ValueError) as exc:
         raise FileFormatError(f"point {shown(folder.name)}: unreadable {shown(str(exc))}") from None
+    _check_summary(summary, folder)
     page = str(_relative(folder / "report.html", page_base)) if (folder / "report.html").is_file() else None
     return PointRecord(name or folder.name, str(_relative(folder, page_base)), summary, cycles, page)
+
+
+def _check_summary(summary, folder: Path) -> None:
+    """FileFormatError unless ``summary`` has the shape reports.summary writes: a hand-edited
+    summary.json holding [] or {} was an internal error (AttributeError, jinja's UndefinedError)."""
+    op = summary.get("operating_point") if isinstance(summary, dict) else None
+    lists = ("headline", "simulations", "events")
+    ok = (isinstance(summary, dict) and summary.get("format") == "labtool.report.summary"
+          and isinstance(op, dict) and math.isfinite(_num(op.get("cam_speed_rpm")))
+          and isinstance(summary.get("measured"), dict)
+          and all(isinstance(summary.get(k, []), list) and all(isinstance(x, dict) for x in summary.get(k, []))
+                  for k in lists))
+    if not ok:
+        raise FileFormatError(f"point {shown(folder.name)}: summary.json is not a labtool report summary (format "
+                              "labtool.report.summary, with its operating_point, measured and headline); delete it and "
+                              "run 'labtool campaign run' again to remake the point's comparison")
 
 
 def _relative(path: Path, base: Path | None) -> Path:

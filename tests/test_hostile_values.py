@@ -336,3 +336,22 @@ def test_acquire_refuses_a_ka_no_chain_has(tmp_path, capsys, ka):
                                 "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
     assert "--ka" in line and "1e+06" in line
     assert not (tmp_path / "r.h5").exists()
+
+
+# --- traceback: a hand-edited campaign folder ---------------------------------------------------
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("text", [
+    "[]",    # AttributeError: 'list' object has no attribute 'get'
+    "{}",    # UndefinedError: 'dict object' has no attribute 'cam_speed_rpm'
+    '{"format": "labtool.report.summary", "operating_point": {"cam_speed_rpm": 180}, "measured": {}, "headline": "x"}',
+], ids=["list", "empty", "headline-text"])
+def test_campaign_report_on_a_hand_edited_summary_is_one_line(tmp_path, capsys, text):
+    from common.files import write_netcdf
+
+    point = tmp_path / "camp" / "points" / "01_180rpm"
+    point.mkdir(parents=True)
+    (point / "summary.json").write_text(text)
+    write_netcdf(xr.Dataset({"x": ("t", [1.0])}), point / "cycles.nc")
+    line = one_error_line(*cli(["campaign", "report", tmp_path / "camp", "-o", tmp_path / "c.html"], capsys))
+    assert "01_180rpm" in line and "summary.json" in line
+    assert not (tmp_path / "c.html").exists()
