@@ -76,6 +76,7 @@ def load_point_folder(folder: Path, name: str | None = None, page_base: Path | N
     except (OSError, ValueError) as exc:
         raise FileFormatError(f"point {shown(folder.name)}: unreadable {shown(str(exc))}") from None
     _check_summary(summary, folder)
+    _check_cycles(cycles, folder)
     page = str(_relative(folder / "report.html", page_base)) if (folder / "report.html").is_file() else None
     return PointRecord(name or folder.name, str(_relative(folder, page_base)), summary, cycles, page)
 
@@ -94,6 +95,20 @@ def _check_summary(summary, folder: Path) -> None:
         raise FileFormatError(f"point {shown(folder.name)}: summary.json is not a labtool report summary (format "
                               "labtool.report.summary, with its operating_point, measured and headline); delete it and "
                               "run 'labtool campaign run' again to remake the point's comparison")
+
+
+def _check_cycles(cycles: xr.Dataset, folder: Path) -> None:
+    """FileFormatError unless ``cycles`` holds what campaign.steps.cycles_dataset writes and the
+    page draws: another NetCDF file there was an internal error (KeyError: No variable named 'phi1')."""
+    need = {f"measured_{s}_{k}": ("phi1",) for s in SIGNALS for k in ("mean", "std")}
+    if "sim" in cycles.dims:
+        need.update({f"sim_{k}": ("sim",) for k in ("label", "requested", "omega1")})
+        need.update({f"sim_{s}": ("sim", "phi1") for s in SIGNALS})
+    bad = [k for k, dims in need.items() if k not in cycles.variables or cycles[k].dims != dims]
+    if "phi1" not in cycles.coords or bad:
+        raise FileFormatError(f"point {shown(folder.name)}: cycles.nc is not a campaign point's cycle overlays "
+                              f"(missing or misshapen: {', '.join((['phi1'] if 'phi1' not in cycles.coords else []) + bad)}); "
+                              "delete it and run 'labtool campaign run' again to remake the point's comparison")
 
 
 def _relative(path: Path, base: Path | None) -> Path:

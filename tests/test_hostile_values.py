@@ -355,3 +355,29 @@ def test_campaign_report_on_a_hand_edited_summary_is_one_line(tmp_path, capsys, 
     line = one_error_line(*cli(["campaign", "report", tmp_path / "camp", "-o", tmp_path / "c.html"], capsys))
     assert "01_180rpm" in line and "summary.json" in line
     assert not (tmp_path / "c.html").exists()
+
+
+@pytest.mark.hostile("traceback")
+def test_campaign_report_on_a_foreign_cycles_file_is_one_line(tmp_path, capsys):
+    """A point's cycles.nc without the overlays (another NetCDF file copied there) was an internal
+    error: KeyError: "No variable named 'phi1'..."."""
+    import json
+
+    from campaign.collect import load_measured_file
+    from campaign.plan import check_compare
+    from common.files import write_netcdf
+    from reports.synthetic import synthetic_measured
+
+    measured = tmp_path / "measured.nc"
+    write_netcdf(synthetic_measured(rpm=180.0, revolutions=3.4, seed=1), measured)
+    rec = load_measured_file(measured, check_compare({"models": ["kinematic"]}, "options"), {})
+    point = tmp_path / "camp" / "points" / "01_180rpm"
+    point.mkdir(parents=True)
+    (point / "summary.json").write_text(json.dumps(rec.summary, default=str))   # a real summary
+    write_netcdf(xr.Dataset({"x": ("t", [1.0])}), point / "cycles.nc")
+    line = one_error_line(*cli(["campaign", "report", tmp_path / "camp", "-o", tmp_path / "c.html"], capsys))
+    assert "01_180rpm" in line and "cycles.nc" in line and "phi1" in line
+    (point / "cycles.nc").unlink()
+    write_netcdf(rec.cycles, point / "cycles.nc")   # the real overlays: the point is shown
+    code, err = cli(["campaign", "report", tmp_path / "camp", "-o", tmp_path / "c.html"], capsys)
+    assert code == 0, err
