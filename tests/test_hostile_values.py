@@ -381,3 +381,13 @@ def test_campaign_report_on_a_foreign_cycles_file_is_one_line(tmp_path, capsys):
     write_netcdf(rec.cycles, point / "cycles.nc")   # the real overlays: the point is shown
     code, err = cli(["campaign", "report", tmp_path / "camp", "-o", tmp_path / "c.html"], capsys)
     assert code == 0, err
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_scene_ka_past_the_calibration_bounds_is_named_by_its_key(tmp_path, capsys):
+    """A scene's ka_m_s2_per_v = 5e6 was taken (the schema allowed 1e7); then refused as "--ka"."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text("[stand]\nka_m_s2_per_v = 5e6\n")
+    line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", "--duration", "0.1", "--scene", scene,
+                                "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
+    assert "ka_m_s2_per_v" in line and "1e+06" in line

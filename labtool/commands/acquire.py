@@ -46,7 +46,7 @@ STAND_SCHEMA = Table({
     "seed": Integer(ge=0, required=False),
     "duration_s": Number(gt=0, allow_inf=True, unit="s", required=False),
     "rate_hz": Number(gt=0, le=1e8, unit="Hz", required=False),
-    "ka_m_s2_per_v": Number(gt=0, le=1e7, unit="m/s^2/V", required=False),
+    "ka_m_s2_per_v": Number(gt=1e-3, lt=1e6, unit="m/s^2/V", required=False),   # as a calibration file
     "truth_model": String(max_len=64, required=False),      # checked by StandScene (TRUTH_MODELS)
 })
 assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
