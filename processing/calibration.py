@@ -295,12 +295,27 @@ def fit_recording_channel(rec, channel: str, reference: ReferenceSpec) -> Channe
     if clip_rows:
         raise InputError(f"{where}: the recorder marked {len(clip_rows)} clipped samples (first at row {clip_rows[0]}); "
                          "lower the exciter level or the conditioner gain and record again")
-    adc = rec.attrs.get("adc_range_v")
-    check_volts(x, where, float(adc) if isinstance(adc, (int, float)) else None)
+    check_volts(x, where, _adc_range(rec.attrs.get("adc_range_v"), where))
     fit = fit_sine(x, rec.sample_rate_hz, reference.freq_hz, t=t, where=where)
     check_distortion(fit, where)
     ka, std_fit, _ = ka_from_fit(fit, reference.accel_m_s2, reference.convention, reference.rel_uncertainty)
     return ChannelFit(channel, utf8_text(rec.source), ka, std_fit, fit)   # a non-UTF-8 byte as \xff (TOML holds text)
+
+
+def _adc_range(raw, where: str) -> float | None:
+    """The recording's ``adc_range_v`` (V) as one number, as processing reads it (the text "10" is
+    10 V); None when not stated. Text that is no number is FileFormatError: "10" was passed over,
+    and a sine at the ADC's rails was calibrated without a word."""
+    if raw is None:
+        return None
+    try:
+        if np.size(raw) != 1:
+            raise ValueError
+        value = np.asarray(raw).ravel()[0]
+        return float(value.decode() if isinstance(value, bytes) else value)
+    except (TypeError, ValueError, UnicodeDecodeError):
+        raise FileFormatError(f"{where}: attribute adc_range_v = {shown(str(raw))!r} is not one number of volts; "
+                              "fix the file") from None
 
 
 def pair_channels(recordings, channels) -> list[tuple[str, str]]:

@@ -72,6 +72,17 @@ def test_a_mildly_clipped_sine_and_the_adc_range_are_seen_too(tmp_path, capsys):
 
 
 @pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("adc, said", [("1", "ADC"), ("ten volts", "adc_range_v")])
+def test_an_adc_range_stated_as_text_is_read_or_refused(tmp_path, capsys, adc, said):
+    """adc_range_v = "1" (text, which process reads as 1 V) or "ten volts" was passed over: a sine at
+    the rails of a +-1 V ADC was calibrated, exit 0."""
+    rec = sine_recording(tmp_path / "ref.h5", volts_peak=0.999, noise_v=1e-3, attrs={"adc_range_v": adc})
+    assert main(["calibrate", str(rec), "-o", str(tmp_path / "a.toml")]) == 2
+    assert said in one_error_line(capsys)
+    assert not (tmp_path / "a.toml").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("dtype", ["int16", "int32"])
 def test_integer_adc_counts_are_not_fitted_as_volts(tmp_path, capsys, dtype):
     # 0.1135 V peak on a +-10 V 16-bit ADC is 372 counts: main fitted the counts, Ka 3277x too small
