@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from common.errors import InputError, SolverError
+from common.names import shown
 from identification import search, uncertainty
 from identification.objective import SIGNALS, Evaluation, Evaluator, load_target
 from identification.parameters import check_start, make_space, parse_free
@@ -369,6 +370,11 @@ def _events_info(m: dict | None) -> dict | None:
 
 
 
+def _is_number(v) -> bool:
+    """A finite JSON number (not a boolean): what a fit file holds for a value."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def load_fit(path: Path) -> dict:
     """A ``labtool fit`` result as ``reports.pipeline.build_report``'s ``fitted`` entry: the model,
     its omega1 mode, the fitted operating point and a note; InputError for a file that is not one."""
@@ -391,6 +397,24 @@ def load_fit(path: Path) -> dict:
     for key in ("cam_speed_rpm", "law", "Fu", "backlash_mm", "jt_factor"):
         if key not in op:
             raise InputError(f"{path}: fitted_operating_point has no {key}")
+    # a hand-edited file: a value of the wrong type was an internal error (TypeError, KeyError, ...)
+    numbers = ("cam_speed_rpm", "Fu", "backlash_mm", "jt_factor", "omega1_var_n1_rpm", "restitution",
+               "contact_damping", "contact_length_mm", "ka_gain", "delay_ms")
+    for key in numbers:
+        if key in op and not _is_number(op[key]):
+            raise InputError(f"{path}: fitted_operating_point {key} = {shown(json.dumps(op[key]))} is not a number")
+    for key in ("law", "elastic_gap"):
+        if key in op and not isinstance(op[key], str):
+            raise InputError(f"{path}: fitted_operating_point {key} = {shown(json.dumps(op[key]))} is not a name")
+    params = doc.get("parameters", {})
+    if not (isinstance(params, dict) and all(
+            isinstance(v, dict) and _is_number(v.get("value"))
+            and (v.get("ci95") is None or (isinstance(v["ci95"], list) and len(v["ci95"]) == 2
+                                           and all(c is None or _is_number(c) for c in v["ci95"])))
+            for v in params.values())):
+        raise InputError(f"{path}: parameters must map each name to its value and ci95 (two numbers)")
+    if not isinstance(doc.get("measured", {}), dict):
+        raise InputError(f"{path}: measured must be a table (its file, revolutions, ...)")
     vals = ", ".join(f"{k} = {v['value']:.4g} [{v['ci95'][0]:.4g}, {v['ci95'][1]:.4g}]"
                      if v.get("ci95") and None not in v["ci95"] else f"{k} = {v['value']:.4g}"
                      for k, v in doc.get("parameters", {}).items())

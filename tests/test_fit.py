@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -320,6 +321,34 @@ def test_a_fit_file_the_report_cannot_use_is_refused(tmp_path):
             load_fit(bad)
     with pytest.raises(InputError, match="not found"):
         load_fit(tmp_path / "none.json")
+
+
+GOOD_FIT = {"format": "labtool.fit", "format_version": 1, "model": "rigid", "omega1": "const",
+            "fitted_operating_point": {"cam_speed_rpm": 180.0, "law": "sine", "Fu": 0.0, "backlash_mm": 0.128,
+                                       "jt_factor": 1.0, "restitution": 0.2},
+            "parameters": {"backlash_mm": {"value": 0.128, "ci95": [0.1, 0.15]}}}
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("change, fragment", [
+    # report --fit: "internal error: TypeError: must be real number, not str"
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "Fu": "heavy"}}, 'Fu = "heavy" is not a number'),
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "cam_speed_rpm": None}}, "cam_speed_rpm = null"),
+    # AttributeError: 'int' object has no attribute 'lower'
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "law": 5}}, "law = 5 is not a name"),
+    # AttributeError: 'list' object has no attribute 'items'; KeyError: 'value'; IndexError; ValueError (format 'g')
+    *[({"parameters": bad}, "parameters must map") for bad in
+      ([1, 2], {"backlash_mm": {}}, {"backlash_mm": {"value": 0.1, "ci95": [1]}}, {"backlash_mm": {"value": "x"}})],
+    ({"measured": "x"}, "measured must be a table"),    # AttributeError: 'str' object has no attribute 'get'
+], ids=["Fu-text", "rpm-null", "law-number", "parameters-list", "no-value", "ci95-short", "value-text",
+        "measured-text"])
+def test_a_hand_edited_fit_file_is_refused_not_a_crash(tmp_path, change, fragment):
+    path = tmp_path / "fit.json"
+    path.write_text(json.dumps({**GOOD_FIT, **change}))
+    with pytest.raises(InputError, match=re.escape(fragment)):
+        load_fit(path)
+    path.write_text(json.dumps(GOOD_FIT))
+    assert load_fit(path)["operating_point"]["Fu"] == 0.0
 
 
 # --------------------------------------------------------------------------- pieces, against independent facts
