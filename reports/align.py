@@ -27,6 +27,7 @@ import xarray as xr
 
 from common.errors import InputError
 from common.history import History, Lowpass
+from common.names import shown
 from processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
@@ -99,10 +100,16 @@ def processing_filter(ds: xr.Dataset) -> TimeFilter | None:
             return None   # not a filter this re-implementation reproduces
         cutoff = lp.cutoff_hz if lp.cutoff_hz is not None else cutoff
         order = int(lp.order) if lp.order is not None else order
+    if fs is None or cutoff is None:
+        return None
     try:
         fs, cutoff = float(fs), float(cutoff)
     except (TypeError, ValueError):
-        return None
+        # a stated low-pass read as "none": the models went unfiltered, compared with a filtered measurement
+        source = ds.encoding.get("source", "the measured file")
+        raise InputError(f"{shown(str(source))}: the processing low-pass it states (cutoff {shown(str(cutoff))!r} Hz, "
+                         f"sample rate {shown(str(fs))!r} Hz) is not a number; fix the file (lowpass_hz, "
+                         "sample_rate_hz or the processing history), or process the recording again") from None
     if not (math.isfinite(fs) and math.isfinite(cutoff) and 0 < cutoff < fs / 2 and 1 <= order <= 12):
         return None
     return TimeFilter(fs, cutoff, order)

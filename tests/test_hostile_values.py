@@ -391,3 +391,16 @@ def test_a_scene_ka_past_the_calibration_bounds_is_named_by_its_key(tmp_path, ca
     line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", "--duration", "0.1", "--scene", scene,
                                 "--status-every", "0", "-o", tmp_path / "r.h5"], capsys))
     assert "ka_m_s2_per_v" in line and "1e+06" in line
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_stated_low_pass_that_is_not_a_number_is_refused(tmp_path, capsys, measured_nc):
+    """lowpass_hz = "300 Hz" (and the history unreadable) was read as "no low-pass": the models went
+    unfiltered against the filtered measurement (rigid epsilon2 ISO 0.623 -> 0.616), exit 0, no word."""
+    def edit(ds):
+        ds.attrs["lowpass_hz"] = "300 Hz"
+        ds.attrs["processing_history"] = "{"
+    path = _measured(tmp_path, measured_nc, edit)
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert "low-pass" in line and "300 Hz" in line
+    assert not (tmp_path / "r.html").exists()
