@@ -13,6 +13,7 @@ from common.errors import InputError
 from common.files import check_output_path
 from common.names import shown
 from common.schema import Integer, Number, String, Table, load_toml
+from processing.calibration_file import KA_MAX, KA_MIN
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {
@@ -46,7 +47,7 @@ STAND_SCHEMA = Table({
     "seed": Integer(ge=0, required=False),
     "duration_s": Number(gt=0, allow_inf=True, unit="s", required=False),
     "rate_hz": Number(gt=0, le=1e8, unit="Hz", required=False),
-    "ka_m_s2_per_v": Number(gt=1e-3, lt=1e6, unit="m/s^2/V", required=False),   # as a calibration file
+    "ka_m_s2_per_v": Number(gt=KA_MIN, lt=KA_MAX, unit="m/s^2/V", required=False),   # as a calibration file
     "truth_model": String(max_len=64, required=False),      # checked by StandScene (TRUTH_MODELS)
 })
 assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
@@ -147,8 +148,6 @@ def acquire(
         raise InputError(f"--rate must be a positive number of Hz, got {opts['rate']}")
     _check_sample_count(dur, float(opts["rate"]))
     if opts["ka"] is not None:   # --ka 1e308 was stored, and processing used it
-        from processing.calibration_file import KA_MAX, KA_MIN
-
         if not (math.isfinite(float(opts["ka"])) and KA_MIN < float(opts["ka"]) < KA_MAX):
             raise InputError(f"--ka must lie between {KA_MIN:g} and {KA_MAX:g} m/s^2/V (as in a calibration file), "
                              f"got {float(opts['ka']):g}")
