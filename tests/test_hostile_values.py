@@ -404,3 +404,19 @@ def test_a_stated_low_pass_that_is_not_a_number_is_refused(tmp_path, capsys, mea
     line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
     assert "low-pass" in line and "300 Hz" in line
     assert not (tmp_path / "r.html").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("args,said", [
+    # 1e-9 s at 10 kHz: a recording of 0 samples marked complete, exit 0 (process refused it later)
+    (["--duration", "1e-9"], "less than one sample"),
+    (["--duration", "5e-5", "--rate", "10000"], "less than one sample"),
+    # the shaker above Nyquist: the recording held its alias, exit 0 (calibrate refused it later)
+    (["--mode", "calibration", "--cal-freq", "6000"], "half the sample rate"),
+    (["--mode", "calibration", "--cal-freq", "5000"], "half the sample rate"),
+])
+def test_acquire_refuses_a_recording_that_cannot_hold_what_it_asks(tmp_path, capsys, args, said):
+    out = tmp_path / "r.h5"
+    line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", *args, "-o", out], capsys))
+    assert said in line
+    assert not out.exists()

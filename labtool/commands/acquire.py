@@ -147,6 +147,8 @@ def acquire(
     if not (math.isfinite(float(opts["rate"])) and float(opts["rate"]) > 0):
         raise InputError(f"--rate must be a positive number of Hz, got {opts['rate']}")
     _check_sample_count(dur, float(opts["rate"]))
+    _check_sampled(dur, float(opts["rate"]), kind == "sim" and str(opts["mode"]) == "calibration",
+                   float(opts["cal_freq"]))
     if opts["ka"] is not None:   # --ka 1e308 was stored, and processing used it
         if not (math.isfinite(float(opts["ka"])) and KA_MIN < float(opts["ka"]) < KA_MAX):
             raise InputError(f"--ka must lie between {KA_MIN:g} and {KA_MAX:g} m/s^2/V (as in a calibration file), "
@@ -280,6 +282,18 @@ def _check_sample_count(duration_s: float, rate_hz: float) -> None:
         raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is more samples than the {MAX_SAMPLES:g} "
                          f"a recording can hold; give at most {MAX_SAMPLES / rate_hz:g} s, "
                          "or --duration inf --realtime to record until Ctrl-C")
+
+
+def _check_sampled(duration_s: float, rate_hz: float, shaker: bool, cal_freq_hz: float) -> None:
+    """InputError when the recording could not hold what it asks: --duration under one sample
+    (1e-9 s wrote a recording of 0 samples marked complete, exit 0), or the calibration shaker's
+    sine at or past half --rate (6000 Hz at 10 kHz recorded its 4000 Hz alias, exit 0)."""
+    if math.isfinite(duration_s) and duration_s * rate_hz < 1.0:
+        raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is less than one sample; "
+                         f"give at least {1.0 / rate_hz:g} s")
+    if shaker and not cal_freq_hz < 0.5 * rate_hz:
+        raise InputError(f"--cal-freq {cal_freq_hz:g} Hz is not below half the sample rate ({0.5 * rate_hz:g} Hz): "
+                         "the recording would hold its alias; lower --cal-freq or raise --rate")
 
 
 def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, status_every: float = 5.0):
