@@ -278,6 +278,12 @@ def _process_window(w: dict, ext, wa, marks, period, chain: Chain, irregular) ->
 
 def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal, hist, out, warn) -> dict:
     """History of the accumulated steps, the small outputs, the global attributes."""
+    if rec.n_samples and st.clip.flagged >= rec.n_samples:
+        # an all-NaN measured.nc with exit 0 said only "0 revolutions averaged" and a warning
+        raise InputError(f"{shown(rec.source)}: every one of its {rec.n_samples} samples is flagged as clipped (at "
+                         "the ADC's rails, or held at a channel's extreme value, as a channel spanning only a few "
+                         "ADC levels is): nothing is left to process; check the chain's gain and range (Ka, the "
+                         "conditioner, the ADC range)")
     if st.clip.flagged:
         warn(f"{st.clip.flagged} clipped samples flagged and kept out of the estimates")
     hist.add(H.TimeAxis(samples_lost=st.time.samples_lost, gaps_with_unknown_loss=st.time.unknown))

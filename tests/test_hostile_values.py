@@ -420,3 +420,15 @@ def test_acquire_refuses_a_recording_that_cannot_hold_what_it_asks(tmp_path, cap
     line = one_error_line(*cli(["acquire", "--device", "sim", "--fast", *args, "-o", out], capsys))
     assert said in line
     assert not out.exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_process_refuses_a_recording_whose_every_sample_is_flagged(tmp_path, capsys, volts):
+    """aE_n on two ADC levels (acquire --ka 1e5: the signal below the ADC's resolution) flagged
+    every sample as clipped, and process wrote an all-NaN measured.nc, 0 revolutions, exit 0."""
+    two_levels = volts.copy()
+    two_levels[:, 1] = np.where(np.sin(np.arange(len(volts)) / 50.0) > 0, 3.05e-4, 0.0).astype(volts.dtype)
+    rec = _recording(tmp_path, two_levels)
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert "every one of its" in line and "flagged as clipped" in line
+    assert not (tmp_path / "m.nc").exists()
