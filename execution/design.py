@@ -123,6 +123,11 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
                 if runs.size != b - a or not np.array_equal(runs, np.arange(a + 1, b + 1)):
                     raise InputError(f"{path} is damaged (its rows are not runs {a + 1}-{b}); delete it and "
                                      "rerun the same command to compute those runs again")
+                for name, idx in zip(design.level_columns, np.unravel_index(columns["run"] - 1, design.shape)):
+                    if cells[name] != [str(k + 1) for k in idx.tolist()]:   # copied as text into the CSV
+                        raise InputError(f"{path} is damaged (its {name} column is not the levels of runs "
+                                         f"{a + 1}-{b} of this design); delete it and rerun the same command "
+                                         "to compute those runs again")
                 for run, msg in zip(runs, cells["error"]):
                     if msg:
                         n_failed += 1

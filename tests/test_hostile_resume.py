@@ -1,0 +1,71 @@
+"""Hostile inputs to a resumed `doe run`: a `results.csv.parts/` folder tampered with by hand.
+
+Every case builds the finished parts of a small design (3 x 3 runs, made-up values: nothing is
+simulated), tampers with them, and runs the real command: it must end with one
+`labtool: error:` line and exit 2, or give the right table, never exit 0 with a wrong one or
+lose the finished parts.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from execution.design import parts_folder
+from execution.parts import PartStore
+from labtool.cli import main
+
+FACTORS_9 = "factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,5,10\nB,n1,rpm,150,165,180\n"
+
+
+def _design(tmp_path: Path, model: str):
+    from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors
+    (tmp_path / "f.csv").write_text(FACTORS_9)
+    return Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), model)
+
+
+def _finished(tmp_path: Path, model: str = "rigid", ranges=((0, 3), (3, 6), (6, 9))) -> Path:
+    """The parts folder of the design with ``ranges`` finished (made-up responses); returns it."""
+    design = _design(tmp_path, model)
+    store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
+
+    def row(i):
+        r = {"run": i + 1, **dict(zip(design.level_columns, design.level_indices(i)))}
+        for k, c in enumerate(design.responses):
+            r[c] = i % 3 if c in ("jumps", "impacts") else float(10 * i + k)
+        return {**r, "wall_s": 0.01, "error": ""}
+    for a, b in ranges:
+        store.write(a, b, [row(i) for i in range(a, b)])
+    store.close()
+    return store.folder
+
+
+def _run(tmp_path: Path, capsys, model: str = "rigid", *extra) -> tuple[int, list[str]]:
+    rc = main(["doe", "run", "--model", model, "--accuracy", "fast", "--factors", str(tmp_path / "f.csv"),
+               "-o", str(tmp_path / "r.csv"), *extra])
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_bytes().decode()
+    assert old in text
+    path.write_bytes(text.replace(old, new, 1).encode())
+
+
+def _refused(rc, err, *words) -> None:
+    assert rc == 2 and err and err[-1].startswith("labtool: error:"), err
+    for w in words:
+        assert w in err[-1], err[-1]
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_part_whose_level_columns_were_edited_is_refused(tmp_path, capsys):
+    """Run 2 is levels (1, 2) of this design; a part saying (3, 2) was copied into the table as is."""
+    folder = _finished(tmp_path)
+    part = folder / "items-000000000-000000002.csv"
+    _edit(part, "\r\n2,1,2,", "\r\n2,3,2,")
+    rc, err = _run(tmp_path, capsys)
+    _refused(rc, err, "items-000000000-000000002.csv", "is damaged", "levels")
+    assert not (tmp_path / "r.csv").exists() and part.exists()
