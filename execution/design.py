@@ -91,6 +91,7 @@ def check_free_space(folder: Path, n_runs: int) -> None:
 def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: str):
     """Parts -> CSV + NetCDF (temporary names, renamed together). Returns (failures, n_failed)."""
     import h5netcdf
+    from models.study.doe import COUNT_RESPONSES
 
     parts = store.part_files()
     _check_tiling(parts, len(design), store)
@@ -128,6 +129,13 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
                         raise InputError(f"{path} is damaged (its {name} column is not the levels of runs "
                                          f"{a + 1}-{b} of this design); delete it and rerun the same command "
                                          "to compute those runs again")
+                for name in COUNT_RESPONSES:              # written as integers into the CSV
+                    if name in columns:
+                        v = columns[name][[c != "" for c in cells[name]]]
+                        if not (np.isfinite(v).all() and (v == np.round(v)).all()):
+                            raise InputError(f"{path} is damaged (its {name} column holds a count that is not "
+                                             "a whole number); delete it and rerun the same command to compute "
+                                             "those runs again")
                 for run, msg in zip(runs, cells["error"]):
                     if msg:
                         n_failed += 1

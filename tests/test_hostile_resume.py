@@ -69,3 +69,15 @@ def test_a_part_whose_level_columns_were_edited_is_refused(tmp_path, capsys):
     rc, err = _run(tmp_path, capsys)
     _refused(rc, err, "items-000000000-000000002.csv", "is damaged", "levels")
     assert not (tmp_path / "r.csv").exists() and part.exists()
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("cell", ["nan", "inf", "-inf", "1.5"])
+def test_a_part_whose_count_is_not_a_whole_number_is_refused(tmp_path, capsys, cell):
+    """jumps is a count, written as an integer: 'nan' or 'inf' there ended in exit 70 (int(round(nan)))."""
+    folder = _finished(tmp_path)
+    part = folder / "items-000000003-000000005.csv"
+    _edit(part, ",44,1,0.01,", f",44,{cell},0.01,")               # run 5's jumps
+    rc, err = _run(tmp_path, capsys)
+    _refused(rc, err, "items-000000003-000000005.csv", "is damaged", "jumps")
+    assert not (tmp_path / "r.csv").exists() and part.exists()
