@@ -74,6 +74,9 @@ class PartStore:
                                  f"({_first_difference(have, want)}); rerun the same command to finish "
                                  f"that work, or pass --fresh to discard its chunks")
         else:
+            if not fresh and self.part_files():     # parts of unknown work: never mixed in, never deleted unasked
+                raise InputError(f"{self.folder} holds {len(self.part_files())} finished chunk(s) but no manifest.json "
+                                 "saying what work they are of; restore it, or pass --fresh to discard those chunks")
             for p in self.part_files():
                 p[2].unlink()
             self._write_text(manifest, json.dumps(want, indent=1))

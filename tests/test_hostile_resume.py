@@ -81,3 +81,14 @@ def test_a_part_whose_count_is_not_a_whole_number_is_refused(tmp_path, capsys, c
     rc, err = _run(tmp_path, capsys)
     _refused(rc, err, "items-000000003-000000005.csv", "is damaged", "jumps")
     assert not (tmp_path / "r.csv").exists() and part.exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_parts_without_their_manifest_are_kept_and_refused(tmp_path, capsys):
+    """A deleted manifest.json: the finished parts were deleted without a word and every run computed again."""
+    folder = _finished(tmp_path, "kinematic", ranges=((0, 3), (3, 6)))
+    (folder / "manifest.json").unlink()
+    rc, err = _run(tmp_path, capsys, "kinematic")
+    _refused(rc, err, "manifest.json", "--fresh")
+    assert (folder / "items-000000000-000000002.csv").exists() and (folder / "items-000000003-000000005.csv").exists()
+    assert not (tmp_path / "r.csv").exists()
