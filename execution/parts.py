@@ -215,6 +215,8 @@ def _first_difference(have, want) -> str:
         if have.get(key) != want.get(key):
             return f"{key} {have.get(key)!r}, not {want.get(key)!r}"
     hw, ww = have.get("work") or {}, want["work"]
+    if not isinstance(hw, dict):
+        return f"its work is {_short(hw)}, not a table"
     for key in sorted(set(hw) | set(ww)):
         if hw.get(key) != ww.get(key):
             return f"its {key} is {_short(hw.get(key))}, this run's is {_short(ww.get(key))}"

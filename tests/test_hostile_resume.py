@@ -92,3 +92,15 @@ def test_parts_without_their_manifest_are_kept_and_refused(tmp_path, capsys):
     _refused(rc, err, "manifest.json", "--fresh")
     assert (folder / "items-000000000-000000002.csv").exists() and (folder / "items-000000003-000000005.csv").exists()
     assert not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("work", [[1], "x", 3, None])
+def test_a_manifest_whose_work_is_not_a_table_is_refused(tmp_path, capsys, work):
+    folder = _finished(tmp_path)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["work"] = work
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    rc, err = _run(tmp_path, capsys)
+    _refused(rc, err, "holds finished chunks of other work", "--fresh")
+    assert len(list(folder.glob("items-*.csv"))) == 3
