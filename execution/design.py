@@ -62,6 +62,7 @@ def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_ite
     store = PartStore(parts_folder(csv_path), design.fingerprint(),
                       design.columns + list(EXTRA_COLUMNS), fresh=fresh)
     try:
+        _check_parts(store, len(design))
         out = map_chunked(design.row, range(len(design)), store, backend, chunk_items=chunk_items,
                           on_estimate=on_estimate, progress=progress, unit="runs")
         if out.failed_chunks:
@@ -173,6 +174,23 @@ def _write_nc_block(variables: dict, pending: list, shape: tuple[int, ...]) -> N
         column = np.concatenate([cols[name] for _, _, cols in pending])
         for index, offset, size in hyperslabs(a, b, shape):
             var[index] = column[offset - a: offset - a + size].reshape(_block_shape(index))
+
+
+def _check_parts(store: PartStore, n: int) -> None:
+    """Before any run: every part's runs lie in the design and no two parts hold the same run (a part
+    renamed or copied by hand; the missing runs are then computed, but the table could not be made)."""
+    prev = None
+    for a, b, path in store.part_files():
+        if not a < b <= n:
+            raise InputError(f"{path} is not a part of this design (its name says runs {a + 1}-{b}, the design has "
+                             f"runs 1-{n}); delete it and rerun the same command")
+        if prev is not None and a < prev[1]:
+            last = min(b, prev[1])
+            runs = f"run {last}" if last == a + 1 else f"runs {a + 1}-{last}"
+            raise InputError(f"{path} and {prev[2].name} both hold {runs}; delete one of "
+                             "them and rerun the same command")
+        if prev is None or b > prev[1]:
+            prev = (a, b, path)
 
 
 def _check_tiling(parts, n: int, store) -> None:

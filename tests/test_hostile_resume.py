@@ -104,3 +104,31 @@ def test_a_manifest_whose_work_is_not_a_table_is_refused(tmp_path, capsys, work)
     rc, err = _run(tmp_path, capsys)
     _refused(rc, err, "holds finished chunks of other work", "--fresh")
     assert len(list(folder.glob("items-*.csv"))) == 3
+
+
+def _rename(folder: Path, old: str, new: str) -> None:
+    (folder / old).rename(folder / new)
+
+
+def _copy(folder: Path, old: str, new: str) -> None:
+    (folder / new).write_bytes((folder / old).read_bytes())
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("tamper,named", [
+    (lambda f: _rename(f, "items-000000000-000000002.csv", "items-000000000-000000003.csv"), "items-000000003-000000005.csv"),
+    (lambda f: _copy(f, "items-000000003-000000005.csv", "items-0000000003-000000005.csv"), "items-000000003-000000005.csv"),
+    (lambda f: _copy(f, "items-000000003-000000005.csv", "items-000000002-000000004.csv"), "items-000000002-000000004.csv"),
+    (lambda f: _rename(f, "items-000000006-000000008.csv", "items-000000008-000000006.csv"), "items-000000008-000000006.csv"),
+    (lambda f: _copy(f, "items-000000006-000000008.csv", "items-000000009-000000011.csv"), "items-000000009-000000011.csv"),
+], ids=["longer-name", "same-range", "overlap", "backwards", "past-the-end"])
+def test_parts_that_overlap_or_lie_outside_the_design_are_refused_before_any_run(tmp_path, capsys, tamper, named):
+    """Before: 'runs 5-3 are missing, or ... overlaps another part; rerun the same command', and the
+    same refusal at every rerun (a backwards name even had runs computed again first)."""
+    folder = _finished(tmp_path, "kinematic")
+    tamper(folder)
+    before = sorted(p.name for p in folder.iterdir())
+    rc, err = _run(tmp_path, capsys, "kinematic")
+    _refused(rc, err, named, "delete")
+    assert "rerun the same command" not in err[-1] or "delete" in err[-1].split("rerun")[0]
+    assert sorted(p.name for p in folder.iterdir()) == before and not (tmp_path / "r.csv").exists()
