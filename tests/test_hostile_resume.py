@@ -132,3 +132,14 @@ def test_parts_that_overlap_or_lie_outside_the_design_are_refused_before_any_run
     _refused(rc, err, named, "delete")
     assert "rerun the same command" not in err[-1] or "delete" in err[-1].split("rerun")[0]
     assert sorted(p.name for p in folder.iterdir()) == before and not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("workers", ["99999999999999999999", "100000"])
+def test_more_workers_than_the_machine_can_run_is_refused_at_once(tmp_path, capsys, workers):
+    """--workers 99999999999999999999 ended in exit 70 (OverflowError in the process pool); 100000
+    was taken, and with runs left to do it would have started a process per queued chunk."""
+    folder = _finished(tmp_path, "kinematic")
+    rc, err = _run(tmp_path, capsys, "kinematic", "--workers", workers)
+    _refused(rc, err, "--workers", "cores")
+    assert len(list(folder.glob("items-*.csv"))) == 3 and not (tmp_path / "r.csv").exists()

@@ -7,6 +7,7 @@ the ANOVA (Fisher's F) and the reduced effect models in the paper's matrix form 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import List, Optional
 
@@ -77,6 +78,10 @@ def run(
         check_output_path(p, force)
     if workers is not None and workers < 1:
         raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
+    cores = os.cpu_count() or 1
+    if workers is not None and workers > 4 * cores:    # a process per queued chunk; 10^20 overflowed the pool
+        raise typer.BadParameter(f"must be at most {4 * cores} (4 x this machine's {cores} cores: more processes "
+                                 f"only share them), got {workers}", param_hint="--workers")
     if chunk_runs is not None and chunk_runs < 1:
         raise typer.BadParameter(f"must be >= 1, got {chunk_runs}", param_hint="--chunk-runs")
     fset = read_factors(factors) if factors is not None else table1_factors()
