@@ -143,3 +143,15 @@ def test_more_workers_than_the_machine_can_run_is_refused_at_once(tmp_path, caps
     rc, err = _run(tmp_path, capsys, "kinematic", "--workers", workers)
     _refused(rc, err, "--workers", "cores")
     assert len(list(folder.glob("items-*.csv"))) == 3 and not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_netcdf_named_as_the_parts_folder_is_refused_before_any_run(tmp_path, capsys, monkeypatch):
+    """--netcdf r.csv.parts: every run was computed, then 'Is a directory while writing r.csv and
+    r.csv.parts: neither was written; ... rerun the same command' - with r.csv written, and every
+    rerun the same."""
+    _design(tmp_path, "kinematic")
+    monkeypatch.chdir(tmp_path)
+    rc, err = _run(tmp_path, capsys, "kinematic", "--netcdf", "r.csv.parts")
+    _refused(rc, err, "--netcdf", "r.csv.parts")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]

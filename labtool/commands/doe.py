@@ -74,6 +74,9 @@ def run(
     nc_path = netcdf if netcdf is not None else output.with_suffix(".nc")
     if nc_path == output:
         raise typer.BadParameter("the NetCDF path must differ from the CSV path", param_hint="--netcdf")
+    if os.path.abspath(nc_path) == os.path.abspath(parts_folder(output)):
+        raise typer.BadParameter(f"{shown(nc_path)} is the folder of the CSV's finished chunks; name another "
+                                 "NetCDF file", param_hint="--netcdf")
     for p in (output, nc_path):
         check_output_path(p, force)
     if workers is not None and workers < 1:
