@@ -161,8 +161,11 @@ class PartStore:
     def read(self, path: Path) -> dict[str, list[str]]:
         """A part's cells as text, column -> one cell per row (empty: no value); InputError when
         its header is not the store's columns or a row has another number of cells."""
-        with open(path, newline="") as fh:
-            table = list(csv.reader(fh))
+        try:
+            with open(path, newline="") as fh:
+                table = list(csv.reader(fh))
+        except UnicodeDecodeError:
+            table = []                   # bytes the encoding it was written in cannot give: damaged
         if not table or table[0] != self.columns or any(len(r) != len(self.columns) for r in table[1:]):
             raise InputError(f"{path} is damaged (not a table of the columns {', '.join(self.columns)}); delete it "
                              "and rerun the same command to compute those runs again")

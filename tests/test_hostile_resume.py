@@ -155,3 +155,14 @@ def test_a_netcdf_named_as_the_parts_folder_is_refused_before_any_run(tmp_path, 
     rc, err = _run(tmp_path, capsys, "kinematic", "--netcdf", "r.csv.parts")
     _refused(rc, err, "--netcdf", "r.csv.parts")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]
+
+
+@pytest.mark.hostile("traceback")
+def test_a_part_with_bytes_that_are_not_utf8_is_refused(tmp_path, capsys):
+    """A byte 0xff in a part ended in exit 70 (UnicodeDecodeError)."""
+    folder = _finished(tmp_path)
+    part = folder / "items-000000003-000000005.csv"
+    part.write_bytes(part.read_bytes().replace(b",44,", b",4\xff4,"))
+    rc, err = _run(tmp_path, capsys)
+    _refused(rc, err, "items-000000003-000000005.csv", "is damaged")
+    assert part.exists() and not (tmp_path / "r.csv").exists()
