@@ -181,6 +181,9 @@ def _check_parts(store: PartStore, n: int) -> None:
     renamed or copied by hand; the missing runs are then computed, but the table could not be made)."""
     prev = None
     for a, b, path in store.part_files():
+        if not path.is_file():                 # a FIFO would block its reading for ever
+            raise InputError(f"{path} is not a regular file (a folder, a FIFO or a broken link); delete it and "
+                             "rerun the same command")
         if not a < b <= n:
             raise InputError(f"{path} is not a part of this design (its name says runs {a + 1}-{b}, the design has "
                              f"runs 1-{n}); delete it and rerun the same command")

@@ -8,6 +8,9 @@ lose the finished parts.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -166,3 +169,30 @@ def test_a_part_with_bytes_that_are_not_utf8_is_refused(tmp_path, capsys):
     rc, err = _run(tmp_path, capsys)
     _refused(rc, err, "items-000000003-000000005.csv", "is damaged")
     assert part.exists() and not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_part_that_is_a_folder_is_named_so(tmp_path, capsys):
+    """Before: 'Is a directory while writing r.csv and r.nc: ... free space and rerun the same command'."""
+    folder = _finished(tmp_path)
+    part = folder / "items-000000003-000000005.csv"
+    part.unlink()
+    part.mkdir()
+    rc, err = _run(tmp_path, capsys)
+    _refused(rc, err, "items-000000003-000000005.csv", "not a regular file", "delete it")
+    assert "free space" not in err[-1] and not (tmp_path / "r.csv").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("hang")
+def test_a_part_that_is_a_fifo_is_refused_without_waiting(tmp_path):
+    """A FIFO named as a part: 'doe run' waited for ever for a writer, opening it."""
+    folder = _finished(tmp_path)
+    part = folder / "items-000000003-000000005.csv"
+    part.unlink()
+    os.mkfifo(part)
+    out = subprocess.run([sys.executable, "-m", "labtool.cli", "doe", "run", "--model", "rigid", "--accuracy", "fast",
+                          "--factors", str(tmp_path / "f.csv"), "-o", str(tmp_path / "r.csv")],
+                         capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    err = out.stderr.strip().splitlines()
+    _refused(out.returncode, err, "items-000000003-000000005.csv", "not a regular file")
