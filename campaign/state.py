@@ -111,6 +111,13 @@ class PointState:
                                   "away to redo it") from None
         if not isinstance(doc, dict) or doc.get("format") != POINT_FORMAT or not isinstance(doc.get("steps"), dict):
             raise FileFormatError(f"{shown(st.file)} is not a labtool campaign point record")
+        for step, rec in doc["steps"].items():
+            if step in STEPS and not (isinstance(rec, dict) and isinstance(rec.get("inputs"), str)
+                                      and isinstance(rec.get("outputs"), dict)
+                                      and all(isinstance(v, str) for v in rec["outputs"].values())):
+                raise FileFormatError(f"{shown(st.file)} is not a labtool campaign point record (its {step} step is "
+                                      "not an inputs digest and a table of output digests); move the point's folder "
+                                      "away to redo it")
         st.recorded_spec = doc.get("spec")
         st.steps = {k: v for k, v in doc["steps"].items() if k in STEPS and isinstance(v, dict)}
         return st

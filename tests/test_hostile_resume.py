@@ -196,3 +196,62 @@ def test_a_part_that_is_a_fifo_is_refused_without_waiting(tmp_path):
                          capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
     err = out.stderr.strip().splitlines()
     _refused(out.returncode, err, "items-000000003-000000005.csv", "not a regular file")
+
+
+# ------------------------------------------------------------------------------------ campaign run
+
+CAMPAIGN_PLAN = """[campaign]
+name = "quick"
+[test]
+test_id = "T-1"
+operator = "tester"
+[device]
+seed = 3
+pacing = "fast"
+[calibration]
+files = ["{cal}"]
+[defaults]
+revolutions = 3
+[[points]]
+rpm = 180.0
+[compare]
+models = ["kinematic"]
+omega1 = ["const"]
+"""
+
+
+def _campaign_point(tmp_path: Path, steps) -> tuple[Path, Path]:
+    """A plan of one point and its folder holding a recording and a point.json with ``steps``
+    (a function of the acquire step's true inputs digest); returns (plan, campaign folder)."""
+    from campaign.plan import load_plan
+    from campaign.runner import _inputs, point_folder
+    from campaign.state import PointState, sha256_file
+    plan_path = tmp_path / "plan.toml"
+    plan_path.write_text(CAMPAIGN_PLAN.format(cal=Path(__file__).resolve().parents[1] / "sample_data" / "calibration.toml"))
+    plan = load_plan(plan_path)
+    out = tmp_path / "camp"
+    folder = point_folder(out, plan.points[0])
+    folder.mkdir(parents=True)
+    (folder / "recording.h5").write_bytes(b"a finished recording")
+    state = PointState(folder, plan.points[0].name, plan.points[0].spec())
+    doc = {"format": "labtool.campaign.point", "format_version": 1, "name": plan.points[0].name,
+           "spec": plan.points[0].spec(),
+           "steps": steps(_inputs(plan, plan.points[0], state, "acquire"), sha256_file(folder / "recording.h5"))}
+    (folder / "point.json").write_text(json.dumps(doc))
+    return plan_path, out
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("record", [
+    lambda inputs, sha: {"inputs": inputs, "outputs": ["recording.h5"]},
+    lambda inputs, sha: {"inputs": inputs, "outputs": {"recording.h5": 5}},
+    lambda inputs, sha: {"inputs": [inputs], "outputs": {"recording.h5": sha}},
+], ids=["outputs-list", "digest-number", "inputs-list"])
+def test_a_point_record_whose_step_is_malformed_is_refused(tmp_path, capsys, record):
+    """point.json's acquire step with its outputs a list ended in exit 70 (AttributeError: 'list'
+    object has no attribute 'items')."""
+    plan, out = _campaign_point(tmp_path, lambda inputs, sha: {"acquire": record(inputs, sha)})
+    rc = main(["campaign", "run", str(plan), "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    _refused(rc, err, "point.json", "acquire")
+    assert (out / "points" / "01_180rpm" / "recording.h5").read_bytes() == b"a finished recording"
