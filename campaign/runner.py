@@ -97,6 +97,10 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
             rep.step(point, step, "kept")
             continue
         if step == "acquire" and (folder / "recording.h5").exists():
+            if "acquire" not in state.steps and _finished_recording(folder / "recording.h5"):
+                raise InputError(f"point {point.name}: {shown(folder / 'recording.h5')} is a finished recording "
+                                 "that its point.json does not record (deleted or replaced); rerun with --redo "
+                                 f"{point.name} to record it again, or move the recording away")
             rep.warn(f"point {point.name}: its acquisition did not finish (killed or stopped); recording it again")
         t0 = time.perf_counter()
         _ensure_space(folder, point, step, plan)
@@ -112,6 +116,16 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
         rep.step(point, step, "done", _detail(step, info))
         worked = True
     return worked
+
+
+def _finished_recording(path: Path) -> bool:
+    """True when ``path`` is a recording that says it is complete (an acquisition that ended)."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as h:
+            return h.attrs.get("complete") in (True, 1)
+    except (OSError, ValueError):        # not HDF5, truncated: not a finished recording
+        return False
 
 
 def _need_bytes(folder: Path, point, step: str, plan: Plan) -> int:

@@ -255,3 +255,25 @@ def test_a_point_record_whose_step_is_malformed_is_refused(tmp_path, capsys, rec
     err = capsys.readouterr().err.strip().splitlines()
     _refused(rc, err, "point.json", "acquire")
     assert (out / "points" / "01_180rpm" / "recording.h5").read_bytes() == b"a finished recording"
+
+
+def _complete_recording(path: Path, complete: bool) -> bytes:
+    import h5py
+    with h5py.File(path, "w") as h:
+        h.attrs["complete"] = complete
+        h["signals"] = [[1.0, 2.0, 3.0]]
+    return path.read_bytes()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_finished_recording_that_point_json_does_not_record_is_kept(tmp_path, capsys):
+    """point.json deleted beside a finished recording: 'its acquisition did not finish (killed or
+    stopped); recording it again' - the measurement was replaced, exit 0."""
+    plan, out = _campaign_point(tmp_path, lambda inputs, sha: {})
+    folder = out / "points" / "01_180rpm"
+    (folder / "point.json").unlink()
+    before = _complete_recording(folder / "recording.h5", True)
+    rc = main(["campaign", "run", str(plan), "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    _refused(rc, err, "01_180rpm", "recording.h5", "--redo 01_180rpm")
+    assert (folder / "recording.h5").read_bytes() == before
