@@ -104,6 +104,9 @@ class PointState:
         st = cls(folder, name, spec)
         if not st.file.exists():
             return st
+        if not st.file.is_file():              # a FIFO would block its reading for ever
+            raise FileFormatError(f"{shown(st.file)} is not a regular file (a folder, a FIFO, a device); move the "
+                                  "point's folder away to redo it")
         try:
             doc = json.loads(st.file.read_text(encoding="utf-8"))
         except (OSError, ValueError, UnicodeDecodeError) as exc:

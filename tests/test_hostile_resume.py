@@ -277,3 +277,16 @@ def test_a_finished_recording_that_point_json_does_not_record_is_kept(tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     _refused(rc, err, "01_180rpm", "recording.h5", "--redo 01_180rpm")
     assert (folder / "recording.h5").read_bytes() == before
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("hang")
+def test_a_point_record_that_is_a_fifo_is_refused_without_waiting(tmp_path):
+    """A FIFO named point.json: 'campaign run' waited for ever for a writer, reading it."""
+    plan, out = _campaign_point(tmp_path, lambda inputs, sha: {})
+    record = out / "points" / "01_180rpm" / "point.json"
+    record.unlink()
+    os.mkfifo(record)
+    proc = subprocess.run([sys.executable, "-m", "labtool.cli", "campaign", "run", str(plan), "-o", str(out)],
+                          capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    _refused(proc.returncode, proc.stderr.strip().splitlines(), "point.json", "not a regular file")
