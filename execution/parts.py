@@ -65,8 +65,8 @@ class PartStore:
         manifest = self.folder / "manifest.json"
         want = {"format": FORMAT, "version": VERSION, "work": self.fingerprint, "columns": self.columns}
         if manifest.exists() and not fresh:
-            try:
-                have = json.loads(manifest.read_text())
+            try:                                   # a FIFO would block its reading for ever
+                have = json.loads(manifest.read_text()) if manifest.is_file() else None
             except (OSError, ValueError):
                 have = None
             if have != want:

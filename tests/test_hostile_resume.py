@@ -290,3 +290,17 @@ def test_a_point_record_that_is_a_fifo_is_refused_without_waiting(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "labtool.cli", "campaign", "run", str(plan), "-o", str(out)],
                           capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
     _refused(proc.returncode, proc.stderr.strip().splitlines(), "point.json", "not a regular file")
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("hang")
+def test_a_manifest_that_is_a_fifo_is_refused_without_waiting(tmp_path):
+    """A FIFO named manifest.json: 'doe run' waited for ever for a writer, reading it."""
+    folder = _finished(tmp_path, "kinematic")
+    (folder / "manifest.json").unlink()
+    os.mkfifo(folder / "manifest.json")
+    out = subprocess.run([sys.executable, "-m", "labtool.cli", "doe", "run", "--model", "kinematic", "--accuracy", "fast",
+                          "--factors", str(tmp_path / "f.csv"), "-o", str(tmp_path / "r.csv")],
+                         capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    _refused(out.returncode, out.stderr.strip().splitlines(), "manifest.json", "--fresh")
+    assert len(list(folder.glob("items-*.csv"))) == 3
