@@ -84,7 +84,10 @@ class PartStore:
             tmp.unlink(missing_ok=True)
 
     def _lock(self) -> None:
-        fh = open(self.folder / "lock", "a+")
+        path = self.folder / "lock"
+        if path.exists() and not path.is_file():
+            raise InputError(f"{path} is not a regular file (a folder, a FIFO); delete it and rerun the same command")
+        fh = open(path, "a+")
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

@@ -304,3 +304,15 @@ def test_a_manifest_that_is_a_fifo_is_refused_without_waiting(tmp_path):
                          capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
     _refused(out.returncode, out.stderr.strip().splitlines(), "manifest.json", "--fresh")
     assert len(list(folder.glob("items-*.csv"))) == 3
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("kind", ["fifo", "folder"])
+def test_a_lock_that_is_not_a_regular_file_is_named(tmp_path, capsys, kind):
+    """A FIFO named lock: 'labtool: error: File or stream is not seekable.', naming nothing."""
+    folder = _finished(tmp_path, "kinematic")
+    (folder / "lock").unlink()
+    os.mkfifo(folder / "lock") if kind == "fifo" else (folder / "lock").mkdir()
+    rc, err = _run(tmp_path, capsys, "kinematic")
+    _refused(rc, err, str(folder / "lock"), "not a regular file")
+    assert len(list(folder.glob("items-*.csv"))) == 3
