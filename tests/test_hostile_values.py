@@ -237,6 +237,7 @@ def _program_mechanism(tmp_path):
 
 
 @pytest.mark.hostile("silent_wrong")
+@pytest.mark.slow
 def test_kinematics_takes_the_law_rise_and_stroke_of_its_mechanism_file(tmp_path, capsys):
     """kinematics --mechanism with law = "poly345", rise_deg = 70 wrote a sine rise of 58 deg, exit 0."""
     mech = _program_mechanism(tmp_path)
@@ -345,6 +346,7 @@ def test_acquire_refuses_a_ka_no_chain_has(tmp_path, capsys, ka):
     "{}",    # UndefinedError: 'dict object' has no attribute 'cam_speed_rpm'
     '{"format": "labtool.report.summary", "operating_point": {"cam_speed_rpm": 180}, "measured": {}, "headline": "x"}',
 ], ids=["list", "empty", "headline-text"])
+@pytest.mark.slow
 def test_campaign_report_on_a_hand_edited_summary_is_one_line(tmp_path, capsys, text):
     from common.files import write_netcdf
 
@@ -358,6 +360,7 @@ def test_campaign_report_on_a_hand_edited_summary_is_one_line(tmp_path, capsys, 
 
 
 @pytest.mark.hostile("traceback")
+@pytest.mark.slow
 def test_campaign_report_on_a_foreign_cycles_file_is_one_line(tmp_path, capsys):
     """A point's cycles.nc without the overlays (another NetCDF file copied there) was an internal
     error: KeyError: "No variable named 'phi1'..."."""
@@ -394,6 +397,7 @@ def test_a_scene_ka_past_the_calibration_bounds_is_named_by_its_key(tmp_path, ca
 
 
 @pytest.mark.hostile("silent_wrong")
+@pytest.mark.slow
 def test_a_stated_low_pass_that_is_not_a_number_is_refused(tmp_path, capsys, measured_nc):
     """lowpass_hz = "300 Hz" (and the history unreadable) was read as "no low-pass": the models went
     unfiltered against the filtered measurement (rigid epsilon2 ISO 0.623 -> 0.616), exit 0, no word."""
