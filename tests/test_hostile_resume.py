@@ -200,34 +200,15 @@ def test_a_part_that_is_a_fifo_is_refused_without_waiting(tmp_path):
 
 # ------------------------------------------------------------------------------------ campaign run
 
-CAMPAIGN_PLAN = """[campaign]
-name = "quick"
-[test]
-test_id = "T-1"
-operator = "tester"
-[device]
-seed = 3
-pacing = "fast"
-[calibration]
-files = ["{cal}"]
-[defaults]
-revolutions = 3
-[[points]]
-rpm = 180.0
-[compare]
-models = ["kinematic"]
-omega1 = ["const"]
-"""
-
-
 def _campaign_point(tmp_path: Path, steps) -> tuple[Path, Path]:
-    """A plan of one point and its folder holding a recording and a point.json with ``steps``
-    (a function of the acquire step's true inputs digest); returns (plan, campaign folder)."""
+    """A plan (test_campaign_run.quick_plan) and its first point's folder holding a recording and a
+    point.json with ``steps`` (a function of the acquire step's true inputs digest); returns (plan,
+    campaign folder)."""
     from campaign.plan import load_plan
     from campaign.runner import _inputs, point_folder
     from campaign.state import PointState, sha256_file
-    plan_path = tmp_path / "plan.toml"
-    plan_path.write_text(CAMPAIGN_PLAN.format(cal=Path(__file__).resolve().parents[1] / "sample_data" / "calibration.toml"))
+    from test_campaign_run import quick_plan
+    plan_path = quick_plan(tmp_path)           # its first point is the one made here
     plan = load_plan(plan_path)
     out = tmp_path / "camp"
     folder = point_folder(out, plan.points[0])
