@@ -20,13 +20,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-import os
 import shutil
 from pathlib import Path
 
 import numpy as np
 
-from common.errors import InputError
+from common.errors import InputError, OutputError
+from common.files import OutputSet
 from execution.chunked import map_chunked
 from execution.parts import DiskFull, PartStore, _is_disk_full, float_cells
 
@@ -103,11 +103,11 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
         raise DiskFull(f"{csv_path} and {nc_path} need about {need / 1e6:.3g} MB, {free / 1e6:.3g} MB are free: "
                        f"nothing written; all {len(design)} runs are finished and kept in {store.folder}; free "
                        "space and rerun the same command to write the results without computing again")
-    tmp_csv = csv_path.with_name(f".{csv_path.name}.tmp")
-    tmp_nc = nc_path.with_name(f".{nc_path.name}.tmp")
     failures, n_failed = {}, 0
     pending = []                  # consecutive parts' columns not yet in the NetCDF
+    out = OutputSet()             # both renamed, or neither (a failed rename puts the first back)
     try:
+        tmp_csv, tmp_nc = out.add(csv_path), out.add(nc_path)
         with open(tmp_csv, "w") as fh, h5netcdf.File(tmp_nc, "w") as nc:
             variables = _netcdf_layout(nc, design)
             writer = csv.writer(fh, lineterminator="\n")
@@ -149,18 +149,20 @@ def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: s
                     pending.clear()
             nc.attrs["failed_runs"] = _failed_text(failures, n_failed)
             nc.attrs["history"] = history
-        os.replace(tmp_csv, csv_path)
-        os.replace(tmp_nc, nc_path)
-    except OSError as exc:
-        tmp_csv.unlink(missing_ok=True)
-        tmp_nc.unlink(missing_ok=True)
-        reason = "disk full" if _is_disk_full(exc) else exc.strerror or str(exc)
-        raise DiskFull(f"{reason} while writing {csv_path} and {nc_path}: neither was written; all "
-                       f"{len(design)} runs are finished and kept in {store.folder}; free space and rerun "
-                       "the same command to write the results without computing again") from None
+        out.commit()
+    except (OSError, OutputError) as exc:
+        out.rollback()
+        kept = f"all {len(design)} runs are finished and kept in {store.folder}"
+        again = "the same command to write the results without computing again"
+        if isinstance(exc, OutputError) and exc.errno is None:     # a file of the set not created or renamed
+            raise DiskFull(f"{exc}; {kept}; once that is fixed, rerun {again}") from None
+        full = exc.errno is not None if isinstance(exc, OutputError) else _is_disk_full(exc)
+        reason = "disk full" if full else exc.strerror or str(exc)
+        advice = "free space and rerun" if full else "once that is fixed, rerun"
+        raise DiskFull(f"{reason} while writing {csv_path} and {nc_path}: neither was written; {kept}; "
+                       f"{advice} {again}") from None
     except BaseException:
-        tmp_csv.unlink(missing_ok=True)
-        tmp_nc.unlink(missing_ok=True)
+        out.rollback()
         raise
     return failures, n_failed
 

@@ -1,0 +1,67 @@
+"""One-line errors whose advice must be true: what was kept, where, and what the user can do.
+
+Each case here was a message that named the wrong thing or advised what cannot help (free space on
+a disk that is not full, rerun when a rerun ends the same way).
+"""
+from __future__ import annotations
+
+import errno
+import os
+from pathlib import Path
+
+import pytest
+
+from execution.design import parts_folder
+from execution.parts import PartStore
+from labtool.cli import main
+
+FACTORS_9 = "factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,5,10\nB,n1,rpm,150,165,180\n"
+
+
+def _refused(rc, err, *words) -> None:
+    assert rc == 2 and err and err[-1].startswith("labtool: error:"), err
+    for w in words:
+        assert w in err[-1], err[-1]
+
+
+# ------------------------------------------------------------------------------------ doe run
+
+def _finished_design(tmp_path: Path) -> Path:
+    """The parts folder of a 3 x 3 kinematic design with every run finished (made-up values)."""
+    from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors
+    (tmp_path / "f.csv").write_text(FACTORS_9)
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
+    rows = [{"run": i + 1, **dict(zip(design.level_columns, design.level_indices(i))),
+             **{c: float(10 * i + k) for k, c in enumerate(design.responses)}, "wall_s": 0.01, "error": ""}
+            for i in range(9)]
+    store.write(0, 9, rows)
+    store.close()
+    return store.folder
+
+
+def _doe(tmp_path: Path, capsys, *extra) -> tuple[int, list[str]]:
+    rc = main(["doe", "run", "--model", "kinematic", "--accuracy", "fast", "--factors", str(tmp_path / "f.csv"),
+               "-o", str(tmp_path / "r.csv"), *extra])
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_netcdf_that_cannot_be_renamed_leaves_neither_output_and_says_why(tmp_path, capsys, monkeypatch):
+    """The CSV was renamed into place, the NetCDF's rename failed (EACCES): 'Permission denied while
+    writing r.csv and r.nc: neither was written; ... free space and rerun' - with r.csv written and
+    a disk that was not full."""
+    folder = _finished_design(tmp_path)
+    real_replace = os.replace
+
+    def replace(src, dst, *a, **k):
+        if Path(dst) == tmp_path / "r.nc":
+            raise PermissionError(errno.EACCES, "Permission denied", str(dst))
+        return real_replace(src, dst, *a, **k)
+    monkeypatch.setattr(os, "replace", replace)
+    rc, err = _doe(tmp_path, capsys)
+    _refused(rc, err, "r.nc", "Permission denied", "none of r.csv, r.nc was written", str(folder), "rerun")
+    assert "free space" not in err[-1]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv", "r.csv.parts"]
+    assert len(list(folder.glob("items-*.csv"))) == 1
