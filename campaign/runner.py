@@ -21,7 +21,7 @@ from common.errors import InputError, LabtoolError
 from common.names import shown
 from campaign import steps
 from campaign.plan import Plan
-from campaign.state import CampaignLock, PointState, clean_partials, sha256_file, sha256_json
+from campaign.state import OUTPUTS, STEPS, CampaignLock, PointState, clean_partials, sha256_file, sha256_json
 
 POINTS_DIR = "points"
 
@@ -79,6 +79,18 @@ def _check_existing(plan: Plan, point, state: PointState, redo: set) -> None:
     what = f"its {', '.join(keys)} changed" if keys else "the plan's device or test metadata changed"
     raise InputError(f"point {point.name} in {shown(state.folder.parent.parent)} was recorded with other settings "
                      f"({what}); rerun with --redo {point.name} to record it again, or use another output folder")
+
+
+def _check_point_paths(point, folder: Path) -> None:
+    """Refuse a point folder that is a file, or a point output that is a folder: no step can
+    replace them, so "rerun to resume" would end the same way for ever (the user's, left alone)."""
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"point {point.name}: {shown(folder)} is a file, where the point's folder goes; "
+                         "move it away and rerun")
+    for name in (n for step in STEPS for n in OUTPUTS[step]):
+        if (folder / name).is_dir():
+            raise InputError(f"point {point.name}: {shown(folder / name)} is a folder, where the point writes "
+                             f"its {name}; move it away and rerun")
 
 
 def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> bool:
@@ -205,6 +217,8 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
             _keep_plan_copy(plan, folder)
         except OSError as exc:
             raise InputError(f"cannot write in the campaign folder {shown(folder)}: {exc.strerror or exc}") from None
+        for p in plan.points:
+            _check_point_paths(p, point_folder(folder, p))
         states = [PointState.load(point_folder(folder, p), p.name, p.spec()) for p in plan.points]
         for p, st in zip(plan.points, states):
             _check_existing(plan, p, st, redo)

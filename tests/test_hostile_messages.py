@@ -65,3 +65,61 @@ def test_a_netcdf_that_cannot_be_renamed_leaves_neither_output_and_says_why(tmp_
     assert "free space" not in err[-1]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv", "r.csv.parts"]
     assert len(list(folder.glob("items-*.csv"))) == 1
+
+
+# ------------------------------------------------------------------------------------ campaign run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _one_point_plan(tmp_path: Path) -> Path:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(f"""[campaign]
+name = "quick"
+[device]
+seed = 3
+pacing = "fast"
+[calibration]
+files = ["{ROOT / 'sample_data' / 'calibration.toml'}"]
+[defaults]
+revolutions = 3
+[[points]]
+rpm = 180.0
+[compare]
+models = ["kinematic"]
+omega1 = ["const"]
+""")
+    return plan
+
+
+def _campaign(tmp_path: Path, capsys, *extra) -> tuple[int, list[str]]:
+    rc = main(["campaign", "run", str(_one_point_plan(tmp_path)), "-o", str(tmp_path / "c"), *extra])
+    return rc, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("name", ["recording.h5", "measured.nc"])
+def test_a_point_output_that_is_a_folder_is_named_with_what_to_do(tmp_path, capsys, name):
+    """recording.h5 made a folder: 'point 01_180rpm (acquire): cannot write in .../01_180rpm: Is a
+    directory; the finished points and steps are kept, rerun to resume', and every rerun the same."""
+    point = tmp_path / "c" / "points" / "01_180rpm"
+    (point / name).mkdir(parents=True)
+    (point / name / "mine.txt").write_text("kept")
+    for _ in range(2):
+        rc, err = _campaign(tmp_path, capsys)
+        _refused(rc, err, "01_180rpm", name, "is a folder", "move it away")
+        assert "rerun to resume" not in err[-1]
+    assert (point / name / "mine.txt").read_text() == "kept"
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("redo", [False, True])
+def test_a_point_folder_that_is_a_file_is_named_with_what_to_do(tmp_path, capsys, redo):
+    """The point's folder made a plain file: '.../points/01_180rpm: File exists' (and with --redo
+    'Not a directory'), with nothing to do."""
+    point = tmp_path / "c" / "points" / "01_180rpm"
+    point.parent.mkdir(parents=True)
+    point.write_text("mine")
+    rc, err = _campaign(tmp_path, capsys, *(["--redo", "01_180rpm"] if redo else []))
+    _refused(rc, err, "01_180rpm", "is a file", "move it away")
+    assert point.read_text() == "mine"
