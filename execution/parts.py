@@ -69,6 +69,14 @@ class PartStore:
                 have = json.loads(manifest.read_text()) if manifest.is_file() else None
             except (OSError, ValueError):
                 have = None
+            if not isinstance(have, dict):             # what work the parts are of is unknown
+                n = len(self.part_files())
+                what = (f"{manifest} is not a regular file (a folder, a FIFO), so what work the {n} finished "
+                        f"chunk(s) in {self.folder} are of is unknown; move it away, then restore it or pass "
+                        "--fresh to discard those chunks") if not manifest.is_file() else (
+                        f"{manifest} cannot be read as a JSON table, so what work the {n} finished chunk(s) "
+                        f"in {self.folder} are of is unknown; restore it, or pass --fresh to discard those chunks")
+                raise InputError(what)
             if have != want:
                 raise InputError(f"{self.folder} holds finished chunks of other work "
                                  f"({_first_difference(have, want)}); rerun the same command to finish "

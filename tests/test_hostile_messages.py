@@ -123,3 +123,44 @@ def test_a_point_folder_that_is_a_file_is_named_with_what_to_do(tmp_path, capsys
     rc, err = _campaign(tmp_path, capsys, *(["--redo", "01_180rpm"] if redo else []))
     _refused(rc, err, "01_180rpm", "is a file", "move it away")
     assert point.read_text() == "mine"
+
+
+def _doe_parts(tmp_path: Path) -> Path:
+    """A 3 x 3 kinematic design with its first 3 runs finished (made-up values), not yet assembled."""
+    from models.dynamics.scene import Scene
+    from models.study.doe import Design, read_factors
+    (tmp_path / "f.csv").write_text(FACTORS_9)
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
+    store.write(0, 3, [{"run": i + 1, **dict(zip(design.level_columns, design.level_indices(i))),
+                        **{c: 1.0 for c in design.responses}, "wall_s": 0.01, "error": ""} for i in range(3)])
+    store.close()
+    return store.folder
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("damage", ["not-json", "a-list", "a-folder"])
+def test_a_manifest_that_cannot_be_read_gets_advice_that_helps(tmp_path, capsys, damage):
+    """'r.csv.parts holds finished chunks of other work (its manifest.json is not readable); rerun
+    the same command to finish that work, or pass --fresh ...': the same command ends the same way,
+    and for a folder --fresh ended 'cannot write .../manifest.json (Is a directory)'."""
+    folder = _doe_parts(tmp_path)
+    manifest = folder / "manifest.json"
+    if damage == "a-folder":
+        manifest.unlink()
+        manifest.mkdir()
+    else:
+        manifest.write_text("{not json" if damage == "not-json" else "[1, 2]")
+    rc, err = _doe(tmp_path, capsys)
+    _refused(rc, err, "manifest.json", "1 finished chunk")
+    assert "rerun the same command" not in err[-1]
+    assert len(list(folder.glob("items-*.csv"))) == 1
+    if damage == "a-folder":
+        assert "move it away" in err[-1]
+        manifest.rmdir()
+        rc, err = _doe(tmp_path, capsys)
+        _refused(rc, err, "manifest.json", "--fresh")
+    rc, err = _doe(tmp_path, capsys, "--fresh")
+    assert rc == 0, err
+    assert (tmp_path / "r.csv").exists() and not folder.exists()
