@@ -10,6 +10,7 @@ import math
 
 from common import recording_attrs as names
 from common.errors import InputError
+from common.names import shown
 from models.mechanism.motion_laws import ALIASES, LAWS
 
 MAX_TEXT = 2000  # characters of a free-text attribute
@@ -32,6 +33,10 @@ def check_text(name: str, value) -> str:
         raise InputError(f"{name} must be text, got {value!r}")
     if "\x00" in value or len(value) > MAX_TEXT:
         raise InputError(f"{name} must be text of at most {MAX_TEXT} characters without NUL bytes")
+    if any("\ud800" <= c <= "\udfff" for c in value):     # a byte the shell passed that is not UTF-8
+        option = OPTION.get(name, "--" + name.replace("_", "-"))
+        raise InputError(f"{name} ({option}) is not UTF-8 text: {shown(value)}; type it again in UTF-8 (a "
+                         "terminal set to Latin-1 sends a byte such as \\xe9 for an accented letter)")
     return value.strip()
 
 

@@ -164,3 +164,17 @@ def test_a_manifest_that_cannot_be_read_gets_advice_that_helps(tmp_path, capsys,
     rc, err = _doe(tmp_path, capsys, "--fresh")
     assert rc == 0, err
     assert (tmp_path / "r.csv").exists() and not folder.exists()
+
+
+# ------------------------------------------------------------------------------------ acquire
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("option", ["--test-id", "--operator", "--notes", "--motor-setting"])
+def test_a_text_option_that_is_not_utf8_is_named(tmp_path, capsys, option):
+    """--test-id $'T\\xff1' (a Latin-1 shell): 'a file name given is not valid UTF-8 and cannot be
+    written into the outputs; rename the file (e.g. with convmv)' - no file name was at fault."""
+    rc = main(["acquire", "--device", "sim", "--duration", "0.05", "--fast", option, "T\udcff1",
+               "-o", str(tmp_path / "a.h5")])
+    err = capsys.readouterr().err.strip().splitlines()
+    _refused(rc, err, option, "not UTF-8", "T\\xff1")
+    assert "file name" not in err[-1] and not list(tmp_path.iterdir())
