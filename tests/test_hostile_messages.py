@@ -178,3 +178,16 @@ def test_a_text_option_that_is_not_utf8_is_named(tmp_path, capsys, option):
     err = capsys.readouterr().err.strip().splitlines()
     _refused(rc, err, option, "not UTF-8", "T\\xff1")
     assert "file name" not in err[-1] and not list(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------------ kinematics
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_rise_that_does_not_fit_the_mechanisms_program_names_the_values_to_change(tmp_path, capsys):
+    """--rise-deg 70 on the STB-216: 'cam program: rise + dwells + return = 372 deg, must be 360 deg',
+    without saying that the dwells and the return are the mechanism file's, nor what would fit."""
+    rc = main(["kinematics", "--rise-deg", "70", "-o", str(tmp_path / "k.nc")])
+    err = capsys.readouterr().err.strip().splitlines()
+    _refused(rc, err, "rise_deg 70 (given)", "upper_dwell_deg 122", "return_deg 58", "lower_dwell_deg 122",
+             "= 372 deg", "stb216.toml", "rise of 58 deg")
+    assert not list(tmp_path.iterdir())

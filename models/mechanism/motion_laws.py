@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from common.errors import InputError
+from common.names import shown
 
 TWO_PI = 2.0 * math.pi
 
@@ -228,6 +229,7 @@ class CamProgram:
             lower_dwell=d(prog["lower_dwell_deg"]) if "lower_dwell_deg" in prog else None,
         )
         kw.update({k: v for k, v in overrides.items() if v is not None})
+        _check_program_sum(mech, kw, [k for k, v in overrides.items() if v is not None])
         return cls.rise_dwell_return_dwell(**kw)
 
     @property
@@ -291,3 +293,27 @@ class CamProgram:
                 level = 1.0 * self.stroke if seg.kind == "rise" else 0.0
             start = end
         return tuple(out)
+
+
+def _check_program_sum(mech, kw: dict, given: list[str]) -> None:
+    """A program whose four angles are all stated (the mechanism's [program], or a value given over
+    it) must add up to 360 deg: the line names each angle, where it comes from, and what would fit."""
+    parts = (("rise", "rise_deg"), ("upper_dwell", "upper_dwell_deg"), ("ret", "return_deg"),
+             ("lower_dwell", "lower_dwell_deg"))
+    if any(kw.get(k) is None for k, _ in parts):
+        return
+    total = sum(kw[k] for k, _ in parts)
+    if math.isclose(total, TWO_PI, rel_tol=0, abs_tol=1e-9):
+        return
+    terms = " + ".join(f"{name} {math.degrees(kw[k]):.6g}" + (" (given)" if k in given else "") for k, name in parts)
+    mine = [(k, name) for k, name in parts if k in given]
+    where = f"[program] of the mechanism {shown(mech.source)}"
+    if not mine:
+        fix = f"change the {where} so that they add up to 360"
+    else:
+        k, name = mine[0]
+        need = TWO_PI - (total - kw[k])
+        fix = (f"give a {name[:-4].replace('_', ' ')} of {math.degrees(need):.6g} deg, or " if 0 < need < TWO_PI
+               else "give ") + "a mechanism file whose [program] angles add up to 360 with yours"
+        fix = f"the others are the {where}; {fix}"
+    raise InputError(f"cam program: {terms} = {math.degrees(total):.6g} deg, must be 360 deg; {fix}")
