@@ -14,7 +14,9 @@ import signal
 import threading
 import time
 
-from acquisition.device import Device, DeviceDisconnected, Event
+import numpy as np
+
+from acquisition.device import Block, Device, DeviceDisconnected, Event
 from acquisition.recorder import DiskFull, Recorder, _classify
 from common.errors import InputError, Interrupted
 from common.files import inside_another_command
@@ -79,6 +81,10 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
             block = device.read_block()
             if block is None:
                 outcome, message = "done", "device finished"
+                if target is not None and rec.device_index < target:   # its last samples never came
+                    missing = target - rec.device_index
+                    rec.write_block(Block(np.empty((0, len(device.channel_names)), np.float32), target))
+                    message = f"device finished {missing} samples short of the requested duration (a gap)"
                 break
             if target is not None and block.end_index > target:
                 block.data = block.data[: max(0, target - block.first_index)]

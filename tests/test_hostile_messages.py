@@ -191,3 +191,21 @@ def test_a_rise_that_does_not_fit_the_mechanisms_program_names_the_values_to_cha
     _refused(rc, err, "rise_deg 70 (given)", "upper_dwell_deg 122", "return_deg 58", "lower_dwell_deg 122",
              "= 372 deg", "stb216.toml", "rise of 58 deg")
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_a_last_block_lost_is_recorded_as_lost(tmp_path, capsys):
+    """--fault drop@0.95 --duration 1: 9000 of 10000 samples, 'device finished', no gap event and
+    samples_lost = 0: the loss was silent (a drop at 0.45 s is a gap of 1000 samples)."""
+    import h5py
+    rc = main(["acquire", "--device", "sim", "--fast", "--duration", "1", "--fault", "drop@0.95",
+               "-o", str(tmp_path / "a.h5"), "--status-every", "0"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert "1 gaps" in out.out + out.err
+    with h5py.File(tmp_path / "a.h5", "r") as h:
+        assert h.attrs["n_samples"] == 9000 and h.attrs["samples_lost"] == 1000
+        assert "1000 samples short" in h.attrs["stop_reason"]
+        gaps = [e for e in h["events"][:] if e["kind"] == b"gap"]
+        assert len(gaps) == 1 and gaps[0]["index"] == 9000 and gaps[0]["detail"].startswith(b"missing_samples=1000 ")
