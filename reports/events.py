@@ -196,7 +196,7 @@ def measured(cycles, det: impacts.Detector, mech, program) -> dict:
         for sl in _pieces(t, e2, th):
             theta = np.unwrap(th[sl])
             w1 = np.gradient(theta, t[sl])
-            n_avg = max(int(0.05 * TWO_PI / max(float(np.median(np.abs(np.diff(theta)))), 1e-9)), 1)
+            n_avg = min(max(int(0.05 * TWO_PI / max(float(np.median(np.abs(np.diff(theta)))), 1e-9)), 1), sl.size)
             w1 = np.convolve(w1, np.ones(n_avg) / n_avg, mode="same")
             ref = kinematic_epsilon2(np.mod(theta, TWO_PI), w1, mech, program)
             r = e2[sl] - ref

@@ -1,0 +1,33 @@
+"""Hostile file contents (hunt 3): hand-edited measured files and text exports, where earlier hunts
+tried options. Each ends with one line and exit 2 (tests/hostile.py ``one_error_line``), or, where
+the file is usable, with exit 0 and the right answer."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from hostile import REPORT_FAST, cli, measured_nc, one_error_line  # noqa: F401
+
+
+def _measured(tmp_path, measured_nc, change):
+    ds = xr.open_dataset(measured_nc, decode_times=False).load()
+    ds = change(ds) or ds
+    path = tmp_path / "m.nc"
+    ds.to_netcdf(path)
+    return path
+
+
+# --- traceback: measured files for report ------------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.hostile("traceback")
+def test_report_on_a_measured_file_with_a_short_run_of_finite_samples(tmp_path, capsys, measured_nc):
+    """epsilon2 NaN from sample 100 to 200 left a piece of 100 finite samples, shorter than the
+    impact detector's speed average (166 samples at 180 rpm): an internal error (ValueError:
+    operands could not be broadcast together with shapes (100,) (166,))."""
+    def edit(ds):
+        ds["epsilon2"][100:200] = np.nan
+    path = _measured(tmp_path, measured_nc, edit)
+    code, err = cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "r.html").exists()
