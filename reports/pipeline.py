@@ -112,10 +112,14 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
         if name not in ds:
             raise InputError(f"{where} has no {name}; the report compares measured omega2 and epsilon2 "
                              "(run 'labtool process' on the recording)")
-        if "time" not in ds[name].dims:
-            raise InputError(f"{where}: {name} is not a signal over time (dims {ds[name].dims})")
+        if ds[name].dims != ("time",):
+            raise InputError(f"{where}: {name} is not a signal over time (dims {ds[name].dims}; "
+                             "the report takes one value per sample, dims ('time',))")
     if "phi1" not in ds:
         raise InputError(f"{where} has no cam angle phi1; run 'labtool process' on a recording with a tacho channel")
+    if ds["phi1"].dims != ("time",):
+        raise InputError(f"{where}: phi1 is not a cam angle over time (dims {ds['phi1'].dims}; "
+                         "the report takes one value per sample, dims ('time',))")
     for name, unit in MEASURED_UNITS.items():
         stated = ds[name].attrs.get("units")
         if stated is not None and udunits(as_text(stated)) != unit:

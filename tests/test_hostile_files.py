@@ -31,3 +31,22 @@ def test_report_on_a_measured_file_with_a_short_run_of_finite_samples(tmp_path, 
     code, err = cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys)
     assert code == 0, err
     assert (tmp_path / "r.html").exists()
+
+
+def _two_columns(ds):
+    """omega2 over (time, x): two columns of one signal, as another tool may store channels."""
+    ds["omega2"] = (("time", "x"), np.stack([ds["omega2"].values] * 2, axis=1))
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("command", [[*["report"], "{m}", *REPORT_FAST, "-o", "{o}/r.html"],
+                                     ["export", "{m}", "--csv", "-o", "{o}/x"]], ids=["report", "export"])
+def test_a_measured_signal_over_two_dimensions_is_refused(tmp_path, capsys, measured_nc, command):
+    """omega2 over (time, x) was an internal error: report 'ValueError: operands could not be
+    broadcast together with shapes (40000,) (40000,2) (40000,)', export 'ValueError: Per-column
+    arrays must each be 1-dimensional'."""
+    path = _measured(tmp_path, measured_nc, _two_columns)
+    args = [str(a).format(m=path, o=tmp_path) for a in command]
+    line = one_error_line(*cli(args, capsys))
+    assert "omega2" in line and "('time', 'x')" in line and "time" in line
+    assert not list(tmp_path.glob("r.html")) and not list(tmp_path.glob("x_*.csv"))

@@ -87,6 +87,11 @@ def _open(path: Path):
     if missing:
         ds.close()
         raise FileFormatError(f"{path}: not a measured file from 'labtool process' (missing {', '.join(missing)})")
+    for name in SERIES:
+        if ds[name].dims != ("time",):
+            ds.close()
+            raise FileFormatError(f"{path}: variable '{name}' is over dims {ds[name].dims}, not one value per "
+                                  "sample ('time',); the file is damaged or not from 'labtool process'")
     for name in ds.variables:
         if name in need or name.endswith(("_mean", "_std", "_kinematic")):
             if ds[name].dtype.kind not in "fiub":
