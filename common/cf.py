@@ -71,6 +71,15 @@ def time_units(start) -> str:
         f".{t.microsecond:06d}".rstrip("0") if t.microsecond else "") + "+00:00"
 
 
+def in_seconds(units) -> bool:
+    """Whether a time variable's stated ``units`` are seconds (``s``, ``seconds``, ``seconds since
+    <start>``, as :func:`time_units` writes them); no unit stated counts as seconds."""
+    if units is None:
+        return True
+    text = (units.decode("utf-8", "replace") if isinstance(units, bytes) else str(units)).strip()
+    return text.partition(" since ")[0].strip() in ("", "s", "sec", "secs", "second", "seconds")
+
+
 def time_attrs(start, long_name: str = "time") -> dict:
     """Attributes of a ``time`` coordinate (absolute when the start is known)."""
     units = time_units(start)

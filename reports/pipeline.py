@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from common.cf import udunits
+from common.cf import in_seconds, udunits
 from common.names import shown
 from common.errors import FileFormatError, InputError, LabtoolError
 from processing import impacts
@@ -120,6 +120,9 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
     if ds["phi1"].dims != ("time",):
         raise InputError(f"{where}: phi1 is not a cam angle over time (dims {ds['phi1'].dims}; "
                          "the report takes one value per sample, dims ('time',))")
+    if "time" in ds.variables and not in_seconds(ds["time"].attrs.get("units")):
+        raise InputError(f"{where}: its time is in '{shown(as_text(ds['time'].attrs['units']))}', the report reads it "
+                         "in seconds (s, or 'seconds since <start>', as 'labtool process' writes it); convert time to s")
     for name, unit in MEASURED_UNITS.items():
         stated = ds[name].attrs.get("units")
         if stated is not None and udunits(as_text(stated)) != unit:

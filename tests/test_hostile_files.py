@@ -50,3 +50,38 @@ def test_a_measured_signal_over_two_dimensions_is_refused(tmp_path, capsys, meas
     line = one_error_line(*cli(args, capsys))
     assert "omega2" in line and "('time', 'x')" in line and "time" in line
     assert not list(tmp_path.glob("r.html")) and not list(tmp_path.glob("x_*.csv"))
+
+
+def _time_in(unit, scale):
+    def edit(ds):
+        ds["time"] = ("time", (ds["time"].values - ds["time"].values[0]) * scale, {"units": unit})
+    return edit
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("unit, scale", [("ms", 1e3), ("minutes since 2026-01-01", 1 / 60)])
+def test_export_refuses_a_time_that_is_not_in_seconds(tmp_path, capsys, measured_nc, unit, scale):
+    """time with units "ms" was written as the column 'time [s]' in ms (3999.9 for 4 s), exit 0."""
+    path = _measured(tmp_path, measured_nc, _time_in(unit, scale))
+    line = one_error_line(*cli(["export", path, "--csv", "-o", tmp_path / "x"], capsys))
+    assert unit in line and "seconds" in line
+    assert not list(tmp_path.glob("x_*.csv"))
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_report_refuses_a_time_that_is_not_in_seconds(tmp_path, capsys, measured_nc):
+    """time in ms was read as seconds: the cam turned 1000x slower (at 180 rpm refused as 'cam speed
+    0.18 rpm is outside the range'; at 1000 rpm simulated at 1 rpm)."""
+    path = _measured(tmp_path, measured_nc, _time_in("ms", 1e3))
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert "'ms'" in line and "seconds" in line
+
+
+@pytest.mark.parametrize("unit", [None, "s", "seconds", "seconds since 2026-12-07T01:08:47+00:00"])
+def test_a_time_in_seconds_is_exported(tmp_path, capsys, measured_nc, unit):
+    def edit(ds):
+        ds["time"] = ("time", ds["time"].values, {} if unit is None else {"units": unit})
+    path = _measured(tmp_path, measured_nc, edit)
+    code, err = cli(["export", path, "--csv", "-o", tmp_path / "x"], capsys)
+    assert code == 0, err

@@ -87,6 +87,12 @@ def _open(path: Path):
     if missing:
         ds.close()
         raise FileFormatError(f"{path}: not a measured file from 'labtool process' (missing {', '.join(missing)})")
+    from common.cf import in_seconds
+    from common.names import shown
+    if not in_seconds(ds["time"].attrs.get("units")):
+        ds.close()
+        raise FileFormatError(f"{path}: its time is in '{shown(str(ds['time'].attrs['units']))}', export writes 'time [s]' "
+                              "(s, or 'seconds since <start>', as 'labtool process' writes it); convert time to s")
     for name in SERIES:
         if ds[name].dims != ("time",):
             ds.close()
