@@ -215,8 +215,7 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
                     v, name = metres * 1e3, "backlash_m"
         if v is None:  # not in the file: the paper's experiment, said so (and noted on the page)
             out[key], out[f"{key}_source"] = EXPERIMENT[key], "not in the file: the paper's experiment"
-            if key != "law":
-                out.setdefault("assumed", []).append(key)
+            out.setdefault("assumed", []).append(key)
         else:
             stated = ds.attrs.get(f"{name}_source")
             out[key] = v
@@ -443,8 +442,9 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
                      f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
     if op.get("assumed"):
         names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
-                 "jt_factor": ("inertia factor Jt", "", "--jt-factor")}
-        said = ", ".join(f"{names[k][0]} = {op[k]:g}{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
+                 "jt_factor": ("inertia factor Jt", "", "--jt-factor"), "law": ("motion law", "", "--law")}
+        said = ", ".join(f"{names[k][0]} = {op[k] if isinstance(op[k], str) else format(op[k], 'g')}"
+                         f"{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
         notes.append(f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
                      f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
                      "stand ran otherwise")

@@ -85,3 +85,18 @@ def test_a_time_in_seconds_is_exported(tmp_path, capsys, measured_nc, unit):
     path = _measured(tmp_path, measured_nc, edit)
     code, err = cli(["export", path, "--csv", "-o", tmp_path / "x"], capsys)
     assert code == 0, err
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_report_says_when_the_measured_file_states_no_law(tmp_path, capsys, measured_nc):
+    """A measured file without its law attribute (another tool's) was compared with the sine law with
+    exit 0 and no note, where a missing Fu, j or Jt is noted."""
+    from labtool.cli import main
+    path = _measured(tmp_path, measured_nc, lambda ds: ds.attrs.pop("law") and None)
+    capsys.readouterr()
+    code = main(["report", str(path), *REPORT_FAST, "-o", str(tmp_path / "r.html")])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    note = [line for line in out.out.splitlines() if "does not state" in line]
+    assert note and "motion law = sine" in note[0] and "--law" in note[0], out.out
