@@ -8,6 +8,24 @@ import pytest
 import xarray as xr
 
 from hostile import REPORT_FAST, cli, measured_nc, one_error_line  # noqa: F401
+from stand_data import stand_volts
+
+
+@pytest.fixture(scope="module")
+def volts():
+    return stand_volts(2.0)[0]
+
+
+def _csv(tmp_path, volts, header: dict, time_column: bool = True):
+    """A CSV export of the stand recording (aE_t, aE_n, tacho in V) with a ``# key = value`` header."""
+    path = tmp_path / "rec.csv"
+    t = np.arange(volts.shape[0]) / 1e4
+    lines = [f"# {k} = {v}" for k, v in header.items()]
+    lines.append(("time [s]," if time_column else "") + "aE_t [V],aE_n [V],tacho [V]")
+    rows = np.column_stack([t, volts]) if time_column else volts
+    lines += [",".join("%.9g" % v for v in r) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def _measured(tmp_path, measured_nc, change):
@@ -100,3 +118,15 @@ def test_report_says_when_the_measured_file_states_no_law(tmp_path, capsys, meas
     assert code == 0, out.err
     note = [line for line in out.out.splitlines() if "does not state" in line]
     assert note and "motion law = sine" in note[0] and "--law" in note[0], out.out
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("key, value, unit", [("ka_aE_t", "86.43 m/s^2/V", "m/s^2/V"), ("cam_speed_rpm", "fast", "rpm")])
+def test_a_csv_header_value_that_is_not_one_number_is_refused(tmp_path, capsys, volts, key, value, unit):
+    """ka_aE_t = "86.43 m/s^2/V" was read as "not stated": the paper's Ka was used with a warning that
+    the recording gives none (right here by chance; 864.3 gave omega2 10x too small), exit 0."""
+    header = {"sample_rate_hz": 10000, "cam_speed_rpm": 180, "ka_aE_t": 86.43, "ka_aE_n": 86.43, key: value}
+    rec = _csv(tmp_path, volts, header)
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert key.lower() in line and value in line and unit in line
+    assert not (tmp_path / "m.nc").exists()

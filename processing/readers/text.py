@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from common.errors import FileFormatError, InputError
+from common.names import shown
 from processing.readers.base import Recording, check_finite, check_sample_rate
 from processing.readers.units import signal_unit, split_name_unit, time_unit
 
@@ -138,8 +139,8 @@ def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | 
         return out
 
     attrs = {k: v for k, v in meta.items()}
-    rpm = _number(meta.get("cam_speed_rpm"))
-    ka = np.array([_number(meta.get(f"ka_{c.lower()}")) for c in names])
+    rpm = _stated(meta, "cam_speed_rpm", "rpm", src)
+    ka = np.array([_stated(meta, f"ka_{c.lower()}", "m/s^2/V", src) for c in names])
     rec = Recording(source=src, format=fmt, sample_rate_hz=fs, channel_names=names, n_samples=n, read=read,
                     ka_m_s2_per_v=ka, start_time_utc=start_iso or str(meta.get("start_time_utc", "")),
                     cam_speed_rpm=rpm if rpm > 0 else math.nan, attrs=attrs, channel_units=units,
@@ -154,6 +155,19 @@ def _number(v) -> float:
         return float(str(v).replace(",", ".")) if v is not None else math.nan
     except ValueError:
         return math.nan
+
+
+def _stated(meta: dict, key: str, unit: str, src: str) -> float:
+    """The header's ``key`` as one number (NaN when absent or empty); text that is not one number
+    ("864.3 m/s^2/V", "fast") is refused: read as "not stated", a Ka fell back to the paper's."""
+    v = meta.get(key)
+    if v is None or not str(v).strip():
+        return math.nan
+    x = _number(v)
+    if math.isnan(x) and str(v).strip().lower() != "nan":
+        raise FileFormatError(f"{src}: header '{key}' = {shown(str(v))!r} is not one number ({unit}); "
+                              f"write the number alone, in {unit}")
+    return x
 
 
 def _rate(src, path, offsets, n, lay: Layout, head, given_fs, given_unit):
