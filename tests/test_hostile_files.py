@@ -130,3 +130,22 @@ def test_a_csv_header_value_that_is_not_one_number_is_refused(tmp_path, capsys, 
     line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
     assert key.lower() in line and value in line and unit in line
     assert not (tmp_path / "m.nc").exists()
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("key, value, unit", [("sample_rate_hz", "10 kHz", "Hz"), ("dt", "0.1 ms", "in s")])
+def test_a_csv_header_rate_in_another_unit_is_refused(tmp_path, capsys, volts, key, value, unit):
+    """sample_rate_hz = "10 kHz" was read as 10 Hz (the number before the unit): without a time column
+    or a stated cam speed, process wrote "cam 0.18 rpm ... low-pass 0 Hz" with exit 0."""
+    rec = _csv(tmp_path, volts, {key: value, "ka_aE_t": 86.43, "ka_aE_n": 86.43}, time_column=False)
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert key in line and value in line and unit in line
+    assert not (tmp_path / "m.nc").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("value", ["10000", "10000 Hz", "10000 S/s"])
+def test_a_csv_header_rate_in_hz_is_read(tmp_path, capsys, volts, value):
+    rec = _csv(tmp_path, volts, {"sample_rate_hz": value, "ka_aE_t": 86.43, "ka_aE_n": 86.43}, time_column=False)
+    code, err = cli(["process", rec, "-o", tmp_path / "m.nc"], capsys)
+    assert code == 0, err

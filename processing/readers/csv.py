@@ -127,12 +127,23 @@ def _rate_from_meta(meta: dict, path) -> float | None:
     return None
 
 
+RATE_UNITS = ("", "hz", "1/s", "s-1", "s/s", "sa/s", "samples/s", "sps")   # what may follow a rate's number
+STEP_UNITS = ("", "s", "sec", "second", "seconds")                          # ... and a sample interval's
+
+
 def _num(text, path, what) -> float:
     m = re.match(r"\s*([-+]?[\d.,]+(?:[eE][-+]?\d+)?)", str(text))
     try:
-        return float(m.group(1).replace(",", ".")) if m else float("nan")
+        x = float(m.group(1).replace(",", ".")) if m else float("nan")
     except ValueError:
         raise InputError(f"{path}: header '{what}' = {text!r} is not a number") from None
+    # a unit after the number must be the key's own: "10 kHz" was read as 10 Hz, "0.1 ms" as 0.1 s
+    rest, (units, unit) = str(text)[m.end():].strip().lower() if m else "", (
+        (STEP_UNITS, "s") if what in STEP_KEYS else (RATE_UNITS, "Hz"))
+    if rest not in units:
+        raise InputError(f"{path}: header '{what}' = {text!r} is not a number in {unit}; write it in {unit} "
+                         "(10 kHz is 10000 Hz, 0.1 ms is 0.0001 s)")
+    return x
 
 
 def open_csv(path, sample_rate_hz: float | None = None, delimiter: str | None = None, decimal: str | None = None,
