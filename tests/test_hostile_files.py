@@ -149,3 +149,18 @@ def test_a_csv_header_rate_in_hz_is_read(tmp_path, capsys, volts, value):
     rec = _csv(tmp_path, volts, {"sample_rate_hz": value, "ka_aE_t": 86.43, "ka_aE_n": 86.43}, time_column=False)
     code, err = cli(["process", rec, "-o", tmp_path / "m.nc"], capsys)
     assert code == 0, err
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("value", ["1e300", "1e30"])
+def test_a_sample_past_any_adc_is_refused(tmp_path, capsys, volts, value):
+    """One CSV cell of 1e300 V was processed with exit 0: omega2 inf at 5768 samples, omega2_mean up
+    to 4e298 rad/s, "|omega2| vs sqrt(aE_n/DE): inf % rms" and numpy RuntimeWarnings on stderr."""
+    rec = _csv(tmp_path, volts, {"sample_rate_hz": 10000, "ka_aE_t": 86.43, "ka_aE_n": 86.43})
+    text = rec.read_text().splitlines()
+    row = text[4 + 5000].split(",")      # 3 header lines, the column names, then sample 5000
+    text[4 + 5000] = ",".join([row[0], value, *row[2:]])
+    rec.write_text("\n".join(text) + "\n")
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert "sample 5000 of channel 'aE_t'" in line and f"{float(value):g}" in line and "1e+12" in line
+    assert not (tmp_path / "m.nc").exists()

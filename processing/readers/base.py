@@ -182,13 +182,22 @@ def check_sample_rate(value, source: str) -> float:
     return fs
 
 
+MAX_SAMPLE = 1e12   # V or m/s^2: past any ADC or accelerometer; x Ka (<= 1e6) and squared it stays finite
+
+
 def check_finite(block: np.ndarray, start: int, names: list[str], source: str) -> None:
-    """NaN or Inf volts are not a measurement: InputError naming the first bad sample."""
+    """NaN or Inf volts are not a measurement: InputError naming the first bad sample. Nor is a
+    sample past MAX_SAMPLE: 1e300 V in a CSV cell made the chain's omega2 inf with exit 0."""
     bad = ~np.isfinite(block)
     if bad.any():
         i, j = np.argwhere(bad)[0]
         raise InputError(f"{source}: sample {start + i} of channel '{names[j]}' is {block[i, j]} (NaN/Inf); "
                          "the recording is damaged")
+    big = np.abs(block) > MAX_SAMPLE
+    if big.any():
+        i, j = np.argwhere(big)[0]
+        raise InputError(f"{source}: sample {start + i} of channel '{names[j]}' is {block[i, j]:g}, past any ADC or "
+                         f"accelerometer (|sample| <= {MAX_SAMPLE:g} V or m/s^2); the recording is damaged")
 
 
 def stated_number(attrs, name: str, source, option: str) -> float | None:
