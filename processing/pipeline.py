@@ -41,7 +41,7 @@ from processing import cam_angle, cycles, events, filters, follower, kernels, sp
 from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from processing.ka import ka_for_channels
 from processing.readers import Recording
-from processing.readers.base import check_finite, stated_number
+from processing.readers.base import MAX_SAMPLE, check_finite, stated_number
 from processing.workspace import Workspace
 from processing.writer import CoreBlock, MeasuredWriter
 
@@ -390,7 +390,7 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
 
 def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
     """Extremes of every channel; every sample checked finite (pass 2 reads unchecked after this)."""
-    if kernels.scan_block(block, vmin, vmax) >= 0:
+    if kernels.scan_block(block, vmin, vmax) >= 0 or max(-vmin.min(), vmax.max()) > MAX_SAMPLE:
         check_finite(np.asarray(block, dtype=float), first, rec.channel_names, rec.source)
 
 

@@ -164,3 +164,18 @@ def test_a_sample_past_any_adc_is_refused(tmp_path, capsys, volts, value):
     line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
     assert "sample 5000 of channel 'aE_t'" in line and f"{float(value):g}" in line and "1e+12" in line
     assert not (tmp_path / "m.nc").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_a_recorded_sample_past_any_adc_is_refused(tmp_path, capsys, volts):
+    """A v1 recording (no adc_range_v) with one sample of 3e38 V was processed with exit 0: aE_t inf at
+    83 samples, epsilon2_mean up to 8e39 rad/s^2, "10 revolutions averaged, 0 clipped samples"."""
+    from stand_data import write_v1
+    bad = np.array(volts, dtype=np.float32)
+    bad[5000, 0] = 3e38
+    rec = tmp_path / "rec.h5"
+    write_v1(rec, bad)
+    line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
+    assert "sample 5000 of channel 'aE_t'" in line and "1e+12" in line
+    assert not (tmp_path / "m.nc").exists()
