@@ -120,6 +120,8 @@ def load_target(path: Path, cond: align.Conditioning | None = None, overrides: d
     if tf is None:
         notes.append("the file records no processing low-pass: the models see only the common harmonic low-pass, "
                      "and no impacts are measured (the fit uses the cycles alone)")
+    if op.get("assumed"):   # a default the file does not state changes the identified values: say so
+        notes.append(pipeline.assumed_note(op))
     meas_ev = pipeline.measured_events(cycles, det, op)
     if len(cycles.revolutions) < 2:
         notes.append("one whole revolution only: its scatter is unknown, every point weighs alike "

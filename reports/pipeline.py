@@ -429,6 +429,17 @@ def fitted_run(fit: dict, accuracy: str, revolutions: float, cond, time_filter) 
     return run
 
 
+def assumed_note(op: dict) -> str:
+    """The note naming the operating-point values the measured file does not state (``op["assumed"]``)."""
+    names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
+             "jt_factor": ("inertia factor Jt", "", "--jt-factor"), "law": ("motion law", "", "--law")}
+    said = ", ".join(f"{names[k][0]} = {op[k] if isinstance(op[k], str) else format(op[k], 'g')}"
+                     f"{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
+    return (f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
+            f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
+            "stand ran otherwise")
+
+
 def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
     notes = []
     if time_filter is None:
@@ -441,13 +452,7 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
         notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
                      f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
     if op.get("assumed"):
-        names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
-                 "jt_factor": ("inertia factor Jt", "", "--jt-factor"), "law": ("motion law", "", "--law")}
-        said = ", ".join(f"{names[k][0]} = {op[k] if isinstance(op[k], str) else format(op[k], 'g')}"
-                         f"{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
-        notes.append(f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
-                     f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
-                     "stand ran otherwise")
+        notes.append(assumed_note(op))
     stated = op.get("cam_speed_rpm_stated")
     if stated and abs(cycles.cam_speed_rpm / stated - 1.0) > 0.002:
         notes.append(f"the file states {stated:g} rpm ({op['cam_speed_stated_by']}), the cam turned at "

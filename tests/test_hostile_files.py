@@ -179,3 +179,23 @@ def test_a_recorded_sample_past_any_adc_is_refused(tmp_path, capsys, volts):
     line = one_error_line(*cli(["process", rec, "-o", tmp_path / "m.nc"], capsys))
     assert "sample 5000 of channel 'aE_t'" in line and "1e+12" in line
     assert not (tmp_path / "m.nc").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_fit_says_when_the_measured_file_states_no_law_or_load(tmp_path, capsys, measured_nc):
+    """fit on a measured file without law and Fu_N identified the backlash under the paper's sine law
+    and Fu = 0 with exit 0 and no note (report notes them)."""
+    from labtool.cli import main
+
+    def edit(ds):
+        ds.attrs.pop("law")
+        ds.attrs.pop("Fu_N", None)
+    path = _measured(tmp_path, measured_nc, edit)
+    capsys.readouterr()
+    code = main(["fit", str(path), "--model", "rigid", "--free", "backlash", "--accuracy", "fast", "--no-scan",
+                 "--max-runs", "4", "-o", str(tmp_path / "f.json")])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    note = [line for line in out.out.splitlines() if "does not state" in line]
+    assert note and "load Fu" in note[0] and "motion law = sine" in note[0] and "--law" in note[0], out.out
