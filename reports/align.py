@@ -236,6 +236,9 @@ def read_measured(ds: xr.Dataset, names, cond: Conditioning, extra=(),
     return MeasuredCycles(first.grid, np.concatenate(revs), signals, times, 0, rpm, in_file, [b for b, _ in parts])
 
 
+MAX_MEASURED = 1e12   # rad/s, rad/s^2: a measured omega2 or epsilon2 past it is no motion (its square must stay finite)
+
+
 def _unwrapped_angle(phi1: np.ndarray) -> np.ndarray:
     """Cam angle that keeps growing over the recording (rad); accepts wrapped or unwrapped phi1."""
     return np.unwrap(phi1)
@@ -256,6 +259,11 @@ def measured_cycles(ds: xr.Dataset, names, cond: Conditioning) -> MeasuredCycles
         ok &= np.isfinite(y)
     if ok.sum() < 16:
         raise InputError("the measured file has fewer than 16 usable samples of phi1 and the signals")
+    for n, y in data.items():   # 1e300 rad/s overflowed the impact check (OverflowError) as a bug
+        big = np.flatnonzero(ok & (np.abs(y) > MAX_MEASURED))
+        if big.size:
+            raise InputError(f"the measured file's {n} reaches {y[big[0]]:g}, past any follower's motion "
+                             f"(|{n}| <= {MAX_MEASURED:g} in SI units); the file is damaged: process the recording again")
     t, phi = t[ok], phi[ok]
     data = {n: y[ok] for n, y in data.items()}
     if np.any(np.diff(t) <= 0):

@@ -199,3 +199,18 @@ def test_fit_says_when_the_measured_file_states_no_law_or_load(tmp_path, capsys,
     assert code == 0, out.err
     note = [line for line in out.out.splitlines() if "does not state" in line]
     assert note and "load Fu" in note[0] and "motion law = sine" in note[0] and "--law" in note[0], out.out
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("var", ["omega2", "epsilon2"])
+def test_a_measured_signal_past_any_motion_is_refused(tmp_path, capsys, measured_nc, var):
+    """omega2 = 1e300 rad/s (a damaged or foreign file) was an internal error in report and fit
+    (OverflowError: (34, 'Numerical result out of range') in the impact check)."""
+    def edit(ds):
+        y = ds[var].values.astype(float)
+        y[np.isfinite(y)] = 1e300
+        ds[var] = ("time", y, ds[var].attrs)
+    path = _measured(tmp_path, measured_nc, edit)
+    line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
+    assert var in line and "1e+300" in line and "1e+12" in line
