@@ -214,3 +214,19 @@ def test_a_measured_signal_past_any_motion_is_refused(tmp_path, capsys, measured
     path = _measured(tmp_path, measured_nc, edit)
     line = one_error_line(*cli(["report", path, *REPORT_FAST, "-o", tmp_path / "r.html"], capsys))
     assert var in line and "1e+300" in line and "1e+12" in line
+
+
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("delta", ["0", "abc", "0.0001 s"])
+def test_an_lvm_delta_x_that_is_no_interval_is_refused(tmp_path, capsys, volts, delta):
+    """An LVM channel header's Delta_X of 0 was an internal error (ZeroDivisionError: float division by
+    zero), "abc" another (ValueError: could not convert string to float: 'abc')."""
+    from test_readers_formats import _lvm
+    path = tmp_path / "rec.lvm"
+    _lvm(path, volts, "\t", ".")
+    text = path.read_text()
+    assert "Delta_X\t0.0001\t0.0001\t0.0001" in text
+    path.write_text(text.replace("Delta_X\t0.0001\t0.0001\t0.0001", f"Delta_X\t{delta}\t{delta}\t{delta}"))
+    line = one_error_line(*cli(["process", path, "-o", tmp_path / "m.nc"], capsys))
+    assert "Delta_X" in line and delta in line and "seconds > 0" in line
+    assert not (tmp_path / "m.nc").exists()

@@ -10,7 +10,10 @@ when written, is checked row by row against it (text.py).
 """
 from __future__ import annotations
 
+import math
+
 from common.errors import FileFormatError, InputError
+from common.names import shown
 from processing.readers.csv import read_head
 from processing.readers.text import Layout, open_table
 
@@ -40,12 +43,20 @@ def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | Non
     if len(ends) > 2:
         raise FileFormatError(f"{path}: the LVM file holds {len(ends) - 1} segments; labtool reads one per file "
                               "(save the measurement as one segment)")
-    deltas = {float(x.replace(dec, ".")) for x in chan.get("delta_x", []) if x.strip()}
+    try:
+        deltas = {float(x.strip().replace(dec, ".")) for x in chan.get("delta_x", []) if x.strip()}
+    except ValueError:
+        deltas = {math.nan}
+    if len(deltas) > 1 and not all(math.isfinite(d) and d > 0 for d in deltas):
+        deltas = {math.nan}
     if len(deltas) > 1:
         raise InputError(f"{path}: the channels have different Delta_X {sorted(deltas)} s; labtool needs one rate")
-    rate = 1.0 / deltas.pop() if deltas else None
-    if rate is not None and not rate > 0:
-        raise InputError(f"{path}: Delta_X is not a usable sample interval")
+    delta = deltas.pop() if deltas else None
+    if delta is not None and not (math.isfinite(delta) and delta > 0):   # 0 was a ZeroDivisionError
+        said = shown(", ".join(x.strip() for x in chan.get("delta_x", [])))
+        raise InputError(f"{path}: Delta_X {said!r} is not a usable sample interval (a number of seconds > 0); "
+                         "fix the LVM channel header")
+    rate = 1.0 / delta if delta is not None else None
     time_col = 0 if columns and columns[0].lower() == "x_value" else None
     units = {}
     labels = [u for u in chan.get("unit_label", []) if u.strip()]
