@@ -56,6 +56,7 @@ def _two_columns(ds):
     ds["omega2"] = (("time", "x"), np.stack([ds["omega2"].values] * 2, axis=1))
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("traceback")
 @pytest.mark.parametrize("command", [[*["report"], "{m}", *REPORT_FAST, "-o", "{o}/r.html"],
                                      ["export", "{m}", "--csv", "-o", "{o}/x"]], ids=["report", "export"])
@@ -76,6 +77,7 @@ def _time_in(unit, scale):
     return edit
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("unit, scale", [("ms", 1e3), ("minutes since 2026-01-01", 1 / 60)])
 def test_export_refuses_a_time_that_is_not_in_seconds(tmp_path, capsys, measured_nc, unit, scale):
@@ -96,6 +98,7 @@ def test_report_refuses_a_time_that_is_not_in_seconds(tmp_path, capsys, measured
     assert "'ms'" in line and "seconds" in line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("unit", [None, "s", "seconds", "seconds since 2026-12-07T01:08:47+00:00"])
 def test_a_time_in_seconds_is_exported(tmp_path, capsys, measured_nc, unit):
     def edit(ds):
