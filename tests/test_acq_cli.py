@@ -51,6 +51,7 @@ def test_recovered_omega2_matches_the_truth(tmp_path):
         assert np.sqrt(np.mean((omega - truth) ** 2)) < 0.05 * truth.max()
 
 
+@pytest.mark.slow
 def test_scene_file_and_overrides(tmp_path):
     scene = tmp_path / "s.toml"
     scene.write_text('[stand]\ncam_speed_rpm = 500\nseed = 9\nduration_s = 0.5\nlaw = "sine"\nbacklash_mm = 0.128\n')

@@ -95,6 +95,7 @@ def test_an_open_hdf5_file_gets_the_normal_exit(tmp_path):
         assert np.array_equal(f["x"][()], np.arange(1000.0))
 
 
+@pytest.mark.slow
 def test_a_sigterm_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path):
     # CI found it: SIGTERM's Interrupted raised inside a garbage-collector callback is printed
     # and dropped by Python, and labtool demo went on and exited 0. The handler keeps the signal:
@@ -121,6 +122,7 @@ def test_a_sigterm_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path
     assert "interrupted (SIGTERM)" in proc.stderr and not out.exists()
 
 
+@pytest.mark.slow
 def test_a_sigterm_dropped_in_a_step_after_its_commit_ends_the_command_that_runs_it(tmp_path):
     # CI found it: in labtool demo's acquire step the signal was dropped after the step's last
     # commit; the step ended 143 by itself and the demo reported "demo step 'acquire' failed",

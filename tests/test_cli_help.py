@@ -49,6 +49,7 @@ def test_a_unit_in_brackets_survives():
     assert "[mm]" in out and "[rpm]" in out
 
 
+@pytest.mark.slow
 def test_a_command_group_loads_only_its_own_module_and_help_still_lists_every_command():
     """``labtool doe ...`` registers the doe group alone (the other commands' modules are not
     imported: a shorter start); ``--help`` afterwards, in the same process, lists every command in

@@ -311,6 +311,7 @@ def test_doe_run_elastic_closed_gap_reproduces_table3_counts(tmp_path, capsys):
     assert "gap closed" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_doe_run_to_a_pipe_loads_no_rich_and_a_forced_terminal_gets_the_bar(tmp_path):
     """Off a terminal the command's stderr gets plain lines (LineProgress, the resuming line) and
     rich is not imported (a shorter start); FORCE_COLOR makes rich take stderr for a terminal, and

@@ -135,6 +135,7 @@ def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
     assert checked >= 5
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(xp=st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=40, unique=True),
        fp=st.lists(st.floats(-1e6, 1e6), min_size=40, max_size=40),

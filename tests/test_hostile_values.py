@@ -122,6 +122,7 @@ def _measured(tmp_path, measured_nc, change):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("attr, value, option", [("Fu_N", "heavy", "--fu"), ("jt_factor", "x", "--jt-factor"),
                                                  ("backlash_mm", "wide", "--backlash-mm")])
@@ -133,6 +134,7 @@ def test_an_operating_point_attribute_that_is_not_a_number_is_refused(tmp_path, 
     assert attr in line and option in line
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 def test_a_backlash_in_metres_that_is_not_a_number_is_refused(tmp_path, capsys, measured_nc):
     """The backlash_m fallback is read as strictly as backlash_mm: "wide" is not the paper's 0.128 mm."""
@@ -144,6 +146,7 @@ def test_a_backlash_in_metres_that_is_not_a_number_is_refused(tmp_path, capsys, 
     assert "backlash_m " in line and "--backlash-mm" in line
 
 
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("var, unit", [("omega2", "deg/s"), ("epsilon2", "rpm"), ("phi1", "deg")])
 def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measured_nc, var, unit):
@@ -154,6 +157,7 @@ def test_measured_quantities_in_other_units_are_refused(tmp_path, capsys, measur
 
 
 # --- silent wrong: export ---------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("umask", [0o022, 0o002])
 def test_export_follows_the_users_umask(tmp_path, capsys, measured_nc, umask):
