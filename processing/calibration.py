@@ -33,6 +33,7 @@ from scipy import optimize
 
 from common.errors import FileFormatError, InputError
 from common.names import shown, utf8_text
+from processing.readers.base import stated_number
 
 MAX_FIT_SAMPLES = 2_000_000     # 200 s at 10 kHz: more adds nothing to a sine fit but memory
 MAX_HARMONIC_DISTORTION = 0.05  # (2f, 3f) / fundamental above which the reference is not a clean sine
@@ -295,27 +296,12 @@ def fit_recording_channel(rec, channel: str, reference: ReferenceSpec) -> Channe
     if clip_rows:
         raise InputError(f"{where}: the recorder marked {len(clip_rows)} clipped samples (first at row {clip_rows[0]}); "
                          "lower the exciter level or the conditioner gain and record again")
-    check_volts(x, where, _adc_range(rec.attrs.get("adc_range_v"), where))
+    # the text "10" is 10 V, as process reads it; text that is no number was passed over
+    check_volts(x, where, stated_number(rec.attrs, "adc_range_v", rec.source))
     fit = fit_sine(x, rec.sample_rate_hz, reference.freq_hz, t=t, where=where)
     check_distortion(fit, where)
     ka, std_fit, _ = ka_from_fit(fit, reference.accel_m_s2, reference.convention, reference.rel_uncertainty)
     return ChannelFit(channel, utf8_text(rec.source), ka, std_fit, fit)   # a non-UTF-8 byte as \xff (TOML holds text)
-
-
-def _adc_range(raw, where: str) -> float | None:
-    """The recording's ``adc_range_v`` (V) as one number, as processing reads it (the text "10" is
-    10 V); None when not stated. Text that is no number is FileFormatError: "10" was passed over,
-    and a sine at the ADC's rails was calibrated without a word."""
-    if raw is None:
-        return None
-    try:
-        if np.size(raw) != 1:
-            raise ValueError
-        value = np.asarray(raw).ravel()[0]
-        return float(value.decode() if isinstance(value, bytes) else value)
-    except (TypeError, ValueError, UnicodeDecodeError):
-        raise FileFormatError(f"{where}: attribute adc_range_v = {shown(str(raw))!r} is not one number of volts; "
-                              "fix the file") from None
 
 
 def pair_channels(recordings, channels) -> list[tuple[str, str]]:

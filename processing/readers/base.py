@@ -200,11 +200,11 @@ def check_finite(block: np.ndarray, start: int, names: list[str], source: str) -
                          f"accelerometer (|sample| <= {MAX_SAMPLE:g} V or m/s^2); the recording is damaged")
 
 
-def stated_number(attrs, name: str, source, option: str) -> float | None:
+def stated_number(attrs, name: str, source, option: str | None = None) -> float | None:
     """The attribute ``name`` of ``attrs`` (a file's attributes) as one number, None when the file
     has none; one that is not one number is InputError naming ``source`` and the option ``option``
-    that gives the value instead. (Read loosely, such an attribute was taken for "not stated": a
-    default replaced what the file meant.)"""
+    that gives the value instead, if there is one. (Read loosely, such an attribute was taken for
+    "not stated": a default replaced what the file meant.)"""
     raw = attrs.get(name)
     if raw is None:
         return None
@@ -213,8 +213,8 @@ def stated_number(attrs, name: str, source, option: str) -> float | None:
             raise ValueError
         return float(np.asarray(raw).ravel()[0])
     except (TypeError, ValueError):
-        raise InputError(f"{shown(source)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file "
-                         f"or give {option}") from None
+        raise InputError(f"{shown(source)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file"
+                         + (f" or give {option}" if option else "")) from None
 
 
 def as_text(value) -> str:
