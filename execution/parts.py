@@ -65,27 +65,28 @@ class PartStore:
         manifest = self.folder / "manifest.json"
         want = {"format": FORMAT, "version": VERSION, "work": self.fingerprint, "columns": self.columns}
         if manifest.exists() and not fresh:
-            try:                                   # a FIFO would block its reading for ever
-                have = json.loads(manifest.read_text()) if manifest.is_file() else None
+            unknown = (f"so what work the {len(self.part_files())} finished chunk(s) in {self.folder} are of "
+                       "is unknown")
+            if not manifest.is_file():             # a FIFO would block its reading for ever
+                raise InputError(f"{manifest} is not a regular file (a folder, a FIFO), {unknown}; move it away, "
+                                 "then restore it or pass --fresh to discard those chunks")
+            try:
+                have = json.loads(manifest.read_text())
             except (OSError, ValueError):
                 have = None
-            if not isinstance(have, dict):             # what work the parts are of is unknown
-                n = len(self.part_files())
-                what = (f"{manifest} is not a regular file (a folder, a FIFO), so what work the {n} finished "
-                        f"chunk(s) in {self.folder} are of is unknown; move it away, then restore it or pass "
-                        "--fresh to discard those chunks") if not manifest.is_file() else (
-                        f"{manifest} cannot be read as a JSON table, so what work the {n} finished chunk(s) "
-                        f"in {self.folder} are of is unknown; restore it, or pass --fresh to discard those chunks")
-                raise InputError(what)
+            if not isinstance(have, dict):
+                raise InputError(f"{manifest} cannot be read as a JSON table, {unknown}; restore it, or pass "
+                                 "--fresh to discard those chunks")
             if have != want:
                 raise InputError(f"{self.folder} holds finished chunks of other work "
                                  f"({_first_difference(have, want)}); rerun the same command to finish "
                                  f"that work, or pass --fresh to discard its chunks")
         else:
-            if not fresh and self.part_files():     # parts of unknown work: never mixed in, never deleted unasked
-                raise InputError(f"{self.folder} holds {len(self.part_files())} finished chunk(s) but no manifest.json "
+            parts = self.part_files()
+            if parts and not fresh:                # parts of unknown work: never mixed in, never deleted unasked
+                raise InputError(f"{self.folder} holds {len(parts)} finished chunk(s) but no manifest.json "
                                  "saying what work they are of; restore it, or pass --fresh to discard those chunks")
-            for p in self.part_files():
+            for p in parts:
                 p[2].unlink()
             self._write_text(manifest, json.dumps(want, indent=1))
         for tmp in self.folder.glob(".*.tmp"):       # a write killed half-way
@@ -222,9 +223,7 @@ def float_cells(cells: list[str]) -> list[float]:
     return [float(c) if c else math.nan for c in cells]
 
 
-def _first_difference(have, want) -> str:
-    if not isinstance(have, dict):
-        return "its manifest.json is not readable"
+def _first_difference(have: dict, want: dict) -> str:
     for key in ("format", "version", "columns"):
         if have.get(key) != want.get(key):
             return f"{key} {have.get(key)!r}, not {want.get(key)!r}"
