@@ -141,7 +141,7 @@ def validate_results(frame: pd.DataFrame, source: str = "<table>") -> FactorialD
     """Check a results table is a balanced full factorial with complete numeric responses."""
     frame = frame.copy()
     frame.columns = [str(c).strip() for c in frame.columns]
-    twice = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    twice = sorted(set(frame.columns[frame.columns.duplicated()]))
     if twice:   # "jumps" and " jumps": one name once stripped (pandas renames only exact copies)
         raise InputError(f"{source}: column(s) {', '.join(twice)} given more than once; keep one of each")
     factors_cols, responses, unknown = [], [], []
