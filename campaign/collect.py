@@ -104,11 +104,12 @@ def _check_cycles(cycles: xr.Dataset, folder: Path) -> None:
     if "sim" in cycles.dims:
         need.update({f"sim_{k}": ("sim",) for k in ("label", "requested", "omega1")})
         need.update({f"sim_{s}": ("sim", "phi1") for s in SIGNALS})
-    bad = [k for k, dims in need.items() if k not in cycles.variables or cycles[k].dims != dims]
-    if "phi1" not in cycles.coords or bad:
+    bad = ([] if "phi1" in cycles.coords else ["phi1"]) + [
+        k for k, dims in need.items() if k not in cycles.variables or cycles[k].dims != dims]
+    if bad:
         raise FileFormatError(f"point {shown(folder.name)}: cycles.nc is not a campaign point's cycle overlays "
-                              f"(missing or misshapen: {', '.join((['phi1'] if 'phi1' not in cycles.coords else []) + bad)}); "
-                              "delete it and run 'labtool campaign run' again to remake the point's comparison")
+                              f"(missing or misshapen: {', '.join(bad)}); delete it and run 'labtool campaign run' "
+                              "again to remake the point's comparison")
 
 
 def _relative(path: Path, base: Path | None) -> Path:
