@@ -138,9 +138,8 @@ def _num(text, path, what) -> float:
     except ValueError:
         raise InputError(f"{path}: header '{what}' = {text!r} is not a number") from None
     # a unit after the number must be the key's own: "10 kHz" was read as 10 Hz, "0.1 ms" as 0.1 s
-    rest, (units, unit) = str(text)[m.end():].strip().lower() if m else "", (
-        (STEP_UNITS, "s") if what in STEP_KEYS else (RATE_UNITS, "Hz"))
-    if rest not in units:
+    units, unit = (STEP_UNITS, "s") if what in STEP_KEYS else (RATE_UNITS, "Hz")
+    if m and str(text)[m.end():].strip().lower() not in units:
         raise InputError(f"{path}: header '{what}' = {text!r} is not a number in {unit}; write it in {unit} "
                          "(10 kHz is 10000 Hz, 0.1 ms is 0.0001 s)")
     return x
