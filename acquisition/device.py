@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
 

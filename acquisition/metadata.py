@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
-from common import recording_attrs as names
-from common.errors import InputError
-from common.names import shown
-from models.mechanism.motion_laws import ALIASES, LAWS
+from labtool.common import recording_attrs as names
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.models.mechanism.motion_laws import ALIASES, LAWS
 
 MAX_TEXT = 2000  # characters of a free-text attribute
 

@@ -46,7 +46,7 @@ import math
 import tomllib
 from pathlib import Path
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 G0 = 9.80665  # m/s^2 per g (standard gravity: the unit of accelerometer sensitivities in mV/g)
 ROLES = ("aE_t", "aE_n", "tacho")

@@ -36,9 +36,9 @@ import time
 
 import numpy as np
 
-from acquisition import nidaqmx_config as nc
-from acquisition.device import Block, Device, DeviceDisconnected, Event
-from common.errors import InputError
+from labtool.acquisition import nidaqmx_config as nc
+from labtool.acquisition.device import Block, Device, DeviceDisconnected, Event
+from labtool.common.errors import InputError
 
 OVERRUN_ERROR = -200279  # DAQmxErrors.SAMPLES_NO_LONGER_AVAILABLE
 DEFAULT_NAMES = nc.ROLES

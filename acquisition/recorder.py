@@ -50,9 +50,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from acquisition.device import Block, Event
-from acquisition.writer_lock import WriterLock
-from common.hdf5 import open_file
+from labtool.acquisition.device import Block, Event
+from labtool.acquisition.writer_lock import WriterLock
+from labtool.common.hdf5 import open_file
 
 FORMAT = "labtool.recording"
 FORMAT_VERSION = 1
@@ -420,11 +420,11 @@ def _classify(exc: Exception) -> OSError:
 def read_recording(path) -> dict:
     """Minimal reader for tests and tools: attrs, signals (float64), channel names, Ka, events.
 
-    Opened through common.hdf5.open_file (superblock and file size checked first, so a truncated
+    Opened through labtool.common.hdf5.open_file (superblock and file size checked first, so a truncated
     file is one FileFormatError, never a hang; SWMR read for a file still marked open for writing).
     The full reader, with checks and warnings, is processing's.
     """
-    from common.errors import FileFormatError
+    from labtool.common.errors import FileFormatError
 
     f, _note = open_file(path)
     with f:

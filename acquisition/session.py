@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from acquisition.device import Block, Device, DeviceDisconnected, Event
-from acquisition.recorder import DiskFull, Recorder, _classify
-from common.errors import InputError, Interrupted
-from common.files import inside_another_command
+from labtool.acquisition.device import Block, Device, DeviceDisconnected, Event
+from labtool.acquisition.recorder import DiskFull, Recorder, _classify
+from labtool.common.errors import InputError, Interrupted
+from labtool.common.files import inside_another_command
 
 
 @dataclasses.dataclass

@@ -2,7 +2,7 @@
 
 What the simulated stand records is the follower's true motion seen through everything a real
 chain adds and the models do not. The truth (``truth_model``) is by default the stand's **twin**
-(models.dynamics.twin: elastic contact with energy loss on both flanks, the backlash crossed, the
+(labtool.models.dynamics.twin: elastic contact with energy loss on both flanks, the backlash crossed, the
 follower's first bending mode as a degree of freedom, pivot friction, motor slip and drive ripple,
 gravity; docs/twin.md), or ``kinematic`` (the cam as input with a speed ripple), or one model's
 own equations (``rigid``, ``elastic``: its periodic steady state, for self-consistency checks).
@@ -36,11 +36,11 @@ import math
 import numpy as np
 from scipy import signal
 
-from common.errors import InputError
-from models.dynamics.twin import TwinPhysics
-from models.mechanism.kinematics import check_load_and_inertia, follower_motion
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
+from labtool.common.errors import InputError
+from labtool.models.dynamics.twin import TwinPhysics
+from labtool.models.mechanism.kinematics import check_load_and_inertia, follower_motion
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
 PAPER_KA = 86.43  # m/s^2 per V, paper sec. 2.4: the 480C02 at gain x10
@@ -60,7 +60,7 @@ PERIODIC_OMEGA2_TOL = 5e-3       # of max |omega2|, away from events: the last t
 
 @dataclasses.dataclass(frozen=True)
 class StandScene:
-    """What the simulated stand does (SI except cam_speed_rpm, as in models.dynamics.scene.Scene).
+    """What the simulated stand does (SI except cam_speed_rpm, as in labtool.models.dynamics.scene.Scene).
 
     mode            "run": the cam drives the follower; "calibration": the sensor sits on a
                     shaker (B&K 4291) giving cal_accel (m/s^2 peak) at cal_freq (Hz) along
@@ -77,7 +77,7 @@ class StandScene:
     contact_length  roller-groove contact length lw (m) of the twin's and the elastic truth's contact
     kc_factor       multiplier of their contact stiffness Kc
     truth_accuracy  solver preset of the twin and the model truths (fast | standard | reference)
-    twin            the twin's other physics (models.dynamics.twin.TwinPhysics; its ripple is
+    twin            the twin's other physics (labtool.models.dynamics.twin.TwinPhysics; its ripple is
                     this scene's ``ripple``)
     """
 
@@ -149,7 +149,7 @@ class StandScene:
     def model_scene(self, revolutions: float | None = None):
         """The models' Scene of this operating point and truth parameters (omega1 constant, the
         whole cycle, the physical gap)."""
-        from models.dynamics.scene import Scene
+        from labtool.models.dynamics.scene import Scene
         return Scene(law=self.law, cam_speed_rpm=self.cam_speed_rpm, Fu=self.Fu, backlash=self.backlash,
                      jt_factor=self.jt_factor, omega1_mode="const", restitution=self.restitution,
                      contact_length=self.contact_length, kc_factor=self.kc_factor,
@@ -159,10 +159,10 @@ class StandScene:
 
     def truth_description(self) -> str:
         if self.truth_model == "kinematic":
-            return "kinematic (models.mechanism.kinematics.follower_motion)"
+            return "kinematic (labtool.models.mechanism.kinematics.follower_motion)"
         if self.truth_model == "twin":
-            return f"twin (models.dynamics.twin, accuracy {self.truth_accuracy}, docs/twin.md)"
-        return (f"{self.truth_model} (models.dynamics.simulate, omega1 const, accuracy {self.truth_accuracy}, "
+            return f"twin (labtool.models.dynamics.twin, accuracy {self.truth_accuracy}, docs/twin.md)"
+        return (f"{self.truth_model} (labtool.models.dynamics.simulate, omega1 const, accuracy {self.truth_accuracy}, "
                 f"{self.model_revolutions} revolutions, the last repeated once periodic)")
 
     def attrs(self) -> dict:
@@ -304,11 +304,11 @@ def truth(scene: StandScene, t, seed: int | None = None, interval: float | None 
             "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
 
 
-# ---- the twin (models.dynamics.twin), streamed
+# ---- the twin (labtool.models.dynamics.twin), streamed
 
 def new_twin_run(scene: StandScene, keep_events: bool = False):
     """A fresh twin trajectory for the scene (its warm-up done; t = 0 at the start of a rise)."""
-    from models.dynamics.twin import TwinRun
+    from labtool.models.dynamics.twin import TwinRun
     return TwinRun(scene.model_scene(), scene.twin, keep_events=keep_events)
 
 
@@ -380,7 +380,7 @@ _MODEL_TABLES: dict = {}
 
 
 def model_table(scene: StandScene) -> dict:
-    """The dynamic model's run behind a rigid/elastic truth (models.dynamics.simulate, omega1
+    """The dynamic model's run behind a rigid/elastic truth (labtool.models.dynamics.simulate, omega1
     constant, ``model_revolutions`` turns): time (s), phi1, omega1, phi2, omega2, epsilon2, the
     event record (EVENTS.md names, times in s of the run), ``period`` (s), and ``periodic``: the
     last two turns have the same events (to PERIODIC_EVENT_TOL rad) and omega2 away from them (to
@@ -389,7 +389,7 @@ def model_table(scene: StandScene) -> dict:
     """
     key = (repr(scene), repr(scene.mechanism))
     if key not in _MODEL_TABLES:
-        from models.dynamics.simulate import simulate
+        from labtool.models.dynamics.simulate import simulate
         R = scene.model_revolutions
         ds = simulate(scene.model_scene(R), scene.truth_model).dataset
         t = np.asarray(ds["time"].values, float)
@@ -424,9 +424,9 @@ def _is_periodic(tab: dict) -> bool:
 
 
 def model_events(ds) -> dict:
-    """A model dataset's contact events as the event record's arrays (models.dynamics.events, times
+    """A model dataset's contact events as the event record's arrays (labtool.models.dynamics.events, times
     in s of the run)."""
-    from models.dynamics import events
+    from labtool.models.dynamics import events
 
     ev = events.read(ds)
     return {name: np.asarray(ev[name].values) for name in events.VARIABLES}
@@ -492,7 +492,7 @@ def truth_events(scene: StandScene, duration: float) -> dict:
     """The truth's event record (EVENTS.md arrays) over [0, duration] s of a recording: the twin
     integrated again from its attributes, or a model truth's events (its steady turn repeated).
     The kinematic truth has none."""
-    from models.dynamics import events
+    from labtool.models.dynamics import events
 
     if scene.mode != "run" or scene.truth_model == "kinematic":
         n = np.zeros(0)

@@ -23,10 +23,10 @@ import time
 
 import numpy as np
 
-from acquisition import signal_chain as sc
-from acquisition.device import Block, Device, DeviceDisconnected, Event
-from common.errors import InputError
-from common.recording_attrs import source_name
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.device import Block, Device, DeviceDisconnected, Event
+from labtool.common.errors import InputError
+from labtool.common.recording_attrs import source_name
 
 BOARD_CLOCK_HZ = 12.8e6  # the simulated board divides a 12.8 MHz timebase (as NI DSA boards do)
 MIN_RATE_HZ = 1000.0

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from acquisition.device import Block, Device, Event
+from labtool.acquisition.device import Block, Device, Event
 
 
 def first_crossing(x: np.ndarray, level: float, edge: str, prev: float | None) -> int | None:

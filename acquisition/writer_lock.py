@@ -24,7 +24,7 @@ import os
 import struct
 from pathlib import Path
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 try:
     import fcntl

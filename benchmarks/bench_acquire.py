@@ -23,9 +23,9 @@ def main() -> None:
     ap.add_argument("--rpm", type=float, default=180.0)
     args = ap.parse_args()
 
-    from acquisition import session
-    from acquisition import signal_chain as sc
-    from acquisition.sim_stand import SimStand
+    from labtool.acquisition import session
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.sim_stand import SimStand
 
     with tempfile.TemporaryDirectory() as tmp:
         # generation alone (no file), then the whole chain to HDF5

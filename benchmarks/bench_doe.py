@@ -2,7 +2,7 @@
 
 On a 4096-run design (Fu 16 levels x n1 16 x j 4 x Jt 4, sine law, omega1 variable, standard):
 
-* ``direct``: ``models.dynamics.simulate.indicators(scene, model)`` (the Dataset-free path that
+* ``direct``: ``labtool.models.dynamics.simulate.indicators(scene, model)`` (the Dataset-free path that
   ``doe run`` calls, issue 17) in a plain loop in this process (warm), per run: the floor that the
   runner's overhead is measured against; ``direct_dataset``: ``simulate(scene, model)`` on the same
   runs, interleaved (what a run cost before the indicator path);
@@ -63,9 +63,9 @@ def doe_run(args: list[str], out: pathlib.Path) -> tuple[float, str]:
 def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[float, float]:
     """(indicator path, dataset path) seconds per run over a random sample of the design's runs,
     interleaved run by run."""
-    from models.dynamics.scene import Scene
-    from models.dynamics.simulate import indicators, simulate
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import indicators, simulate
+    from labtool.models.study.doe import Design, read_factors
     design = Design(tuple(read_factors(factors_csv)), Scene(), model)
     # a random sample: every 16th run would always hit the same levels of the fastest factors
     import numpy as np
@@ -86,8 +86,8 @@ def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[
 def _warm(model: str) -> int:
     """Load in a worker what its runs will use: the model's compiled code, of the Dataset path and of
     the indicator path that ``doe run`` calls."""
-    from models.dynamics.scene import Scene
-    from models.dynamics.simulate import indicators, simulate
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import indicators, simulate
     simulate(Scene(), model)
     indicators(Scene(), model)
     return os.getpid()

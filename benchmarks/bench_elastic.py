@@ -10,10 +10,10 @@ import time
 
 import numpy as np
 
-from models.study.paper import compare_table3
-from models.study.paper import read_reference, table1_runs
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.models.study.paper import compare_table3
+from labtool.models.study.paper import read_reference, table1_runs
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 
 def _runs(accuracy, backlash=None, **kw):

@@ -1,6 +1,6 @@
 """Benchmark of ``labtool fit``: a fit of two parameters at ``--accuracy fast`` and ``standard`` on one
 core, beside the unit it is made of, one model run of the same scene through the report's path
-(reports.pipeline.run_simulation: the simulation, resampled, filtered and conditioned like the
+(labtool.reports.pipeline.run_simulation: the simulation, resampled, filtered and conditioned like the
 measurement) measured in the same run. Issue 16's goals: the whole fit under 60 s, under 10 s at
 fast. Prints, no asserts.
 
@@ -48,8 +48,8 @@ def record(folder: Path, model: str) -> Path:
 
 def one_run_s(measured: Path, model: str, preset: str, revolutions: int, reps: int = 5) -> float:
     """Median wall time of one model run through the report's path at the fit's scene."""
-    from identification.objective import load_target
-    from reports import pipeline
+    from labtool.identification.objective import load_target
+    from labtool.reports import pipeline
 
     target = load_target(measured)
     op = {**target.op, "backlash_mm": 0.2, "restitution": 0.5, "contact_damping": 40.0}
@@ -62,7 +62,7 @@ def one_run_s(measured: Path, model: str, preset: str, revolutions: int, reps: i
 
 
 def bench(measured: Path, model: str, free: str) -> None:
-    from identification.fit import FitRequest, identify
+    from labtool.identification.fit import FitRequest, identify
 
     identify(FitRequest(measured, model, free.split(",")[0], accuracy="fast", max_runs=8))    # warm-up
     unit = {p: one_run_s(measured, model, p, 3) for p in ("fast", "standard")}

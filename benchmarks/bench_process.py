@@ -85,8 +85,8 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
     import numpy as np
     from scipy import signal
 
-    from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
+    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism.motion_laws import CamProgram
 
     f = h5py.File(src, "r")
     sig = f["signals"]
@@ -245,7 +245,7 @@ def _peak_rss_mb(peer, src: Path, out: Path, root: Path = ROOT) -> float:
 
 def _check_checkout(name: str, root: Path) -> None:
     """The peer imports the code of its own checkout (not an installed or editable copy)."""
-    r = subprocess.run([sys.executable, "-c", "import processing.pipeline as p, labtool; print(p.__file__)"],
+    r = subprocess.run([sys.executable, "-c", "import labtool.processing.pipeline as p, labtool; print(p.__file__)"],
                        env=_env(root), cwd=root, capture_output=True, text=True)
     path = Path(r.stdout.strip()).resolve()
     if root.resolve() not in path.parents:

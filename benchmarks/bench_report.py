@@ -31,7 +31,7 @@ TIME_VARS = ("aE_t", "aE_n", "epsilon2", "omega2", "phi1", "revolution", "clippe
 def bench_metrics() -> None:
     import numpy as np
 
-    from reports import metrics
+    from labtool.reports import metrics
     rng = np.random.default_rng(0)
     metrics.compare(np.sin(np.arange(64.0)), np.cos(np.arange(64.0)), np.arange(64.0))   # compile the DTW once
     for n in (360, 720, 1440, 2880):

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from models.study.paper import TABLE2_KEYS, rigid_vs_table2
+from labtool.models.study.paper import TABLE2_KEYS, rigid_vs_table2
 
 
 def main() -> None:

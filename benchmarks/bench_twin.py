@@ -3,7 +3,7 @@
 Run: ``.venv/bin/python benchmarks/bench_twin.py [--seconds 60] [--rpm 180 300 500]``.
 
 Per cam speed, for the default stand (sine law, Fu = 0, j = 0.128 mm, the 480C02 at gain x1):
-the true events per revolution (models.dynamics.twin's event record: contacts, visible impacts
+the true events per revolution (labtool.models.dynamics.twin's event record: contacts, visible impacts
 with |event_domega2| > 0.05 rad/s, impacts faster than 1 mm/s, lift-offs), the first impact on the
 exterior flank in the rise, the peak recorded volts against the +-10 V range and the clip events;
 then the cost of ``--seconds`` of data to HDF5 (``--fast``) against its peer measured in the same
@@ -31,10 +31,10 @@ IMPACT_SPEED = 1e-3      # m/s
 
 def record(scene, seconds, path):
     """(wall s, CPU s, peak volts per channel, clip events) of a --fast recording to HDF5."""
-    from acquisition import session
-    from acquisition import signal_chain as sc
-    from acquisition.recorder import read_recording
-    from acquisition.sim_stand import SimStand
+    from labtool.acquisition import session
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.recorder import read_recording
+    from labtool.acquisition.sim_stand import SimStand
 
     params = sc.ChainParams(resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
     dev = SimStand(scene, params, seed=1, duration_s=seconds, realtime=False)
@@ -69,8 +69,8 @@ def main() -> None:
     ap.add_argument("--rpm", type=float, nargs="+", default=[180.0, 300.0, 500.0])
     args = ap.parse_args()
 
-    from acquisition import signal_chain as sc
-    from models.dynamics.twin import TwinRun
+    from labtool.acquisition import signal_chain as sc
+    from labtool.models.dynamics.twin import TwinRun
 
     TwinRun(sc.StandScene().model_scene())   # compile (or load the cached kernels) before timing
     print(f"default twin stand, {args.seconds:g} s per recording, 10 kHz, Ka = {sc.DEFAULT_KA:g} m/s^2/V (gain x1), range +-10 V")

@@ -61,7 +61,7 @@ def _stream_kernel():
 def _elastic_call():
     sys.path.insert(0, str(ROOT))
     from benchmarks.work_precision import scenes
-    from models.dynamics.simulate import indicators
+    from labtool.models.dynamics.simulate import indicators
     scene = scenes({1})[0][1]
     for _ in range(20):
         indicators(scene, "elastic")

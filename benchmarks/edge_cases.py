@@ -18,8 +18,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 
 def cases():
-    from models.mechanism import Mechanism
-    from models.dynamics.scene import Scene
+    from labtool.models.mechanism import Mechanism
+    from labtool.models.dynamics.scene import Scene
 
     steep = Mechanism.default().replace(program={"law": "sine", "rise_deg": 5.0})
     return {
@@ -37,8 +37,8 @@ def cases():
 
 
 def outcome(model: str, scene) -> tuple[str, str, float]:
-    from common.errors import LabtoolError
-    from models.dynamics.simulate import simulate
+    from labtool.common.errors import LabtoolError
+    from labtool.models.dynamics.simulate import simulate
 
     t0 = time.perf_counter()
     try:

@@ -17,9 +17,9 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 
 def main():
-    from models.dynamics import accuracy
-    from common.errors import LabtoolError
-    from models.dynamics.scene import Scene
+    from labtool.models.dynamics import accuracy
+    from labtool.common.errors import LabtoolError
+    from labtool.models.dynamics.scene import Scene
     from test_extremes import BASE, ELASTIC_CASES, RIGID_CASES
 
     rows = []

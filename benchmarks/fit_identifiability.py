@@ -31,7 +31,7 @@ CHANGES = {"rigid": {"backlash_mm": lambda v: 1.25 * v, "restitution": lambda v:
 
 
 def cycle(op, model, accuracy):
-    from reports import align, pipeline
+    from labtool.reports import align, pipeline
     cond = align.Conditioning()
     tf = align.TimeFilter(10_000.0, 100.0 * op["cam_speed_rpm"] / 60.0, 4)
     run = pipeline.run_simulation(op, model, "const", accuracy, 3, cond, tf)
@@ -40,7 +40,7 @@ def cycle(op, model, accuracy):
 
 def visibility(base, changed) -> float:
     """rms change over the fit's floor (1 % rms), the larger of omega2 and epsilon2."""
-    from identification.objective import MODEL_FLOOR
+    from labtool.identification.objective import MODEL_FLOOR
     out = 0.0
     for s in ("omega2", "epsilon2"):
         rms = math.sqrt(float(np.mean(base[s] ** 2)))

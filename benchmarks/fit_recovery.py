@@ -72,7 +72,7 @@ def _forget_stated_backlash(path: Path) -> None:
     """labtool process keeps the j a recording states; a worn groove's true j is what nobody states."""
     import xarray as xr
 
-    from common.files import write_netcdf
+    from labtool.common.files import write_netcdf
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         ds = ds.load()
     for k in [k for k in ds.attrs if "backlash" in k]:

@@ -6,7 +6,7 @@ solve_ivp with a numba right-hand side (LSODA, DOP853, Radau), and, for continui
 with labtool's pure-Python right-hand side. Each runs a tolerance ladder; labtool runs its
 ``standard`` preset through the public ``simulate(scene, model)``.
 
-Accuracy: ``models.dynamics.accuracy.compare`` against ``accuracy.reference_run`` (scipy DOP853,
+Accuracy: ``labtool.models.dynamics.accuracy.compare`` against ``accuracy.reference_run`` (scipy DOP853,
 rtol 1e-12): omega2 (relative, at the output instants both share) and the event times; a ladder
 point that loses or adds an event is not "as accurate". Cost: the whole call (scene -> omega2 and
 events at the output instants) and the integration loop alone, medians of interleaved repeats
@@ -57,7 +57,7 @@ LADDERS = {
 
 def labtool_call(scene, model):
     """labtool's standard preset: (result, loop_s, wall_s) through the public API."""
-    from models.dynamics import accuracy
+    from labtool.models.dynamics import accuracy
     stats = {}
     t0 = time.perf_counter()
     res = accuracy.run_model(scene, model, stats=stats)
@@ -65,10 +65,10 @@ def labtool_call(scene, model):
 
 
 def labtool_indicators_call(scene, model):
-    """labtool's Dataset-free indicator path (``models.dynamics.simulate.indicators``, issue 17) at
+    """labtool's Dataset-free indicator path (``labtool.models.dynamics.simulate.indicators``, issue 17) at
     the standard preset: the same loop as ``labtool_call``, hence its accuracy; (indicators, loop_s,
     wall_s)."""
-    from models.dynamics.simulate import indicators
+    from labtool.models.dynamics.simulate import indicators
     stats = {}
     t0 = time.perf_counter()
     ind = indicators(scene, model, stats=stats)
@@ -77,8 +77,8 @@ def labtool_indicators_call(scene, model):
 
 def python_dop853_call(scene, model, rtol):
     """scipy DOP853 over the model's compiled equations (labtool's reference loop,
-    models.dynamics.reference) at the standard preset's other settings."""
-    from models.dynamics import accuracy, elastic, rigid
+    labtool.models.dynamics.reference) at the standard preset's other settings."""
+    from labtool.models.dynamics import accuracy, elastic, rigid
     mod = {"rigid": rigid, "elastic": elastic}[model]
     preset = accuracy.scaled_preset(mod.PRESETS["standard"], rtol=rtol)
     preset["method"] = "DOP853"
@@ -100,7 +100,7 @@ def peer_call(scene, model, solver, rtol, ref):
         out, loop, wall = mod.solve(scene, solver, rtol, t_out=t_ref[:-1:4])
     import xarray as xr
 
-    from models.dynamics import events
+    from labtool.models.dynamics import events
     te = np.asarray(out["event_times"], dtype=float)
     z = np.zeros(te.size)      # the peers report their event instants only: what accuracy.compare reads
     record = events.record(te, z, z.astype(int), z.astype(int), z, z, z, z.astype(bool))
@@ -121,7 +121,7 @@ def available_peers(model):
 
 
 def measure(models, run_ids, repeats, log, calls=1):
-    from models.dynamics import accuracy
+    from labtool.models.dynamics import accuracy
     rows = []
     for model in models:
         for run, scene in scenes(run_ids):

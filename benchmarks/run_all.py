@@ -3,7 +3,7 @@
 1. compile time of the numba kernels with an empty cache (a fresh NUMBA_CACHE_DIR), and the time
    to load them from that cache in a new process (cache=True: compiled once, reused by every run);
 2. the 16 runs of Table 1 for both models at the ``standard`` preset on one core, after compilation
-   (``table1_timing``), through ``models.dynamics.simulate.simulate``;
+   (``table1_timing``), through ``labtool.models.dynamics.simulate.simulate``;
 3. the work-precision benchmark (benchmarks/work_precision.py: CSV, PNG, JSON summary);
 4. the other ``benchmarks/bench_*.py`` scripts, each in its own process.
 
@@ -30,9 +30,9 @@ _WARM = """
 import time, warnings
 warnings.simplefilter('ignore')
 t0 = time.perf_counter()
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
-from models.dynamics import accuracy
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
+from labtool.models.dynamics import accuracy
 t1 = time.perf_counter()
 for model in ('rigid', 'elastic'):
     accuracy.run_model(Scene(accuracy='standard'), model)
@@ -74,10 +74,10 @@ def table1_timing(repeat: int = 3) -> dict:
     except (AttributeError, OSError):
         pass
     sys.path.insert(0, str(ROOT))
-    from models.mechanism import memo
-    from models.study.paper import table1_runs
-    from models.dynamics.scene import Scene
-    from models.dynamics.simulate import simulate
+    from labtool.models.mechanism import memo
+    from labtool.models.study.paper import table1_runs
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import simulate
     scenes = [Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
                     omega1_mode="var", accuracy="standard") for r in table1_runs().itertuples()]
     for model in ("rigid", "elastic"):            # load the compiled kernels from the cache

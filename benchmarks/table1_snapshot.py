@@ -8,7 +8,7 @@ commits and compare the JSON files.
 
 Per (model, preset, run): every numeric indicator and the event times (s). The elastic model runs
 twice: the default physical gap and the closed gap of the paper's Table 3. ``--errors`` adds each
-preset's errors against the reference solution (models.dynamics.accuracy.compare against
+preset's errors against the reference solution (labtool.models.dynamics.accuracy.compare against
 reference_run: DOP853 at rtol 1e-12), the figures of accuracy.MEASURED (a few minutes).
 The compare mode prints, per model and preset, the largest change of each indicator against the
 preset's measured indicator error (accuracy.bound(..., "err_indicators"): the worst error of the
@@ -33,23 +33,23 @@ COUNTS = ("jumps", "impacts", "liftoffs", "settles", "separations", "n_events")
 
 def _event_times(ds):
     try:                                             # the one event record (issue 14)
-        from models.dynamics import events
+        from labtool.models.dynamics import events
         return [float(t) for t in events.read(ds)["event_time"].values]
     except ImportError:                              # before it: two formats
-        from models.dynamics import accuracy
+        from labtool.models.dynamics import accuracy
         return [float(t) for t in accuracy.event_times(ds)]
 
 
 def _scene(run, gap, preset):
-    from models.dynamics.scene import Scene
+    from labtool.models.dynamics.scene import Scene
     return Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
                  omega1_mode="var", accuracy=preset, elastic_gap=gap)
 
 
 def snapshot(errors: bool, models=("rigid", "elastic")) -> dict:
-    from models.dynamics import accuracy
-    from models.dynamics.simulate import simulate
-    from models.study.paper import table1_runs
+    from labtool.models.dynamics import accuracy
+    from labtool.models.dynamics.simulate import simulate
+    from labtool.models.study.paper import table1_runs
 
     out = {}
     for model, gap in CASES:
@@ -83,7 +83,7 @@ def _rel(a, b, scale):
 
 
 def _scale(ind: dict, key: str, value: float) -> float:
-    """What an indicator's change is relative to (as models.dynamics.accuracy.compare): MR13D and
+    """What an indicator's change is relative to (as labtool.models.dynamics.accuracy.compare): MR13D and
     xel extremes by the larger of their max and min (a minimum near zero has no relative error)."""
     for prefix in ("MR13D_contact", "MR13D", "xel"):
         if key.startswith(prefix):
@@ -102,7 +102,7 @@ def _distinct(times):
 
 
 def compare(before: dict, after: dict) -> None:
-    from models.dynamics import accuracy
+    from labtool.models.dynamics import accuracy
 
     print(f"{'case':28s} {'indicator':22s} {'max change':>12s} {'bound':>8s}  verdict")
     for case, rows_a in before.items():

@@ -3,7 +3,7 @@
 * ``events``: measured vs true impacts (first impact angle, visible impacts per revolution) at 180,
   300 and 500 rpm, on the twin's default recordings and on model truths (rigid with k = 0.2 and
   elastic with 40 s/m). True = the truth's own event record (``truth_events``) with the measured
-  side's visibility (``reports.events.truth_statistics``: the recording's detectability threshold,
+  side's visibility (``labtool.reports.events.truth_statistics``: the recording's detectability threshold,
   the detector's resolution). Goal: first impact within 1 deg, visible impacts within 25 %.
 * ``self``: a recording whose truth is model X (its equations and parameters), reported against X
   (omega1 const, the same restitution or contact damping), fast and standard preset, 180 and 500
@@ -51,14 +51,14 @@ def record(d: Path, truth: str, rpm: float, seconds: float) -> tuple[Path, Path]
 
 def truth_record(rec: Path, duration: float) -> dict:
     """The recording's true events (EVENTS.md arrays). The elastic model's record carries no
-    event_domega2 until models.dynamics.events lands on main: then its contacts' steps are taken
-    as the report takes them from a model (reports.events.model_events: omega2 less the law's
+    event_domega2 until labtool.models.dynamics.events lands on main: then its contacts' steps are taken
+    as the report takes them from a model (labtool.reports.events.model_events: omega2 less the law's
     over the impact), from the truth's own simulation, its steady turn repeated as the stand does."""
     import h5py
 
-    from acquisition.signal_chain import model_table, scene_from_attrs, truth_events
-    from models.dynamics.simulate import simulate
-    from reports import events
+    from labtool.acquisition.signal_chain import model_table, scene_from_attrs, truth_events
+    from labtool.models.dynamics.simulate import simulate
+    from labtool.reports import events
 
     with h5py.File(rec, "r") as f:
         scene = scene_from_attrs(dict(f.attrs))
@@ -78,7 +78,7 @@ def truth_record(rec: Path, duration: float) -> dict:
 
 
 def measured_and_true(rec: Path, nc: Path) -> tuple[dict, dict]:
-    from reports import align, events, pipeline
+    from labtool.reports import align, events, pipeline
 
     ds = pipeline.load_measured(nc)
     cyc = align.read_measured(ds, pipeline.SIGNALS, align.Conditioning(), extra=("aE_n",))
@@ -113,7 +113,7 @@ def check_events(d: Path, seconds: float) -> None:
 
 
 def check_self(d: Path, seconds: float) -> None:
-    from reports import pipeline
+    from labtool.reports import pipeline
     print("self-consistency: truth = model X, reported against X (omega1 const, the truth's k or damping)")
     print(f"{'model':8s} {'rpm':>4s} {'preset':9s} {'w2 ISO':>7s} {'e2 ISO':>7s}  grades              motion")
     for model in ("rigid", "elastic"):
@@ -129,7 +129,7 @@ def check_self(d: Path, seconds: float) -> None:
 
 
 def check_twin(d: Path, seconds: float) -> None:
-    from reports import pipeline
+    from labtool.reports import pipeline
     for rpm in (180.0, 500.0):
         _, nc = record(d, "twin", rpm, seconds)
         for name, loss in (("the recording's energy loss (k 0.2, 40 s/m), as the demo", {**LOSS["rigid"], **LOSS["elastic"]}),

@@ -15,9 +15,9 @@ import time
 if "PYTHONPATH" not in __import__("os").environ:     # else: the tree PYTHONPATH names
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
-from models.dynamics.scene import Scene  # noqa: E402
-from models.dynamics.simulate import simulate  # noqa: E402
-from models.study.paper import table1_runs  # noqa: E402
+from labtool.models.dynamics.scene import Scene  # noqa: E402
+from labtool.models.dynamics.simulate import simulate  # noqa: E402
+from labtool.models.study.paper import table1_runs  # noqa: E402
 
 
 def best(fn, repeat):

@@ -45,11 +45,11 @@ PEERS = {"numbalsoda-DOP853": [1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12],
 def peer_outputs_call(scene):
     """The peer's outputs from labtool's loop (module doc): a Dataset of omega2, MR13D, x_el on the
     uniform output instants and the event record."""
-    from common.datasets import dataset
-    from models.dynamics import elastic as E
-    from models.dynamics import events
-    from models.dynamics.kernels import dopri5 as dp
-    from models.dynamics.kernels import elastic_nb as eq
+    from labtool.common.datasets import dataset
+    from labtool.models.dynamics import elastic as E
+    from labtool.models.dynamics import events
+    from labtool.models.dynamics.kernels import dopri5 as dp
+    from labtool.models.dynamics.kernels import elastic_nb as eq
     run = E._solve(scene, "consistent", None, None, {}, raw=True)
     E.complete_events(run.rows, E.phase_table(run.segments, run.raw), run.model, run.tab)
     record = events.from_rows(run.rows)
@@ -68,9 +68,9 @@ def peer_outputs_call(scene):
 
 def measure(run_ids, repeats, calls, log):
     from benchmarks.peers_bench import peer_call
-    from models.dynamics import accuracy
-    from models.dynamics import elastic as E
-    from models.dynamics.simulate import indicators
+    from labtool.models.dynamics import accuracy
+    from labtool.models.dynamics import elastic as E
+    from labtool.models.dynamics.simulate import indicators
     out = {}
     for run, scene in scenes(run_ids):
         ref = accuracy.reference_run(scene, "elastic")

@@ -1,15 +1,15 @@
 """Work-precision of the dynamic models: error against the reference solution vs wall time.
 
 For each model (rigid with impacts, elastic) and each solver (the compiled Dormand-Prince 5(4) loop
-of models.dynamics.kernels; scipy solve_ivp RK45 and DOP853 with the model's pure-Python right-hand side) at
+of labtool.models.dynamics.kernels; scipy solve_ivp RK45 and DOP853 with the model's pure-Python right-hand side) at
 a ladder of tolerances, and for the named presets fast / standard / reference, on Table 1's runs
 (omega1 variable, sine law): errors in omega2, MR13D, event times and event count against the
-reference solution (scipy DOP853, rtol 1e-12: models.dynamics.accuracy.reference_run), wall time of the
+reference solution (scipy DOP853, rtol 1e-12: labtool.models.dynamics.accuracy.reference_run), wall time of the
 integration loop and of the whole simulate call, and the compiled loops' RHS evaluations.
 
 Writes benchmarks/results/work_precision.csv (one row a model x solver x tolerance x run),
 benchmarks/results/work_precision.png and benchmarks/results/work_precision_summary.json (worst
-error of each preset over the runs: the figures of models.dynamics.accuracy.MEASURED; speed-up of the
+error of each preset over the runs: the figures of labtool.models.dynamics.accuracy.MEASURED; speed-up of the
 ``standard`` preset over DOP853 at the same achieved accuracy).
 
 Run: ``.venv/bin/python benchmarks/work_precision.py [--runs 1,5,12] [--models rigid,elastic]``
@@ -55,8 +55,8 @@ def pin_one_core():
 
 
 def scenes(run_ids):
-    from models.study.paper import table1_runs
-    from models.dynamics.scene import Scene
+    from labtool.models.study.paper import table1_runs
+    from labtool.models.dynamics.scene import Scene
     out = []
     for r in table1_runs().itertuples():
         if run_ids and int(r.run) not in run_ids:
@@ -77,7 +77,7 @@ def timed(fn, repeat=1):
 
 def one(model, solver, rtol, preset_name, run, scene, ref, repeat):
     """One measurement row."""
-    from models.dynamics import accuracy, elastic, rigid
+    from labtool.models.dynamics import accuracy, elastic, rigid
     mod = {"rigid": rigid, "elastic": elastic}[model]
     if preset_name is not None:
         sc = scene.replace(accuracy=preset_name)
@@ -262,7 +262,7 @@ def main(argv=None, quiet=False):
         return summary
     warnings.simplefilter("ignore", RuntimeWarning)
     cpu = None if args.all_cores else pin_one_core()
-    from models.dynamics import accuracy
+    from labtool.models.dynamics import accuracy
     run_ids = {int(x) for x in args.runs.split(",") if x}
     ladder_ids = {int(x) for x in args.ladder_runs.split(",") if x}
     out = pathlib.Path(args.out)

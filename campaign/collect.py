@@ -2,8 +2,8 @@
 
 A point comes from a campaign folder (its ``summary.json`` and ``cycles.nc``, written by the
 compare step) or from a ``measured.nc`` file of any origin (compared here, with the plan's or the
-default models). Either way it becomes a ``PointRecord``: the report summary (reports.summary's
-keys) and the overlay data (campaign.steps.cycles_dataset).
+default models). Either way it becomes a ``PointRecord``: the report summary (labtool.reports.summary's
+keys) and the overlay data (labtool.campaign.steps.cycles_dataset).
 
 ``table(records)`` is tidy: one row per point and simulation (model x omega1 mode), the point's
 operating point and measured values repeated on each row, so a spreadsheet can pivot it.
@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from common.errors import FileFormatError, InputError
-from common.names import shown
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown
 
 SIGNALS = ("omega2", "epsilon2")
 ROW_METRICS = ("iso_rating", "iso_grade", "sg_comprehensive", "nrmse")
@@ -30,8 +30,8 @@ ROW_METRICS = ("iso_rating", "iso_grade", "sg_comprehensive", "nrmse")
 class PointRecord:
     name: str
     source: str                 # the point's folder or the measured file
-    summary: dict               # reports.summary.build_summary(...)
-    cycles: xr.Dataset          # campaign.steps.cycles_dataset(...)
+    summary: dict               # labtool.reports.summary.build_summary(...)
+    cycles: xr.Dataset          # labtool.campaign.steps.cycles_dataset(...)
     page: str | None = None     # the per-point report, relative to the campaign page
 
     @property
@@ -82,7 +82,7 @@ def load_point_folder(folder: Path, name: str | None = None, page_base: Path | N
 
 
 def _check_summary(summary, folder: Path) -> None:
-    """FileFormatError unless ``summary`` has the shape reports.summary writes: a hand-edited
+    """FileFormatError unless ``summary`` has the shape labtool.reports.summary writes: a hand-edited
     summary.json holding [] or {} was an internal error (AttributeError, jinja's UndefinedError)."""
     op = summary.get("operating_point") if isinstance(summary, dict) else None
     lists = ("headline", "simulations", "events")
@@ -98,7 +98,7 @@ def _check_summary(summary, folder: Path) -> None:
 
 
 def _check_cycles(cycles: xr.Dataset, folder: Path) -> None:
-    """FileFormatError unless ``cycles`` holds what campaign.steps.cycles_dataset writes and the
+    """FileFormatError unless ``cycles`` holds what labtool.campaign.steps.cycles_dataset writes and the
     page draws: another NetCDF file there was an internal error (KeyError: No variable named 'phi1')."""
     need = {f"measured_{s}_{k}": ("phi1",) for s in SIGNALS for k in ("mean", "std")}
     if "sim" in cycles.dims:
@@ -124,8 +124,8 @@ def _relative(path: Path, base: Path | None) -> Path:
 
 def load_measured_file(path: Path, compare, overrides: dict, say=None) -> PointRecord:
     """Compare a measured.nc (from an earlier run or another tool) now; nothing is written."""
-    from campaign.steps import build, cycles_dataset
-    from reports.summary import build_summary
+    from labtool.campaign.steps import build, cycles_dataset
+    from labtool.reports.summary import build_summary
 
     rep = build(Path(path), compare, None, overrides, say=say)
     return PointRecord(Path(path).stem, str(path), build_summary(rep), cycles_dataset(rep), None)

@@ -1,5 +1,5 @@
 """The cross-point figures (matplotlib object API), in the report's colours and labels
-(reports.figures): omega1 constant blue, variable red (thinner, on top: a var run that is the
+(labtool.reports.figures): omega1 constant blue, variable red (thinner, on top: a var run that is the
 const motion shows both); the elastic model solid, rigid dashed, kinematic dotted.
 
 - ISO/TS 18571 rating of omega2 and epsilon2 against the cam speed, per model and omega1 mode,
@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from reports.figures import COLORS, SIGNAL_LABEL, plain
-from reports.metrics import ISO_GRADES
+from labtool.reports.figures import COLORS, SIGNAL_LABEL, plain
+from labtool.reports.metrics import ISO_GRADES
 
 LINESTYLE = {"elastic": "-", "rigid": "--", "kinematic": ":"}
 MARKERS = "osD^vP*X"

@@ -52,7 +52,7 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     omega1 = ["const", "var"]
     accuracy = "fast"                    # fast | standard | reference
     revolutions = 6                      # simulated revolutions (default: labtool report's, 6)
-    thresholds = "limits.toml"           # optional: reports.thresholds file (exit 1 if one fails)
+    thresholds = "limits.toml"           # optional: labtool.reports.thresholds file (exit 1 if one fails)
     restitution = 1.0                    # optional model options (labtool report's)
     contact_damping = 0.0
     contact_length_mm = 6.0
@@ -72,9 +72,9 @@ import re
 import types
 from pathlib import Path
 
-from common.errors import InputError
-from common.names import shown
-from common.schema import Bool, Integer, ListOf, Number, SchemaError, String, Table, load_toml
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.common.schema import Bool, Integer, ListOf, Number, SchemaError, String, Table, load_toml
 
 MAX_POINTS = 500
 MAX_RPM = 2000.0      # the schema's bound; expand_points then holds each point to the models' own range
@@ -269,7 +269,7 @@ def expand_points(doc) -> list[Point]:
                 raw.append(dict(zip(keys, combo)))
     if not raw:
         raise InputError("the plan has no operating points: add [[points]] with an rpm, or a [grid]")
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
 
     mech = Mechanism.default()                     # the mechanism the campaign's scenes use
     out, names = [], set()
@@ -326,7 +326,7 @@ def load_plan(path, check_files: bool = True) -> Plan:
         points = expand_points(doc)
     except InputError as exc:
         raise InputError(f"plan {shown(path)}: {exc}") from None
-    from models.mechanism.motion_laws import ALIASES, LAWS
+    from labtool.models.mechanism.motion_laws import ALIASES, LAWS
     for p in points:
         if p.law not in LAWS and p.law not in ALIASES:
             raise InputError(f"plan {shown(path)}: point {p.name}: unknown motion law {shown(p.law)!r}; known: {', '.join(sorted(LAWS))}")

@@ -4,11 +4,11 @@
 files (compared here), and returns the ``CampaignReport``; ``write_outputs`` renders it:
 
 - HTML: self-contained (figures as base64 PNG), autoescaped jinja2 in the per-point report's
-  style (reports.html's environment and stylesheet);
+  style (labtool.reports.html's environment and stylesheet);
 - JSON: ``format = "labtool.campaign.summary"``, version 1: the campaign and test metadata, every
   point (operating point, measured values, closest model, thresholds, notes, its report's summary
   file), where the closest model changes, and the table's rows (numbers, not strings; NaN -> null);
-- CSV: the table (campaign.collect.table), written by pandas (RFC 4180 quoting, '.' decimals).
+- CSV: the table (labtool.campaign.collect.table), written by pandas (RFC 4180 quoting, '.' decimals).
 
 Nothing in the JSON or CSV depends on the wall clock, so a resumed campaign gives the same files
 as an uninterrupted one.
@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from common.errors import InputError
-from common.names import shown
-from campaign import collect
-from campaign.figures import all_figures
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.campaign import collect
+from labtool.campaign.figures import all_figures
 
 FORMAT = "labtool.campaign.summary"
 FORMAT_VERSION = 1
@@ -56,8 +56,8 @@ class CampaignReport:
 
 def _campaign_points(folder: Path, page_base: Path):
     """(records, missing names, plan metadata) of a campaign folder, in the plan's order."""
-    from campaign.plan import load_plan
-    from campaign.runner import POINTS_DIR
+    from labtool.campaign.plan import load_plan
+    from labtool.campaign.runner import POINTS_DIR
 
     plan_file = folder / "plan.toml"
     meta = {}
@@ -82,7 +82,7 @@ def _campaign_points(folder: Path, page_base: Path):
 def collect_inputs(inputs, compare=None, overrides: dict | None = None, page_base: Path | None = None,
                    say=None) -> CampaignReport:
     """A CampaignReport from campaign folders, point folders and measured.nc files."""
-    from campaign.plan import check_compare
+    from labtool.campaign.plan import check_compare
 
     compare = compare or check_compare({}, "options")
     records, missing, meta, notes = [], [], {}, []
@@ -165,7 +165,7 @@ def to_csv(rep: CampaignReport) -> str:
 
 def _stylesheet() -> str:
     """The per-point report's stylesheet (reports/templates/report.html.j2), so both pages look alike."""
-    from reports.html import TEMPLATES as REPORT_TEMPLATES
+    from labtool.reports.html import TEMPLATES as REPORT_TEMPLATES
 
     text = (REPORT_TEMPLATES / "report.html.j2").read_text(encoding="utf-8")
     m = re.search(r"<style>(.*?)</style>", text, re.S)
@@ -175,8 +175,8 @@ def _stylesheet() -> str:
 def render_html(rep: CampaignReport, files: dict | None = None, dpi: int = 90) -> str:
     import jinja2
 
-    from reports.figures import render
-    from reports.html import environment
+    from labtool.reports.figures import render
+    from labtool.reports.html import environment
 
     env = environment()
     env.loader = jinja2.ChoiceLoader([jinja2.FileSystemLoader(str(TEMPLATES)), env.loader])
@@ -196,7 +196,7 @@ def render_html(rep: CampaignReport, files: dict | None = None, dpi: int = 90) -
 
 def write_outputs(rep: CampaignReport, html: Path | None, json_path: Path | None, csv_path: Path | None) -> None:
     """Write the page, the JSON and the CSV that are asked for, each atomically."""
-    from common.files import atomic_write
+    from labtool.common.files import atomic_write
 
     base = (html or json_path or csv_path).parent
     files = {k: (str(p.relative_to(base)) if p.parent == base else str(p)) for k, p in

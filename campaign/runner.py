@@ -2,7 +2,7 @@
 
 For each point in the plan's order: acquire (after the settle wait), process, compare; each step
 is skipped when ``point.json`` says it finished from today's inputs with its outputs intact
-(campaign.state). A point whose acquisition did not finish (killed, a disconnect, Ctrl-C) is
+(labtool.campaign.state). A point whose acquisition did not finish (killed, a disconnect, Ctrl-C) is
 redone from its acquisition; a finished recording is never thrown away silently: if the plan now
 says something else for a point that has one, the run stops with one line unless the point is
 named in ``redo``. A step whose inputs changed downstream of the recording (a new calibration,
@@ -17,11 +17,11 @@ import shutil
 import time
 from pathlib import Path
 
-from common.errors import InputError, LabtoolError
-from common.names import shown
-from campaign import steps
-from campaign.plan import Plan
-from campaign.state import OUTPUTS, STEPS, CampaignLock, PointState, clean_partials, sha256_file, sha256_json
+from labtool.common.errors import InputError, LabtoolError
+from labtool.common.names import shown
+from labtool.campaign import steps
+from labtool.campaign.plan import Plan
+from labtool.campaign.state import OUTPUTS, STEPS, CampaignLock, PointState, clean_partials, sha256_file, sha256_json
 
 POINTS_DIR = "points"
 
@@ -173,7 +173,7 @@ def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter) -> dict:
                              say=lambda m: rep.step(point, "compare", "running", m))
         steps.write_point_outputs(report, folder, {"html": "report.html", "summary": "summary.json",
                                                    "cycles": "cycles.nc"})
-        from reports.pipeline import closest
+        from labtool.reports.pipeline import closest
         best = closest(report)
         return {"closest": None if best is None else best["label"], "passed": bool(report.passed),
                 "notes": list(report.notes)}
@@ -243,7 +243,7 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
 
 def _keep_plan_copy(plan: Plan, folder: Path) -> None:
     """plan.toml in the folder: the plan of the latest run (the points' records say what each used)."""
-    from common.files import atomic_write
+    from labtool.common.files import atomic_write
 
     data = Path(plan.path).read_bytes()
     target = folder / "plan.toml"

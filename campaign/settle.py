@@ -4,7 +4,7 @@ The operator sets the drive; the stand needs a few seconds (the motor's slip, th
 reach its speed. Two ways to wait, chosen by the plan's ``device.settle``:
 
 - ``prompt``: ask the operator to set the speed and confirm (a terminal is needed);
-- ``tacho``: read the device, find the tacho's rising edges (processing.cam_angle.TachoEdges) and
+- ``tacho``: read the device, find the tacho's rising edges (labtool.processing.cam_angle.TachoEdges) and
   wait until the last ``revolutions`` periods all give a speed within ``tolerance`` (relative) of
   the planned rpm; give up after ``timeout_s`` with one line saying the speed seen.
 
@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,7 +51,7 @@ def steady(edges, rate_hz: float, target_rpm: float, tolerance: float, revolutio
 def wait_for_tacho(device, rate_hz: float, target_rpm: float, tolerance: float, revolutions: int,
                    timeout_s: float, tacho: str = "tacho", clock=time.monotonic, say=None) -> SettleResult:
     """Read ``device`` (configured, started and stopped here) until the speed is steady."""
-    from processing.cam_angle import TachoEdges
+    from labtool.processing.cam_angle import TachoEdges
 
     if tacho not in device.channel_names:
         raise InputError(f"settle = \"tacho\" needs a '{tacho}' channel; the device has "

@@ -27,9 +27,9 @@ import json
 import os
 from pathlib import Path
 
-from common.errors import FileFormatError, InputError
-from common.files import atomic_write
-from common.names import shown
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.files import atomic_write
+from labtool.common.names import shown
 
 POINT_FORMAT = "labtool.campaign.point"
 STEPS = ("acquire", "process", "compare")

@@ -1,10 +1,10 @@
 """The three steps of a point, as narrow adapters over the layers' library functions.
 
-acquire  -> acquisition.session.run on the plan's device (the simulated stand or NI-DAQmx),
-            after waiting for a steady cam speed (campaign.settle);
-process  -> processing.pipeline.process_recording with the plan's calibration files;
-compare  -> reports.pipeline.build_report, then the per-point page (reports.html), its JSON
-            summary (reports.summary) and the overlay data the campaign page draws (cycles.nc).
+acquire  -> labtool.acquisition.session.run on the plan's device (the simulated stand or NI-DAQmx),
+            after waiting for a steady cam speed (labtool.campaign.settle);
+process  -> labtool.processing.pipeline.process_recording with the plan's calibration files;
+compare  -> labtool.reports.pipeline.build_report, then the per-point page (labtool.reports.html), its JSON
+            summary (labtool.reports.summary) and the overlay data the campaign page draws (cycles.nc).
 
 Each step writes its outputs atomically (temp file + rename) or, for the recording, as the
 recorder does (``complete`` set last); nothing here calls the CLI. When the layers' interfaces
@@ -18,15 +18,15 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from common.errors import InputError
-from common.names import shown
+from labtool.common.errors import InputError
+from labtool.common.names import shown
 
 # --------------------------------------------------------------------------- acquire
 
 
 def _sim_device(plan, point, duration_s: float):
-    from acquisition import signal_chain as sc
-    from acquisition.sim_stand import SimStand
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.sim_stand import SimStand
 
     dev = plan.doc.device
     kw = {} if dev.truth is None else {"truth_model": dev.truth}
@@ -46,9 +46,9 @@ def _sim_device(plan, point, duration_s: float):
 
 def _nidaqmx_device(plan, point, duration_s: float):
     """The NI device of the plan: its device file (channels by role, ranges, coupling, IEPE,
-    sensitivities, trigger; acquisition.nidaqmx_config) and/or its physical channels."""
-    from acquisition import nidaqmx_config as nc
-    from acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
+    sensitivities, trigger; labtool.acquisition.nidaqmx_config) and/or its physical channels."""
+    from labtool.acquisition import nidaqmx_config as nc
+    from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
 
     dev = plan.doc.device
     doc = nc.load_device_file(plan.device_file) if plan.device_file is not None else None
@@ -84,7 +84,7 @@ def point_attrs(plan, point) -> dict:
 
 def settle(plan, point, ask=None, say=None):
     """Wait for a steady cam speed as the plan says (None when it says "none")."""
-    from campaign import settle as st
+    from labtool.campaign import settle as st
 
     dev = plan.doc.device
     mode = dev.settle_mode
@@ -107,7 +107,7 @@ def settle(plan, point, ask=None, say=None):
 
 def acquire(plan, point, path: Path, ask=None, say=None, progress=None) -> dict:
     """Record the point into ``path`` (format v1); InputError unless the run reached its duration."""
-    from acquisition import session
+    from labtool.acquisition import session
 
     settled = settle(plan, point, ask, say)
     device, ka, attrs = make_device(plan, point)
@@ -130,10 +130,10 @@ def acquire(plan, point, path: Path, ask=None, say=None, progress=None) -> dict:
 
 
 def process(plan, point, recording: Path, measured: Path, warn=None) -> dict:
-    """recording -> measured.nc with the plan's calibration files (processing.pipeline)."""
-    from processing.calibration_file import read_calibrations
-    from processing.pipeline import ProcessOptions, process_recording
-    from processing.readers import open_recording
+    """recording -> measured.nc with the plan's calibration files (labtool.processing.pipeline)."""
+    from labtool.processing.calibration_file import read_calibrations
+    from labtool.processing.pipeline import ProcessOptions, process_recording
+    from labtool.processing.readers import open_recording
 
     cal = read_calibrations(plan.calibration_files) if plan.calibration_files else None
     opts = ProcessOptions(calibration=cal, calibration_source="; ".join(str(p) for p in plan.calibration_files),
@@ -163,11 +163,11 @@ def overrides(plan, point=None) -> dict:
 
 
 def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dict, say=None):
-    """reports.pipeline.build_report with the plan's [compare] choices."""
-    from reports.pipeline import build_report
-    from reports.thresholds import load_thresholds
+    """labtool.reports.pipeline.build_report with the plan's [compare] choices."""
+    from labtool.reports.pipeline import build_report
+    from labtool.reports.thresholds import load_thresholds
 
-    from reports.pipeline import DEFAULT_REVOLUTIONS
+    from labtool.reports.pipeline import DEFAULT_REVOLUTIONS
 
     th = load_thresholds(thresholds_path) if thresholds_path is not None else None
     return build_report(Path(measured), tuple(compare.models), tuple(compare.omega1), th, overrides_,
@@ -175,11 +175,11 @@ def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dic
 
 
 def write_point_outputs(report, folder: Path, names: dict) -> None:
-    """The per-point page (reports.html), its JSON summary and the overlay data, each atomically."""
-    from common.files import atomic_write, write_netcdf
-    from reports.figures import all_figures, render
-    from reports.html import render_html
-    from reports.summary import to_json
+    """The per-point page (labtool.reports.html), its JSON summary and the overlay data, each atomically."""
+    from labtool.common.files import atomic_write, write_netcdf
+    from labtool.reports.figures import all_figures, render
+    from labtool.reports.html import render_html
+    from labtool.reports.summary import to_json
 
     html = render_html(report, render(all_figures(report)))
     atomic_write(folder / names["html"], lambda tmp: tmp.write_text(html, encoding="utf-8"))
@@ -191,7 +191,7 @@ def write_point_outputs(report, folder: Path, names: dict) -> None:
 def cycles_dataset(report) -> xr.Dataset:
     """What the campaign page overlays: the measured cycle average and scatter of omega2 and
     epsilon2 on the report's cam-angle grid, and each simulation's steady revolution on it."""
-    from reports.pipeline import SIGNALS
+    from labtool.reports.pipeline import SIGNALS
 
     cyc = report.cycles
     grid = np.asarray(cyc.grid, dtype=float)

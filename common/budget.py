@@ -24,7 +24,7 @@ import os
 import time
 from typing import Callable
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 DEFAULT_MAX_SECONDS = 120.0
 MEMORY_FRACTION = 0.8          # of the memory available now

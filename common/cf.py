@@ -120,7 +120,7 @@ def apply(ds, title: str, source: str, history: str = "", start=None):
     """Make an xarray Dataset CF-1.10 in place and return it: global attributes, UDUNITS units,
     standard names, an absolute ``time`` when ``start`` (datetime/ISO text) is given, and an index
     coordinate on every dimension that has none. Call it just before writing, e.g.
-    ``common.cf.apply(ds, title="labtool simulation", source="labtool simulate --model rigid ...")``.
+    ``labtool.common.cf.apply(ds, title="labtool simulation", source="labtool simulate --model rigid ...")``.
     """
     for name in list(ds.variables):
         v = ds[name]

@@ -18,7 +18,7 @@ same name removes the temporaries of dead processes of this host.
 
 Files are created with mode 0666 & ~umask (and the folder's default ACL), as ``open()`` would:
 colleagues on a shared lab drive can read them. A full disk (ENOSPC, EDQUOT, EFBIG) or a read-only
-file system (EROFS) becomes :class:`common.errors.OutputError`, one line saying what was kept.
+file system (EROFS) becomes :class:`labtool.common.errors.OutputError`, one line saying what was kept.
 NetCDF is built in memory and written with plain writes: HDF5 never meets a full disk itself (it
 crashes the process when a metadata flush fails, HDF5 2.0 / h5py 3.16).
 """
@@ -36,8 +36,8 @@ import threading
 from pathlib import Path
 from typing import Callable, Iterable
 
-from common.errors import InputError, Interrupted, OutputError
-from common.names import shown
+from labtool.common.errors import InputError, Interrupted, OutputError
+from labtool.common.names import shown
 
 DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 _DISK_TEXT = {"No space left on device": errno.ENOSPC, "errno = 28": errno.ENOSPC,

@@ -26,7 +26,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError
 
 SIGNATURE = b"\x89HDF\r\n\x1a\n"
 PROBE_TIMEOUT_S = 20.0

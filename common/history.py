@@ -19,7 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from common.names import utf8_text
+from labtool.common.names import utf8_text
 
 ATTRIBUTE = "processing_history"
 
@@ -216,7 +216,7 @@ class History:
 
     def add(self, step: Step) -> Step:
         if not isinstance(step, Step):
-            raise TypeError(f"a history step must be a common.history.Step, got {type(step).__name__}")
+            raise TypeError(f"a history step must be a labtool.common.history.Step, got {type(step).__name__}")
         self.steps.append(step)
         return step
 

@@ -6,7 +6,7 @@ Numbers must be finite; a TOML boolean is never taken for a number; an integer f
 
 Usage::
 
-    from common.schema import Number, Integer, String, Table, load_toml
+    from labtool.common.schema import Number, Integer, String, Table, load_toml
 
     MECHANISM = Table({
         "name": String(default="my cam"),
@@ -40,8 +40,8 @@ import tomllib
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-from common.errors import InputError
-from common.names import shown
+from labtool.common.errors import InputError
+from labtool.common.names import shown
 
 MAX_TOML_BYTES = 4 << 20      # no configuration file is this large; refuse rather than parse for ages
 _MISSING = object()

@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 
 class TaskFailed:

@@ -1,8 +1,8 @@
 """Map a pure function over a large list of items, in chunks sized from its measured cost.
 
 ``map_chunked(fn, items, store, backend)`` calls ``fn(items[i])`` (a dict of column values, one row)
-for every item that ``store`` (a :class:`execution.parts.PartStore`) does not hold yet, groups the
-rows of consecutive items into chunks, runs the chunks on ``backend`` (``execution.backends``) and
+for every item that ``store`` (a :class:`labtool.execution.parts.PartStore`) does not hold yet, groups the
+rows of consecutive items into chunks, runs the chunks on ``backend`` (``labtool.execution.backends``) and
 writes each finished chunk to the store at once. So a run holds in memory only the chunks in
 flight, a kill loses only those, and the same call again finishes the rest.
 
@@ -27,9 +27,9 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from common.errors import InputError
-from execution.backends import InProcess, LocalProcesses, TaskFailed
-from execution.parts import DiskFull, PartStore
+from labtool.common.errors import InputError
+from labtool.execution.backends import InProcess, LocalProcesses, TaskFailed
+from labtool.execution.parts import DiskFull, PartStore
 
 PROBE_ITEMS = 4          # items in each first chunk, before any cost is known
 TARGET_TASK_S = 1.0      # wanted duration of a chunk (s): task overhead << 1 %, a kill loses ~1 s per worker
@@ -125,7 +125,7 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
                 auto_workers: int | None = None, unit: str = "items") -> Outcome:
     """Compute ``fn(item)`` for every item not yet in ``store``; see the module docstring.
 
-    backend       an ``execution.backends`` backend; None = decide from the measured cost: this
+    backend       an ``labtool.execution.backends`` backend; None = decide from the measured cost: this
                   process for work under POOL_WORTH_S, else ``auto_workers`` (default: the cores)
                   local processes
     chunk_items   items per chunk (None: sized from the measured cost)

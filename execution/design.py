@@ -1,8 +1,8 @@
-"""A factorial design (``models.study.doe.Design``) run in chunks, streamed to disk, then assembled.
+"""A factorial design (``labtool.models.study.doe.Design``) run in chunks, streamed to disk, then assembled.
 
 ``run_design(design, csv_path, nc_path, backend)`` maps ``design.row`` over the runs with
-:func:`execution.chunked.map_chunked`; the finished chunks go to ``<csv>.parts/``
-(:class:`execution.parts.PartStore`, keyed by the design's fingerprint: a rerun of the same
+:func:`labtool.execution.chunked.map_chunked`; the finished chunks go to ``<csv>.parts/``
+(:class:`labtool.execution.parts.PartStore`, keyed by the design's fingerprint: a rerun of the same
 design resumes, another design is refused). When every run is done the parts are assembled, one
 part at a time, into
 
@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import InputError, OutputError
-from common.files import OutputSet
-from execution.chunked import map_chunked
-from execution.parts import DiskFull, PartStore, _is_disk_full, float_cells
+from labtool.common.errors import InputError, OutputError
+from labtool.common.files import OutputSet
+from labtool.execution.chunked import map_chunked
+from labtool.execution.parts import DiskFull, PartStore, _is_disk_full, float_cells
 
 EXTRA_COLUMNS = ("wall_s", "error")
 MAX_LISTED_FAILURES = 100
@@ -92,7 +92,7 @@ def check_free_space(folder: Path, n_runs: int) -> None:
 def assemble(design, store: PartStore, csv_path: Path, nc_path: Path, history: str):
     """Parts -> CSV + NetCDF (temporary names, renamed together). Returns (failures, n_failed)."""
     import h5netcdf
-    from models.study.doe import COUNT_RESPONSES
+    from labtool.models.study.doe import COUNT_RESPONSES
 
     parts = store.part_files()
     _check_tiling(parts, len(design), store)
@@ -213,7 +213,7 @@ def _write_csv_part(writer, cells: dict, design, header: bool) -> None:
     """A part's rows in the results table: the run and level columns as integers, the counts
     rounded to integers, every other number with 10 significant digits, an empty cell for no value
     (a failed run's)."""
-    from models.study.doe import COUNT_RESPONSES
+    from labtool.models.study.doe import COUNT_RESPONSES
     columns = design.columns
     as_text = set(["run"] + design.level_columns)
 
@@ -238,7 +238,7 @@ def _failed_text(failures: dict, n_failed: int) -> str:
 
 def _netcdf_layout(nc, design) -> dict:
     """Dimensions, coordinates and empty variables; returns {column: variable} to fill."""
-    from models.study.doe import RESPONSE_ATTRS
+    from labtool.models.study.doe import RESPONSE_ATTRS
     dims = tuple(f.symbol for f in design.factors)
     nc.dimensions = {f.symbol: len(f.levels) for f in design.factors}
     for f in design.factors:

@@ -30,7 +30,7 @@ import os
 import re
 from pathlib import Path
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 FORMAT = "labtool.parts"
 VERSION = 1

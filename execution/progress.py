@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from execution.chunked import format_duration
+from labtool.execution.chunked import format_duration
 
 
 class LineProgress:

@@ -2,7 +2,7 @@
 
 Top rows: omega2 and epsilon2 over the cam angle (deg): the measured cycle average with its +-2
 sigma band, the model at the scene's values (before) and at the fitted ones (after); the y-range
-is the measurement's, a model beyond it is clipped and marked (reports.figures.plot_clipped).
+is the measurement's, a model beyond it is clipped and marked (labtool.reports.figures.plot_clipped).
 Bottom row: one panel per free parameter, the profiled objective at the checked points, its
 linear-theory parabola, the 95 % threshold and the interval.
 """
@@ -13,13 +13,13 @@ import math
 import numpy as np
 from matplotlib.figure import Figure
 
-from reports.figures import SIGNAL_LABEL, measured_limits, plot_clipped
+from labtool.reports.figures import SIGNAL_LABEL, measured_limits, plot_clipped
 
 SIGNALS = ("omega2", "epsilon2")
 
 
 def fit_figure(outcome) -> Figure:
-    """The figure of ``identification.fit.FitOutcome``."""
+    """The figure of ``labtool.identification.fit.FitOutcome``."""
     s = outcome.summary
     p = len(outcome.space.params)
     fig = Figure(figsize=(11, 8.5), layout="constrained")

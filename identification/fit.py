@@ -2,15 +2,15 @@
 
 The steps (docs/identification.md):
 
-1. the measurement side once (identification.objective.load_target);
+1. the measurement side once (labtool.identification.objective.load_target);
 2. *before*: the model at the scene's values (what ``labtool report`` would simulate);
 3. the search at the ``fast`` preset: a coarse scan of the bounds, bounded least squares on
    smoothed cycles from its best points (and a given start), then at full resolution from the best
-   (identification.search);
+   (labtool.identification.search);
 4. for another requested preset, a few least-squares iterations at that preset from there;
 5. the Jacobian at the optimum (central differences) at the requested preset: 95 % intervals and
    correlations; a profile of the objective per parameter checks them and finds what this
-   measurement cannot identify (identification.uncertainty);
+   measurement cannot identify (labtool.identification.uncertainty);
 6. *after*: metrics of the fitted model against the measurement, as the report computes them.
 """
 from __future__ import annotations
@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import InputError, SolverError
-from common.names import shown
-from identification import search, uncertainty
-from identification.objective import SIGNALS, Evaluation, Evaluator, load_target
-from identification.parameters import check_start, make_space, parse_free
-from reports import align, pipeline
+from labtool.common.errors import InputError, SolverError
+from labtool.common.names import shown
+from labtool.identification import search, uncertainty
+from labtool.identification.objective import SIGNALS, Evaluation, Evaluator, load_target
+from labtool.identification.parameters import check_start, make_space, parse_free
+from labtool.reports import align, pipeline
 
 FORMAT = "labtool.fit"
 FORMAT_VERSION = 1
@@ -314,7 +314,7 @@ def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
 
 
 def _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profiles, notes, wall) -> dict:
-    from reports.summary import plain_json
+    from labtool.reports.summary import plain_json
 
     names = space.keys
     corr = lin.correlation()
@@ -376,7 +376,7 @@ def _is_number(v) -> bool:
 
 
 def load_fit(path: Path) -> dict:
-    """A ``labtool fit`` result as ``reports.pipeline.build_report``'s ``fitted`` entry: the model,
+    """A ``labtool fit`` result as ``labtool.reports.pipeline.build_report``'s ``fitted`` entry: the model,
     its omega1 mode, the fitted operating point and a note; InputError for a file that is not one."""
     import json
 

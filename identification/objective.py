@@ -1,12 +1,12 @@
 """The objective of a fit: weighted residuals of a model's cycle statistics against the measured.
 
 The measurement side (``Target``) is computed once: the whole measured revolutions aligned and
-conditioned as the report does (reports.align.read_measured), their cycle average and its standard
+conditioned as the report does (labtool.reports.align.read_measured), their cycle average and its standard
 error, the processing low-pass re-applied to the simulations, the measured impacts and jumps.
 The model side (``Evaluator``) runs the model through the report's own path
-(reports.pipeline.run_simulation: periodic steady state or band statistics, conditioned like the
+(labtool.reports.pipeline.run_simulation: periodic steady state or band statistics, conditioned like the
 measurement) and keeps each run's cycle, keyed by the scene parameters, so the chain parameters
-(Ka gain, delay: reports.align.as_measured) and repeated points cost no model run.
+(Ka gain, delay: labtool.reports.align.as_measured) and repeated points cost no model run.
 
 Residuals (dimensionless; docs/identification.md), at a resolution ``Level`` of H harmonics of the
 cam frequency (the conditioning's, or fewer for the search's first, smoothed stage):
@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import LabtoolError
-from identification.parameters import Space
-from reports import align, events, pipeline
+from labtool.common.errors import LabtoolError
+from labtool.identification.parameters import Space
+from labtool.reports import align, events, pipeline
 
 SIGNALS = pipeline.SIGNALS
 MODEL_FLOOR = 0.01            # of the measured signal's rms: how well a model cycle repeats itself
@@ -178,7 +178,7 @@ class Evaluator:
     """The model side: residuals at a point of the search space, with a cache of model runs.
 
     ``fixed``: the operating point and the values of the parameters that are not free (edge units,
-    reports.pipeline.operating_point's keys plus ``ka_gain`` and ``delay_ms``)."""
+    labtool.reports.pipeline.operating_point's keys plus ``ka_gain`` and ``delay_ms``)."""
 
     def __init__(self, target: Target, model: str, omega1: str, revolutions: int, space: Space, fixed: dict):
         self.target, self.model, self.omega1, self.revolutions = target, model, omega1, int(revolutions)

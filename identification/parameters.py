@@ -7,7 +7,7 @@ that span decades (backlash, contact length, gain).
 
 Two kinds: ``scene`` parameters change the simulation (one model run per new value); ``chain``
 parameters (Ka gain, delay) act on the measuring side only and are applied to a simulated cycle
-already computed (reports.align.as_measured), so they cost no model run.
+already computed (labtool.reports.align.as_measured), so they cost no model run.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,7 +29,7 @@ class FreeParameter:
     si_per_unit  SI value of one edge unit (1e-3 for mm, ms)
     models    the models it exists in
     kind      "scene" (a Scene field, needs a model run) or "chain" (applied to the simulated cycle)
-    op_key    its key in the report's operating point (reports.pipeline.operating_point, edge units)
+    op_key    its key in the report's operating point (labtool.reports.pipeline.operating_point, edge units)
     bounds    default search bounds (edge units)
     limits    physically possible values (edge units, inclusive): user bounds must lie inside
     log       search on a log scale

@@ -1,6 +1,6 @@
 """The search: a coarse scan of the bounds, then bounded least squares (scipy.optimize.least_squares).
 
-Everything works in the unit box u in [0, 1]^p (identification.parameters.Space). The Jacobian is
+Everything works in the unit box u in [0, 1]^p (labtool.identification.parameters.Space). The Jacobian is
 a forward difference of step ``FD_STEP`` in u (2 % of each parameter's range, or of its decades on
 a log scale), stepping inwards at a bound: the models' outputs move in small steps of their own
 (adaptive solvers, an impact more or less), so a finer difference would measure that noise, not the
@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import qmc
 
-from identification.objective import Evaluation, Evaluator
+from labtool.identification.objective import Evaluation, Evaluator
 
 FD_STEP = 0.02
 

@@ -47,7 +47,7 @@ from scipy import stats
 from statsmodels.regression.linear_model import OLS
 from statsmodels.stats.sandwich_covariance import cov_nw_panel
 
-from identification.search import FD_STEP
+from labtool.identification.search import FD_STEP
 
 MAX_CORRELATION = 0.95
 PROFILE_AGREES = (0.5, 2.0)     # rho within this: the linear interval's edge is within ~30 % of the profile's

@@ -18,10 +18,10 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from common.errors import Interrupted, LabtoolError, OutputError
-from common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
+from labtool.common.errors import Interrupted, LabtoolError, OutputError
+from labtool.common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
                           lost_interrupt, signals_interrupt)
-from common.names import shown
+from labtool.common.names import shown
 
 _app = typer.Typer(
     name="labtool",
@@ -249,7 +249,7 @@ def _error(message: str) -> int:
 
 def _one_line(text) -> str:
     """The message on one line, whatever it quotes: a newline or another control character (in a
-    file or channel name, a library's text) is shown escaped (common.names.shown)."""
+    file or channel name, a library's text) is shown escaped (labtool.common.names.shown)."""
     return shown(str(text).strip())
 
 

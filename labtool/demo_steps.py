@@ -24,7 +24,7 @@ from rich.markup import escape  # paths are the user's, not markup
 from rich.table import Table
 
 from labtool.output import console as new_console
-from common.files import write_netcdf
+from labtool.common.files import write_netcdf
 
 # the paper's experiment (sec. 2.4 and 3.3)
 EXPERIMENT_RPM = 180.0
@@ -60,7 +60,7 @@ def run_demo(out: Path, shown_as: Path | None = None):
 
 def _cli(args: list[str], step: str) -> None:
     """Run a labtool command; a non-zero exit ends the demo with the step's name."""
-    from common.errors import LabtoolError
+    from labtool.common.errors import LabtoolError
     from labtool.cli import main
     rc = main(args)
     if rc != 0:
@@ -70,7 +70,7 @@ def _cli(args: list[str], step: str) -> None:
 def step_kinematics(out: Path, console: Console) -> Path:
     from matplotlib.figure import Figure
 
-    from models.mechanism.kinematics import analyze, rise_summary
+    from labtool.models.mechanism.kinematics import analyze, rise_summary
 
     ds = analyze(rpm=180.0)
     s = rise_summary(ds)
@@ -93,7 +93,7 @@ def step_kinematics(out: Path, console: Console) -> Path:
 
 
 def step_table1_kinematic(out: Path, console: Console) -> Path:
-    from models.study.paper import kinematic_vs_table3
+    from labtool.models.study.paper import kinematic_vs_table3
 
     df = kinematic_vs_table3()
     path = out / "table1_kinematic_vs_table3.csv"
@@ -150,12 +150,12 @@ def groove_energy_loss(recording: Path) -> dict:
 
 def step_report(out: Path, console: Console, measured: Path, recording: Path) -> tuple[Path, list[str]]:
     """The report: both models, both omega1 modes, 'fast' preset, with the robustness check."""
-    from common.files import atomic_write
-    from reports.figures import all_figures, render
-    from reports.html import render_html
-    from reports.pdf import write_pdf
-    from reports.pipeline import build_report, headline, verdict_lines
-    from reports.summary import to_json
+    from labtool.common.files import atomic_write
+    from labtool.reports.figures import all_figures, render
+    from labtool.reports.html import render_html
+    from labtool.reports.pdf import write_pdf
+    from labtool.reports.pipeline import build_report, headline, verdict_lines
+    from labtool.reports.summary import to_json
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
     loss = groove_energy_loss(recording)

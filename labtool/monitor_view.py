@@ -1,6 +1,6 @@
 """The acquisition monitor on screen: a rich panel on a terminal, one status line in a log.
 
-Figures come from ``acquisition.monitor.Snapshot``; this module only lays them out. The live trace
+Figures come from ``labtool.acquisition.monitor.Snapshot``; this module only lays them out. The live trace
 of the last revolution is drawn with plotext (braille-free ASCII-safe markers), turned into rich
 text; headroom is coloured: above 80 % of the input range yellow, clipping red.
 """

@@ -40,7 +40,7 @@ def terminal_console(stderr: bool = True):
 def terminal_confirm():
     """``confirm(question) -> bool`` asking yes/no (default no) on stderr when a user sits at a
     terminal (stdin and stderr both are one); None otherwise, so a script gets the refusal line
-    instead of a prompt it cannot answer (common.budget.check)."""
+    instead of a prompt it cannot answer (labtool.common.budget.check)."""
     import sys
 
     if not (sys.stdin.isatty() and sys.stderr.isatty()):

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from processing import events, kernels
+from labtool.processing import events, kernels
 
 MAX_SPIKES = 100_000  # stored spike records (a noisy hour could otherwise hold millions)
 

@@ -31,9 +31,9 @@ import math
 import numpy as np
 from scipy import optimize
 
-from common.errors import FileFormatError, InputError
-from common.names import shown, utf8_text
-from processing.readers.base import stated_number
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown, utf8_text
+from labtool.processing.readers.base import stated_number
 
 MAX_FIT_SAMPLES = 2_000_000     # 200 s at 10 kHz: more adds nothing to a sine fit but memory
 MAX_HARMONIC_DISTORTION = 0.05  # (2f, 3f) / fundamental above which the reference is not a clean sine
@@ -235,7 +235,7 @@ class ChannelResult:
     fits: tuple                       # ChannelFit
 
     def entry(self) -> dict:
-        """The channel's table in the calibration file (processing.calibration_file.ChannelEntry)."""
+        """The channel's table in the calibration file (labtool.processing.calibration_file.ChannelEntry)."""
         f = self.fits[0].fit if len(self.fits) == 1 else None
         out = {"ka_m_s2_per_v": self.ka_m_s2_per_v, "uncertainty_m_s2_per_v": self.uncertainty_m_s2_per_v,
                "ka_std_fit_m_s2_per_v": self.ka_std_fit_m_s2_per_v,
@@ -277,7 +277,7 @@ def row_times(n: int, rate_hz: float, lost_rows, lost_n) -> np.ndarray:
 
 
 def fit_recording_channel(rec, channel: str, reference: ReferenceSpec) -> ChannelFit:
-    """Fit ``channel`` of an open recording (processing.readers.Recording); every error names it."""
+    """Fit ``channel`` of an open recording (labtool.processing.readers.Recording); every error names it."""
     where = f"channel {shown(channel)} of {shown(rec.source)}"
     if not rec.has_channel(channel):
         raise InputError(f"channel {shown(channel)} is not in {shown(rec.source)} "
@@ -339,7 +339,7 @@ def pair_channels(recordings, channels) -> list[tuple[str, str]]:
 def calibrate_pairs(pairs, reference: ReferenceSpec, open_recording) -> list[ChannelResult]:
     """Fit every (channel, recording) pair and merge the fits per channel, in the order given.
 
-    ``open_recording(path) -> Recording`` (processing.readers.open_recording)."""
+    ``open_recording(path) -> Recording`` (labtool.processing.readers.open_recording)."""
     fits: dict[str, list[ChannelFit]] = {}
     by_file: dict[str, list[str]] = {}
     for ch, path in pairs:

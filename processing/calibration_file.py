@@ -27,7 +27,7 @@ formatting, so any channel name or file name is quoted as TOML requires) and rea
     birge_ratio = 1.0              # optional: their scatter / their stated uncertainty (> 1: inflated)
     source = "ref.h5"              # optional: where this channel's Ka comes from
 
-Strict (common.schema): a key this schema does not know, a bool or a string where a number belongs,
+Strict (labtool.common.schema): a key this schema does not know, a bool or a string where a number belongs,
 a number out of range, NaN or inf is refused with one line naming the file and the key. The header
 (``format``, ``format_version``) may be left out of a hand-written file; if present it must match.
 """
@@ -38,9 +38,9 @@ import datetime as _dt
 import math
 from pathlib import Path
 
-from common.errors import InputError
-from common.names import shown
-from common.schema import Integer, MapOf, Number, SchemaError, String, Table, load_toml
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.common.schema import Integer, MapOf, Number, SchemaError, String, Table, load_toml
 
 CAL_FORMAT = "labtool.calibration"
 CAL_VERSION = 1
@@ -159,8 +159,8 @@ def calibration_text(doc: dict) -> str:
 
 
 def write_calibration(path, doc: dict) -> None:
-    """Write the file atomically, with the user's umask (common.files: a full disk is one line)."""
-    from common.files import write_text
+    """Write the file atomically, with the user's umask (labtool.common.files: a full disk is one line)."""
+    from labtool.common.files import write_text
 
     write_text(Path(path), calibration_text(doc))
 

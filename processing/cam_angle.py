@@ -13,8 +13,8 @@ import math
 import numpy as np
 import scipy.fft as sfft
 
-from common.errors import InputError
-from processing import kernels
+from labtool.common.errors import InputError
+from labtool.processing import kernels
 
 TWO_PI = 2.0 * math.pi
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing import kernels
+from labtool.processing import kernels
 
 DEFAULT_K_SIGMA = 8.0
 DEFAULT_FLOOR_FRACTION = 0.05

@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
-from processing import kernels
+from labtool.common.errors import InputError
+from labtool.processing import kernels
 
 DEFAULT_HARMONICS = 100.0
 DEFAULT_ORDER = 4

@@ -101,7 +101,7 @@ class Detector:
 def _band(x: np.ndarray, det: Detector) -> np.ndarray:
     """x limited to the detector's band (zero-phase low-pass at ``band_hz`` when it is below the
     processing's), less its zero-phase low-pass at band / 4 (the slow departures from the cam law)."""
-    from processing.filters import lowpass_sos, zero_phase
+    from labtool.processing.filters import lowpass_sos, zero_phase
     if det.band_hz < det.cutoff_hz:
         x = zero_phase(lowpass_sos(det.fs, det.band_hz, det.order), x)
     return x - zero_phase(lowpass_sos(det.fs, 0.25 * det.band_hz, det.order), x)
@@ -112,7 +112,7 @@ def pulse_kernel(fs: float, cutoff_hz: float, order: int = 4, mode_hz: float = M
     """What a velocity step of 1 rad/s at sample 0 looks like in the detector's x (rad/s^2), on
     samples -L..L (odd length, centre = the step): an impulse of area 1 through the processing
     low-pass and the detector's band (``_band``), all zero-phase."""
-    from processing.filters import lowpass_sos, zero_phase
+    from labtool.processing.filters import lowpass_sos, zero_phase
     det = Detector(fs, cutoff_hz, order, mode_hz=mode_hz)
     half = int(math.ceil(6.0 * fs / det.band_hz))
     imp = np.zeros(8 * half + 1)

@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import math
 
-from common import history as H
-from common.errors import InputError
-from processing.calibration_file import KA_MAX, KA_MIN, PAPER_KA_M_S2_PER_V
+from labtool.common import history as H
+from labtool.common.errors import InputError
+from labtool.processing.calibration_file import KA_MAX, KA_MIN, PAPER_KA_M_S2_PER_V
 
 CHANNELS = ("aE_t", "aE_n")
 
 
 def ka_for_channels(rec, calibration: dict | None, calibration_source: str, warn) -> H.ApplyKa:
-    """The ApplyKa step for aE_t and aE_n of ``rec`` (a processing.readers.Recording)."""
+    """The ApplyKa step for aE_t and aE_n of ``rec`` (a labtool.processing.readers.Recording)."""
     out = {}
     for name in CHANNELS:
         j = rec.channel_index(name)

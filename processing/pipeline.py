@@ -16,7 +16,7 @@ samples at a channel's extreme value) are flagged, set to NaN in the outputs, an
 intervals, revolutions and spectral segments holding them are left out of the estimates.
 
 Every step is recorded in the history from the parameters it was called with (common/history.py).
-The output is written to a temporary file and renamed at the end (common.files.atomic_write): an
+The output is written to a temporary file and renamed at the end (labtool.common.files.atomic_write): an
 interrupted or failed run leaves nothing that looks complete.
 """
 from __future__ import annotations
@@ -29,21 +29,21 @@ from typing import Callable
 
 import numpy as np
 
-from common import cf
-from common import history as H
-from common import recording_attrs
-from common.errors import InputError
-from common.files import atomic_write
-from common.names import shown
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
-from processing import cam_angle, cycles, events, filters, follower, kernels, speed, spectra
-from processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
-from processing.ka import ka_for_channels
-from processing.readers import Recording
-from processing.readers.base import MAX_SAMPLE, check_finite, stated_number
-from processing.workspace import Workspace
-from processing.writer import CoreBlock, MeasuredWriter
+from labtool.common import cf
+from labtool.common import history as H
+from labtool.common import recording_attrs
+from labtool.common.errors import InputError
+from labtool.common.files import atomic_write
+from labtool.common.names import shown
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, speed, spectra
+from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
+from labtool.processing.ka import ka_for_channels
+from labtool.processing.readers import Recording
+from labtool.processing.readers.base import MAX_SAMPLE, check_finite, stated_number
+from labtool.processing.workspace import Workspace
+from labtool.processing.writer import CoreBlock, MeasuredWriter
 
 CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
 
@@ -68,7 +68,7 @@ class ProcessOptions:
     spike_k_sigma: float = events.DEFAULT_K_SIGMA
     tacho_channel: str = "tacho"
     ac_tau_s: float | None = None       # sensor chain's AC-coupling time constant (s), undone if given
-    mechanism: object | None = None     # models.mechanism.Mechanism; default: the paper's STB-216
+    mechanism: object | None = None     # labtool.models.mechanism.Mechanism; default: the paper's STB-216
 
 
 def process_recording(rec: Recording, output: Path, options: ProcessOptions | None = None,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
-from processing import kernels
+from labtool.processing import kernels
 
 
 def default_nperseg(fs: float, n_samples: int, seconds: float = 4.0) -> int:

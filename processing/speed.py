@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 IRREGULAR = 0.2          # relative deviation from the median period that makes a revolution irregular
 REFUSE_RATIO = 1.5       # measured / stated speed beyond this (either way): the rate is wrong

@@ -11,7 +11,7 @@ import h5netcdf
 import h5py
 import numpy as np
 
-from common import cf
+from labtool.common import cf
 
 TIME_VARS = {
     # name: (dtype, units, long_name)

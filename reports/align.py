@@ -25,10 +25,10 @@ import math
 import numpy as np
 import xarray as xr
 
-from common.errors import InputError
-from common.history import History, Lowpass
-from common.names import shown
-from processing.filters import lowpass_sos, zero_phase
+from labtool.common.errors import InputError
+from labtool.common.history import History, Lowpass
+from labtool.common.names import shown
+from labtool.processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
 FINE_FACTOR = 4

@@ -4,7 +4,7 @@ Measured: the velocity steps the detector finds in every whole revolution the re
 Predicted: each model's own event record (``model_events``), seen as the chain would see it
 (contacts closer than the detector's resolution merged, those below the recording's detectability
 threshold dropped), over the model's steady revolutions. Both go through the same cycle
-statistics (``processing.impacts.per_revolution``).
+statistics (``labtool.processing.impacts.per_revolution``).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from processing import impacts
+from labtool.processing import impacts
 
 TWO_PI = 2.0 * math.pi
 KEYS = ("impacts_per_rev", "jumps_per_rev", "first_impact_deg", "impact_angles_deg")   # summary JSON keys
@@ -38,10 +38,10 @@ class EventRecord:
 
 def model_events(sim: xr.Dataset) -> EventRecord | None:
     """The one place the report reads a model's events: the dataset's event record
-    (models.dynamics.events, the same for every model; EVENTS.md). None for a simulation without
+    (labtool.models.dynamics.events, the same for every model; EVENTS.md). None for a simulation without
     one (the kinematic level)."""
-    from common.errors import FileFormatError
-    from models.dynamics import events
+    from labtool.common.errors import FileFormatError
+    from labtool.models.dynamics import events
 
     try:
         ev = events.read(sim)
@@ -146,7 +146,7 @@ def _mean_speed(t, phi1) -> float:
 
 def truth_statistics(record: dict, cycles, det: impacts.Detector, threshold: float, program=None) -> dict:
     """A known truth's events (the arrays of EVENTS.md, e.g. the simulated stand's
-    ``acquisition.signal_chain.truth_events``; times from the recording's first sample) over the
+    ``labtool.acquisition.signal_chain.truth_events``; times from the recording's first sample) over the
     measured whole revolutions of ``cycles`` (by time), with the same visibility as the measured and
     predicted ones: what the detector should find. ``program`` as for ``predicted``."""
     t_all, phi_all = np.asarray(record["event_time"], float), np.asarray(record["event_phi1"], float)
@@ -164,7 +164,7 @@ def truth_statistics(record: dict, cycles, det: impacts.Detector, threshold: flo
 
 def kinematic_epsilon2(phi1: np.ndarray, omega1: np.ndarray, mech, program) -> np.ndarray:
     """epsilon2 (rad/s^2) the cam law imposes at cam angle phi1 (rad) and speed omega1 (rad/s)."""
-    from models.mechanism.kinematics import follower_motion
+    from labtool.models.mechanism.kinematics import follower_motion
     _, _, eps2, _ = follower_motion(program, mech, phi1, omega1, np.zeros_like(phi1))
     return eps2
 

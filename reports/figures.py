@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from common.cf import elapsed_seconds
+from labtool.common.cf import elapsed_seconds
 
 COLORS = {"const": "tab:blue", "var": "tab:red"}
 STYLES = {"const": "-", "var": (0, (4, 3))}

@@ -14,10 +14,10 @@ from pathlib import Path
 import jinja2
 import numpy as np
 
-from reports.figures import all_figures, render
-from reports.align import PERIODIC_TOL
-from reports.pipeline import Report, closest, headline, robust_verdict
-from reports.summary import build_summary
+from labtool.reports.figures import all_figures, render
+from labtool.reports.align import PERIODIC_TOL
+from labtool.reports.pipeline import Report, closest, headline, robust_verdict
+from labtool.reports.summary import build_summary
 
 TEMPLATES = Path(__file__).with_name("templates")
 METRIC_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_magnitude", "sg_phase",

@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 # ISO/TS 18571:2014 default parameters (section 6; docs/reports.md)
 ISO_DEFAULTS = {
@@ -373,7 +373,7 @@ METRICS = {
     "peak_max_shift_deg": ("low", True),
     "peak_min_shift_deg": ("low", True),
     "lag_deg": ("low", True),
-    "band_overlap": ("high", False),    # reports.pipeline.band_statistics
+    "band_overlap": ("high", False),    # labtool.reports.pipeline.band_statistics
 }
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
-from reports.figures import all_figures, render
-from reports.pipeline import Report, headline, verdict_lines
+from labtool.reports.figures import all_figures, render
+from labtool.reports.pipeline import Report, headline, verdict_lines
 
 
 def _dash(v, spec=".2f") -> str:

@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from common.cf import in_seconds, udunits
-from common.names import shown
-from common.errors import FileFormatError, InputError, LabtoolError
-from processing import impacts
-from processing.readers.base import as_text, stated_number
-from reports import align, events, metrics
-from reports.thresholds import Thresholds, evaluate
+from labtool.common.cf import in_seconds, udunits
+from labtool.common.names import shown
+from labtool.common.errors import FileFormatError, InputError, LabtoolError
+from labtool.processing import impacts
+from labtool.processing.readers.base import as_text, stated_number
+from labtool.reports import align, events, metrics
+from labtool.reports.thresholds import Thresholds, evaluate
 
 SIGNALS = ("omega2", "epsilon2")
 # the units (UDUNITS spelling) the comparison reads the measured file in; another stated unit is refused
@@ -49,7 +49,7 @@ class SimRun:
     revolutions: float = 1.0  # cam revolutions simulated
     warning: str = ""         # what the reader must know (a stand-in level, a partial revolution)
     accuracy: str = "standard"
-    events: dict | None = None   # predicted event statistics (reports.events.predicted)
+    events: dict | None = None   # predicted event statistics (labtool.reports.events.predicted)
     op: dict | None = None       # its own operating point (an identified model's); None = the report's
 
     @property
@@ -80,7 +80,7 @@ class Report:
     notes: list                       # what was skipped or replaced, and why
     wall_s: float = 0.0
     time_filter: align.TimeFilter | None = None   # the processing low-pass, re-applied to the simulations
-    measured_events: dict | None = None            # reports.events.measured
+    measured_events: dict | None = None            # labtool.reports.events.measured
     robustness: list = dataclasses.field(default_factory=list)   # rows: preset, revolutions, closest, grades
 
     @property
@@ -152,14 +152,14 @@ def _stated_number(ds, name: str, option: str) -> float | None:
 
 def no_load_factor() -> float:
     """No-load over nominal cam speed of the models' drive with omega1 variable (n_sync / n_nominal)."""
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
     m = Mechanism.default()
     return m.omega_sync_motor / m.omega_nominal_motor
 
 
 def max_cam_speed_rpm() -> float:
     """The fastest cam speed the models take (rpm): the drive motor's synchronous speed."""
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
     return Mechanism.default().max_cam_speed_rpm
 
 
@@ -230,7 +230,7 @@ def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dic
 def model_scene(op: dict, mode: str, accuracy: str, revolutions: float):
     """The models' Scene for the operating point ``op`` (edge units) over whole revolutions; with
     omega1 var the drive's nominal n1 is ``omega1_var_n1_rpm`` (its no-load speed is the op's)."""
-    from models.dynamics.scene import Scene
+    from labtool.models.dynamics.scene import Scene
     rpm = op["cam_speed_rpm"] if mode == "const" else op.get("omega1_var_n1_rpm", op["cam_speed_rpm"])
     return Scene(law=op["law"], cam_speed_rpm=rpm, Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
                  jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
@@ -244,7 +244,7 @@ def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutio
                    cond: align.Conditioning, time_filter: align.TimeFilter | None = None) -> SimRun:
     """One model at one omega1 mode over ``revolutions`` whole revolutions, conditioned like the
     measurement (align.simulated_cycles): its steady cycle, periodic or as statistics."""
-    from models.dynamics.simulate import simulate
+    from labtool.models.dynamics.simulate import simulate
 
     t0 = time.perf_counter()
     res = simulate(model_scene(op, mode, accuracy, revolutions), requested)
@@ -265,7 +265,7 @@ CHAIN_KEYS = ("ka_gain", "delay_ms")   # measuring-side parameters of an operati
 def chain_view(cycle, op: dict):
     """The simulated cycle as the measuring chain shows it when the operating point carries an
     identified Ka gain (true Ka over the one processing used) or delay (ms, channels behind the
-    tacho): reports.align.cycle_as_measured; unchanged without them."""
+    tacho): labtool.reports.align.cycle_as_measured; unchanged without them."""
     gain, delay_ms = float(op.get("ka_gain", 1.0)), float(op.get("delay_ms", 0.0))
     return align.cycle_as_measured(cycle, gain, delay_ms * 1e-3 * op["cam_speed_rpm"] * math.pi / 30.0)
 
@@ -446,7 +446,7 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
         notes.append("the measured file records no processing low-pass that the report can reproduce: "
                      "the simulations see only the common harmonic low-pass, and no impacts are detected")
     if ds.attrs.get("source") == "synthetic":
-        notes.append("the measured file is SYNTHETIC (kinematics + noise, reports.synthetic), not a recording")
+        notes.append("the measured file is SYNTHETIC (kinematics + noise, labtool.reports.synthetic), not a recording")
     dev = cycles.cam_speed_rpm / op["cam_speed_rpm"] - 1.0
     if abs(dev) > 0.10:
         notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
@@ -472,7 +472,7 @@ CONSTANT_SPEED_VAR = ("elastic", "kinematic")   # levels whose omega1 var is the
 
 def _same_motion(runs: list, model: str, mode: str, accuracy: str) -> SimRun | None:
     """The elastic model and the kinematic level with omega1 var turn the cam at constant speed,
-    the drive's no-load speed (models.dynamics.elastic, simulate._kinematic), which the report sets
+    the drive's no-load speed (labtool.models.dynamics.elastic, simulate._kinematic), which the report sets
     to the simulated speed: the same motion as omega1 const. That run is reused (labelled var, with
     a note) instead of simulated again."""
     if model not in CONSTANT_SPEED_VAR or mode != "var":
@@ -506,17 +506,17 @@ def _simulate_or_stand_in(op, model, mode, accuracy, revolutions, cond, time_fil
 
 def cam_program(op: dict):
     """The cam program of the operating point (the default mechanism, the op's law)."""
-    from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
+    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism.motion_laws import CamProgram
     return CamProgram.for_mechanism(Mechanism.default(), law=op["law"])
 
 
 def measured_events(cycles, det, op) -> dict | None:
-    """The measured impacts and jumps (reports.events.measured) at the operating point's cam law;
+    """The measured impacts and jumps (labtool.reports.events.measured) at the operating point's cam law;
     None without a detector (no processing low-pass recorded)."""
     if det is None:
         return None
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
     return events.measured(cycles, det, Mechanism.default(), cam_program(op))
 
 

@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from common import recording_attrs
-from reports.events import KEYS as EVENT_KEYS
-from reports.pipeline import Report, closest, headline, robust_verdict
+from labtool.common import recording_attrs
+from labtool.reports.events import KEYS as EVENT_KEYS
+from labtool.reports.pipeline import Report, closest, headline, robust_verdict
 
 FORMAT_VERSION = 2
 

@@ -20,9 +20,9 @@ def synthetic_measured(rpm: float = 180.0, revolutions: float = 4.3, fs: float =
     scaled by ``gain``, delayed by ``lag_deg`` of cam angle, plus white noise of ``noise`` times the
     signal's peak. The recording starts at cam angle ``start_deg`` so that its first and last
     revolutions are partial, as on the stand."""
-    from models.mechanism.kinematics import analyze
-    from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram
+    from labtool.models.mechanism.kinematics import analyze
+    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism.motion_laws import CamProgram
 
     mech = mechanism or Mechanism.default()
     program = CamProgram.for_mechanism(mech, law=law)
@@ -74,7 +74,7 @@ def synthetic_measured(rpm: float = 180.0, revolutions: float = 4.3, fs: float =
             "ka_m_s2_per_v": 86.43,
             "ka_source": "paper default (synthetic data)",
             "sample_rate_hz": float(fs),
-            "processing_history": f"reports.synthetic.synthetic_measured(rpm={rpm}, noise={noise}, gain={gain}, "
+            "processing_history": f"labtool.reports.synthetic.synthetic_measured(rpm={rpm}, noise={noise}, gain={gain}, "
                                   f"lag_deg={lag_deg}, seed={seed})",
         },
     )

@@ -23,9 +23,9 @@ import dataclasses
 import math
 from pathlib import Path
 
-from common.errors import InputError
-from common.schema import ListOf, MapOf, Number, OneOf, String, Table, load_toml
-from reports.metrics import METRICS
+from labtool.common.errors import InputError
+from labtool.common.schema import ListOf, MapOf, Number, OneOf, String, Table, load_toml
+from labtool.reports.metrics import METRICS
 
 SIGNALS = ("omega2", "epsilon2")
 MODELS = ("kinematic", "rigid", "elastic")
@@ -109,7 +109,7 @@ def parse_thresholds(data: dict, source: str = "thresholds") -> Thresholds:
 
 
 def load_thresholds(path: Path) -> Thresholds:
-    """Read and check a threshold file (TOML, common.schema)."""
+    """Read and check a threshold file (TOML, labtool.common.schema)."""
     return parse_thresholds(load_toml(path, "threshold file"), source=f"threshold file {path}")
 
 

@@ -196,8 +196,8 @@ class FakeBoard:
 
 def stand_source(scene=None, seed=0):
     """Volts of the simulated stand as the board's inputs: the fake board wired to the stand."""
-    from acquisition import signal_chain as sc
-    from acquisition.sim_stand import SimStand
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.sim_stand import SimStand
 
     dev = SimStand(scene or sc.StandScene(truth_model="kinematic"), seed=seed, realtime=False)
     dev.configure(10000)

@@ -1,6 +1,6 @@
 """Recordings for processing tests, from the one sensor chain (acquisition's simulated stand).
 
-``stand_volts`` runs acquisition.sim_stand.SimStand with the kinematic truth (acquisition/signal_chain.py: gravity,
+``stand_volts`` runs labtool.acquisition.sim_stand.SimStand with the kinematic truth (acquisition/signal_chain.py: gravity,
 resonance, noise, Ka, AC coupling, anti-alias, ADC) without the recorder; ``write_v1`` writes
 DESIGN.md's recording format v1 with plain h5py, so a test can damage or vary any part of it;
 ``truth`` is the chain's own noise-free truth at the samples' times. Benchmarks use it too.
@@ -12,8 +12,8 @@ import math
 import h5py
 import numpy as np
 
-from acquisition import signal_chain as sc
-from acquisition.sim_stand import SimStand
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.sim_stand import SimStand
 
 
 def stand_volts(duration_s: float, rpm: float = 180.0, fs: float = 10000.0, seed: int = 1,

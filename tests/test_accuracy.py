@@ -1,6 +1,6 @@
 """Accuracy presets: defined by their measured error against the reference solution.
 
-The figures in models.dynamics.accuracy.MEASURED come from benchmarks/work_precision.py on Table 1; here a
+The figures in labtool.models.dynamics.accuracy.MEASURED come from benchmarks/work_precision.py on Table 1; here a
 preset is run again on Table 1 runs and held to them, the tolerances they were measured with are
 checked against the models' presets (a changed tolerance must be measured again), and the error
 metrics are checked on known cases.
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from models.dynamics import accuracy, elastic, events, rigid
-from common.errors import InputError
-from models.study.paper import table1_runs
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import SimulationResult
+from labtool.models.dynamics import accuracy, elastic, events, rigid
+from labtool.common.errors import InputError
+from labtool.models.study.paper import table1_runs
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import SimulationResult
 
 
 def _scene(run, **kw):
@@ -28,8 +28,8 @@ def test_measured_with_the_models_current_tolerances(model, mod, preset):
     for key, value in measured.items():
         now = mod.PRESETS[preset].get(key)
         same = now == pytest.approx(value, rel=1e-12) if isinstance(value, float) else now == value
-        assert same, (f"models.dynamics.{model}.PRESETS['{preset}']['{key}'] is {now}, measured with {value}: run "
-                      "benchmarks/work_precision.py and update models.dynamics.accuracy.MEASURED")
+        assert same, (f"labtool.models.dynamics.{model}.PRESETS['{preset}']['{key}'] is {now}, measured with {value}: run "
+                      "benchmarks/work_precision.py and update labtool.models.dynamics.accuracy.MEASURED")
 
 
 @pytest.mark.slow

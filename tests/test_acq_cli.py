@@ -7,8 +7,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from acquisition import signal_chain as sc
-from acquisition.recorder import read_recording
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.recorder import read_recording
 from labtool.cli import main
 
 
@@ -140,7 +140,7 @@ def test_sample_data_is_what_its_scene_makes(tmp_path, name):
 
 def test_sample_calibration_gives_the_chains_ka():
     """The sample recordings use the 480C02 at gain x1 (Ka = 864.3 m/s^2/V), calibration included."""
-    from processing.calibration_file import read_calibration
+    from labtool.processing.calibration_file import read_calibration
     cal = read_calibration(SAMPLE / "calibration.toml")
     assert cal["aE_t"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)
     assert cal["aE_n"].ka_m_s2_per_v == pytest.approx(864.3, rel=0.005)

@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from acquisition.recorder import Recorder, read_recording
+from labtool.acquisition.recorder import Recorder, read_recording
 from labtool.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,14 +69,14 @@ def test_recordings_follow_the_umask(tmp_path):
     old = os.umask(0o027)
     try:
         with Recorder(tmp_path / "u.h5", ["a"], 1000.0) as r:
-            r.write_block(__import__("acquisition.device", fromlist=["Block"]).Block(np.zeros((10, 1)), 0))
+            r.write_block(__import__("labtool.acquisition.device", fromlist=["Block"]).Block(np.zeros((10, 1)), 0))
     finally:
         os.umask(old)
     assert (tmp_path / "u.h5").stat().st_mode & 0o777 == 0o640
 
 
 def is_being_written(path):
-    from acquisition.writer_lock import is_being_written as held  # new in this change: imported here so the
+    from labtool.acquisition.writer_lock import is_being_written as held  # new in this change: imported here so the
     return held(path)                                              # other cases still run against older code
 
 
@@ -195,7 +195,7 @@ def test_read_recording_of_a_truncated_file_is_one_error_not_a_hang(tmp_path, ke
     assert main(["acquire", "--fast", "--duration", "0.3", "-o", str(full)]) == 0
     cut = tmp_path / "cut.h5"
     cut.write_bytes(full.read_bytes()[:keep])
-    code = ("import sys\nfrom acquisition.recorder import read_recording\nfrom common.errors import FileFormatError\n"
+    code = ("import sys\nfrom labtool.acquisition.recorder import read_recording\nfrom labtool.common.errors import FileFormatError\n"
             "try:\n    read_recording(sys.argv[1])\nexcept FileFormatError as e:\n    print('refused:', e)\n")
     try:  # in a child with a bound: before the safe opener, h5py looped for ever on such a file
         proc = subprocess.run([sys.executable, "-c", code, str(cut)], cwd=ROOT, capture_output=True, text=True,

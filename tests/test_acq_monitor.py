@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from acquisition import signal_chain as sc
-from acquisition.device import Block
-from acquisition.monitor import Monitor
-from acquisition.sim_stand import SimStand
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.device import Block
+from labtool.acquisition.monitor import Monitor
+from labtool.acquisition.sim_stand import SimStand
 from labtool import monitor_view
 
 ROOT = Path(__file__).resolve().parents[1]

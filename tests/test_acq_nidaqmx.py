@@ -10,12 +10,12 @@ import pytest
 from nidaqmx.constants import AccelSensitivityUnits, AccelUnits, AcquisitionType, Edge, ExcitationSource, Slope
 from nidaqmx.constants import TerminalConfiguration
 
-from acquisition import nidaqmx_config as nc
-from acquisition import session
-from acquisition.device import DeviceDisconnected
-from acquisition.nidaqmx_driver import NIDAQmxDevice, check_readback, expand_channels
-from acquisition.recorder import read_recording
-from common.errors import InputError
+from labtool.acquisition import nidaqmx_config as nc
+from labtool.acquisition import session
+from labtool.acquisition.device import DeviceDisconnected
+from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, check_readback, expand_channels
+from labtool.acquisition.recorder import read_recording
+from labtool.common.errors import InputError
 from nidaqmx_fake import FakeBoard
 
 
@@ -277,9 +277,9 @@ def test_expand_channels_bad(bad):
 
 
 def test_software_trigger_keeps_the_pretrigger_samples(tmp_path):
-    from acquisition import signal_chain as sc
-    from acquisition.sim_stand import SimStand
-    from acquisition.trigger import SoftwareTrigger, first_crossing
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.sim_stand import SimStand
+    from labtool.acquisition.trigger import SoftwareTrigger, first_crossing
 
     assert first_crossing(np.array([0.0, 1.0, 3.0, 1.0]), 2.5, "rising", None) == 2
     assert first_crossing(np.array([3.0, 3.0]), 2.5, "rising", None) is None  # high from the start: no edge

@@ -5,8 +5,8 @@ import sys
 import numpy as np
 import pytest
 
-import acquisition.nidaqmx_driver as drv
-from acquisition.recorder import read_recording
+import labtool.acquisition.nidaqmx_driver as drv
+from labtool.acquisition.recorder import read_recording
 from labtool.cli import main
 from nidaqmx_fake import FakeBoard, stand_source
 
@@ -52,7 +52,7 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
 def test_a_value_not_in_the_file_is_said_to_be_the_papers():
     import xarray as xr
 
-    from reports.pipeline import operating_point
+    from labtool.reports.pipeline import operating_point
 
     op = operating_point(xr.Dataset(attrs={"cam_speed_rpm_stated": 180.0, "Fu_N": 5.0}), 180.0, {})
     assert op["Fu"] == 5.0 and op["Fu_source"] == "file attribute Fu_N"

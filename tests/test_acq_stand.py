@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from acquisition import signal_chain as sc
-from acquisition.device import Event, parse_device
-from acquisition.sim_stand import Fault, SimStand, board_rate, parse_fault
-from common.errors import InputError
-from models.mechanism.kinematics import analyze
-from models.mechanism.linkage import linkage_state
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.device import Event, parse_device
+from labtool.acquisition.sim_stand import Fault, SimStand, board_rate, parse_fault
+from labtool.common.errors import InputError
+from labtool.models.mechanism.kinematics import analyze
+from labtool.models.mechanism.linkage import linkage_state
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
 
 
 def record(scene=None, params=None, seed=1, duration=2.0, rate=10000.0, faults=()):
@@ -165,7 +165,7 @@ def test_clip_fault_and_disconnect():
     _, blocks = record(duration=1.0, faults=[Fault("clip", 0.5)])
     clips = [e for b in blocks for e in b.events if e.kind == "clip"]
     assert clips and clips[0].detail.startswith("aE_t") and 5000 <= clips[0].index < 5100
-    from acquisition.device import DeviceDisconnected
+    from labtool.acquisition.device import DeviceDisconnected
     with pytest.raises(DeviceDisconnected):
         record(duration=1.0, faults=[Fault("disconnect", 0.3)])
 
@@ -304,7 +304,7 @@ def test_the_twins_bending_mode_is_not_applied_twice():
 
 
 def test_every_truth_parameter_survives_the_recordings_attributes():
-    from models.dynamics.twin import TwinPhysics
+    from labtool.models.dynamics.twin import TwinPhysics
 
     physics = TwinPhysics(drive="input", mode_hz=1500.0, mode_zeta=0.03, mode_mass_share=0.2, friction_torque=0.01,
                           friction_radius=2e-5, friction_speed=2e-3, persistence_s=3e-3, warmup_revolutions=2)

@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from labtool.cli import main
-from models.study import anova
-from common.errors import InputError
-from models.study.paper import read_reference
+from labtool.models.study import anova
+from labtool.common.errors import InputError
+from labtool.models.study.paper import read_reference
 
 TABLES = {2: "table2_rigid", 3: "table3_elastic"}
 

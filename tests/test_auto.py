@@ -8,11 +8,11 @@ runs no dynamic model at all where the kinematic level is the exact answer.
 import numpy as np
 import pytest
 
-from models.dynamics import accuracy
-from models.dynamics.auto import CONTACT_OUTPUTS, choose_level, simulate_auto
-from models.study.paper import table1_runs
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.models.dynamics import accuracy
+from labtool.models.dynamics.auto import CONTACT_OUTPUTS, choose_level, simulate_auto
+from labtool.models.study.paper import table1_runs
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 KEYS = ("MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s",
         "percussion_max_Ns")
@@ -123,8 +123,8 @@ def test_the_decision_reads_the_same_moment_range_as_the_kinematic_analysis():
     """auto decides from the shared cam-angle table (4001 angles over the rise) instead of a whole
     kinematic analysis (1441 over the revolution): the MR13D range is the same to the coarser
     grid's resolution, on every run of Table 1 at both omega1 modes."""
-    from models.dynamics.auto import rise_moment_range
-    from models.dynamics.simulate import _kinematic
+    from labtool.models.dynamics.auto import rise_moment_range
+    from labtool.models.dynamics.simulate import _kinematic
 
     for r in table1_runs().itertuples():
         for mode in ("const", "var"):

@@ -7,13 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from acquisition import session
-from acquisition import signal_chain as sc
-from processing.calibration import fit_sine, ka_from_fit
-from processing.calibration_file import read_calibration
-from acquisition.sim_stand import Fault, SimStand
+from labtool.acquisition import session
+from labtool.acquisition import signal_chain as sc
+from labtool.processing.calibration import fit_sine, ka_from_fit
+from labtool.processing.calibration_file import read_calibration
+from labtool.acquisition.sim_stand import Fault, SimStand
 from labtool.cli import main
-from common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError
 
 
 def cal_recording(path, ka=86.43, freq=79.6, accel=9.81, channel="aE_t", seed=3, duration=2.0, faults=()):

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 from labtool.cli import main
-from processing.calibration_file import read_calibration
+from labtool.processing.calibration_file import read_calibration
 from stand_data import stand_recording, write_v1
 
 FS = 10000.0
@@ -355,7 +355,7 @@ def test_a_calibration_ten_times_the_recordings_ka_is_said(tmp_path, capsys):
 @pytest.mark.parametrize("keep_bytes", [100, 512, 2048, 4096])
 def test_a_reference_cut_to_its_first_bytes_does_not_hang_calibrate(tmp_path, keep_bytes):
     # main hung for ever (SWMR open of a truncated file); calibrate now reads through
-    # processing.readers and its superblock check. Run in a child with a bound, as a user would.
+    # labtool.processing.readers and its superblock check. Run in a child with a bound, as a user would.
     import subprocess
     import sys
     cut = tmp_path / "cut.h5"

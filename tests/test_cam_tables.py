@@ -1,4 +1,4 @@
-"""models.mechanism.cam_tables: the speed-independent terms reproduce models.mechanism.kinematics and the cam geometry,
+"""labtool.models.mechanism.cam_tables: the speed-independent terms reproduce labtool.models.mechanism.kinematics and the cam geometry,
 the stroke spline reproduces the exact linkage, the grid cache is shared and read-only; and the
 batched dense output of the compiled loop equals the per-run one."""
 import math
@@ -6,16 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from models.mechanism import cam_tables, memo
-from models.dynamics import elastic
-from models.mechanism.cam_profile import contact_geometry
-from models.mechanism.kinematics import follower_motion, kinetostatic_moment, load_force_x
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.models.mechanism import cam_tables, memo
+from labtool.models.dynamics import elastic
+from labtool.models.mechanism.cam_profile import contact_geometry
+from labtool.models.mechanism.kinematics import follower_motion, kinetostatic_moment, load_force_x
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 
 def _reference(scene, phi1, omega1):
-    """The operating point's kinematics the way models.mechanism.kinematics computes them."""
+    """The operating point's kinematics the way labtool.models.mechanism.kinematics computes them."""
     mech, prog = scene.mechanism, scene.program
     phi2, omega2, epsilon2, _ = follower_motion(prog, mech, phi1, omega1)
     load_x = load_force_x(mech, prog, phi1, phi2, scene.Fu)
@@ -110,8 +110,8 @@ def test_cache_is_bounded():
 
 
 def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
-    from models.dynamics.elastic import integrate
-    from models.dynamics.kernels.dopri5 import evaluate_runs
+    from labtool.models.dynamics.elastic import integrate
+    from labtool.models.dynamics.kernels.dopri5 import evaluate_runs
 
     s = Scene(backlash=0.016e-3, omega1_mode="var")           # run 1: several phases
     tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
@@ -125,7 +125,7 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     np.testing.assert_array_equal(batched, each)
     # read in place on the integration's store, a subset of the runs too (the landings of
     # complete_events), and the same as runs that are copies with no store (joined first)
-    from models.dynamics.kernels.dopri5 import DenseRun, evaluate_at_runs
+    from labtool.models.dynamics.kernels.dopri5 import DenseRun, evaluate_at_runs
     assert all(r.store is runs[0].store for r in runs)
     subset = runs[1::2]
     which = np.repeat(np.arange(len(subset)), [tt.size for tt in times[1::2]])[::-1].copy()
@@ -136,7 +136,7 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     copies = [DenseRun(r.t0s.copy(), r.hs.copy(), r.y0s.copy(), r.Qs.copy(), float(r.t[-1])) for r in subset]
     np.testing.assert_array_equal(evaluate_at_runs(copies, which, tt_subset), each_subset)
     # the merged output instants read the store in place too, and equal those of copies
-    from models.dynamics.kernels.dopri5 import shared_store
+    from labtool.models.dynamics.kernels.dopri5 import shared_store
     copied = [(ph, DenseRun(r.t0s.copy(), r.hs.copy(), r.y0s.copy(), r.Qs.copy(), float(r.t[-1]))) for ph, r in segs]
     assert shared_store(runs) is not None and shared_store([r for _, r in copied]) is None
     for in_store, joined in zip(elastic._outputs(tab, segs), elastic._outputs(tab, copied)):
@@ -157,7 +157,7 @@ def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
 
 
 def test_rigid_plant_tables_are_shared_and_a_warm_run_equals_a_cold_one():
-    from models.dynamics import rigid
+    from labtool.models.dynamics import rigid
 
     a = Scene(cam_speed_rpm=180, Fu=0.0, jt_factor=1.0, backlash=0.016e-3)
     b = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.128e-3)

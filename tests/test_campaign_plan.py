@@ -1,8 +1,8 @@
 """Campaign plans: the schema (types, ranges, unknown keys named), points from a list and a grid."""
 import pytest
 
-from campaign.plan import expand_points, load_plan
-from common.errors import InputError
+from labtool.campaign.plan import expand_points, load_plan
+from labtool.common.errors import InputError
 from labtool.cli import main
 
 SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_data" / "plans"
@@ -89,7 +89,7 @@ def test_a_plan_that_is_a_folder_or_missing(tmp_path, capsys):
 
 
 def test_defaults_and_points_combine():
-    from campaign.plan import check_plan
+    from labtool.campaign.plan import check_plan
     doc = check_plan({"defaults": {"law": "cosine", "duration_s": 2.0, "backlash_mm": 0.016},
                       "points": [{"rpm": 180}, {"rpm": 300, "revolutions": 4, "jt_factor": 1.5}]}, "plan")
     a, b = expand_points(doc)
@@ -100,7 +100,7 @@ def test_defaults_and_points_combine():
 
 
 def test_a_nidaqmx_plan_builds_its_device_without_touching_a_board(tmp_path):
-    from campaign import steps
+    from labtool.campaign import steps
     p = write(tmp_path, '[device]\nkind = "nidaqmx"\nchannels = "Dev1/ai0:2"\n[[points]]\nrpm = 180\n')
     plan = load_plan(p)
     assert plan.doc.device.settle_mode == "tacho"          # real hardware waits for a steady speed

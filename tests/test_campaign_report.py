@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from campaign import collect
-from common.files import write_netcdf
+from labtool.campaign import collect
+from labtool.common.files import write_netcdf
 from labtool.cli import main
-from reports.synthetic import synthetic_measured
+from labtool.reports.synthetic import synthetic_measured
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "", shutil.which("chromium-browser") or "")
                  if p and Path(p).exists()), None)

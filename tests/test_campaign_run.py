@@ -241,7 +241,7 @@ def test_a_second_run_on_the_same_folder_is_refused_while_the_first_works(tmp_pa
 @pytest.mark.slow
 @pytest.mark.hostile("interrupted")
 def test_a_failing_point_stops_the_campaign_with_one_line_and_keeps_the_finished(tmp_path, capsys, monkeypatch):
-    from campaign import steps
+    from labtool.campaign import steps
 
     plan = quick_plan(tmp_path)
     out = tmp_path / "camp"
@@ -249,7 +249,7 @@ def test_a_failing_point_stops_the_campaign_with_one_line_and_keeps_the_finished
 
     def broken(plan_, point, *a, **k):
         if point.name == "02_300rpm":
-            from common.errors import InputError
+            from labtool.common.errors import InputError
             raise InputError("simulated processing failure")
         return real(plan_, point, *a, **k)
     monkeypatch.setattr(steps, "process", broken)

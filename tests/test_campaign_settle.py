@@ -6,9 +6,9 @@ import h5py
 import numpy as np
 import pytest
 
-from acquisition.device import Block, Device
-from campaign.settle import steady, wait_for_operator, wait_for_tacho
-from common.errors import InputError
+from labtool.acquisition.device import Block, Device
+from labtool.campaign.settle import steady, wait_for_operator, wait_for_tacho
+from labtool.common.errors import InputError
 from labtool.cli import main
 
 

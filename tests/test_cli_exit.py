@@ -103,7 +103,7 @@ def test_a_sigterm_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path
     out = tmp_path / "kin.nc"
     code = f"""
         import os, signal, sys, weakref
-        import common.files as files
+        import labtool.common.files as files
         real_commit = files.OutputSet.commit
         def commit(self):
             class Thing: pass
@@ -130,7 +130,7 @@ def test_a_sigterm_dropped_in_a_step_after_its_commit_ends_the_command_that_runs
     out = tmp_path / "kin.nc"
     code = f"""
         import os, signal, sys, weakref
-        import common.files as files
+        import labtool.common.files as files
         real_commit = files.OutputSet.commit
         def commit(self):
             real_commit(self)

@@ -1,4 +1,4 @@
-"""common.datasets.dataset against xarray's own constructor on the same arguments."""
+"""labtool.common.datasets.dataset against xarray's own constructor on the same arguments."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,7 @@ import xarray as xr
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.datasets import dataset
+from labtool.common.datasets import dataset
 
 DTYPES = [np.float64, np.float32, np.int64, np.int8, np.bool_, np.complex128]
 

@@ -12,10 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from labtool.cli import main
-from models.study import doe
-from common.errors import FileFormatError, InputError
-from models.study.paper import read_reference, table1_runs
-from models.dynamics.scene import Scene
+from labtool.models.study import doe
+from labtool.common.errors import FileFormatError, InputError
+from labtool.models.study.paper import read_reference, table1_runs
+from labtool.models.dynamics.scene import Scene
 
 TOML_2x3 = """
 [[factor]]
@@ -158,7 +158,7 @@ def test_doe_run_local_processes_writes_table_and_netcdf(kinematic_2x3, capsys):
     assert list(table.columns) == ["run", "A_Fu_level", "B_n1_level", "MR13D_max_Nm", "MR13D_min_Nm"]
     assert list(table.run) == [1, 2, 3, 4, 5, 6]
     # each row equals a direct simulation of that operating point (independent of the runner)
-    from models.dynamics.simulate import simulate
+    from labtool.models.dynamics.simulate import simulate
     direct = simulate(Scene(Fu=30.0, cam_speed_rpm=300.0), "kinematic").indicators
     row = table[(table.A_Fu_level == 2) & (table.B_n1_level == 2)].iloc[0]
     assert row.MR13D_max_Nm == pytest.approx(direct["MR13D_max_Nm"], rel=1e-9)
@@ -205,14 +205,14 @@ def test_doe_run_on_a_local_dask_cluster(tmp_path):
 
 @pytest.mark.slow
 def test_unreachable_scheduler_is_an_input_error(tmp_path):
-    from execution.backends import DaskCluster
+    from labtool.execution.backends import DaskCluster
     with pytest.raises(InputError, match="cannot reach the Dask scheduler"):
         DaskCluster("tcp://127.0.0.1:1", connect_timeout_s=0.5)
 
 
 def test_failed_runs_are_reported_and_left_empty(tmp_path, monkeypatch, capsys):
     """A run whose model raises keeps the other runs, leaves its row empty and ends in exit 2."""
-    from models.dynamics import simulate as sim
+    from labtool.models.dynamics import simulate as sim
 
     real = sim.simulate
 
@@ -260,7 +260,7 @@ def test_doe_run_refuses_to_overwrite(capsys, tmp_path):
 # the paper's 16-run tables from the dynamic models (issues 3 and 4 define their accuracy)
 
 def _paper_end_to_end(model: str, table: str, tmp_path, extra=(), **scene_extra):
-    if importlib.util.find_spec(f"models.dynamics.{model}") is None:
+    if importlib.util.find_spec(f"labtool.models.dynamics.{model}") is None:
         pytest.skip(f"models/{model}.py does not exist yet (issue {3 if model == 'rigid' else 4})")
     out = tmp_path / f"{model}.csv"
     rc = main(["doe", "run", "--model", model, "--accuracy", "fast", "-o", str(out), *extra])
@@ -269,7 +269,7 @@ def _paper_end_to_end(model: str, table: str, tmp_path, extra=(), **scene_extra)
     assert list(ours.columns) == list(paper.columns)
     assert (ours[paper.columns[:5]].to_numpy() == paper[paper.columns[:5]].to_numpy()).all()
     # the runner adds nothing: run 10 (Fu 65 N, j 0.016 mm, 180 rpm, Jt x4) equals a direct simulation
-    from models.dynamics.simulate import simulate
+    from labtool.models.dynamics.simulate import simulate
     direct = simulate(Scene(Fu=65.0, backlash=0.016e-3, cam_speed_rpm=180.0, jt_factor=4.0,
                             accuracy="fast", **scene_extra), model).indicators
     for col in paper.columns[5:]:

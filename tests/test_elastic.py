@@ -6,22 +6,22 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from models.dynamics import elastic as E
-from models.dynamics import events as EV
-from models.mechanism.cam_profile import contact_geometry
-from models.dynamics.contact import (MM_TO_SI, contact_force, contact_potential, contact_stiffness,
+from labtool.models.dynamics import elastic as E
+from labtool.models.dynamics import events as EV
+from labtool.models.mechanism.cam_profile import contact_geometry
+from labtool.models.dynamics.contact import (MM_TO_SI, contact_force, contact_potential, contact_stiffness,
                             hunt_crossley_force, static_penetration)
-from common.errors import InputError
-from models.study.paper import read_reference
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import INDICATORS, simulate
+from labtool.common.errors import InputError
+from labtool.models.study.paper import read_reference
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import INDICATORS, simulate
 
 KC = contact_stiffness(6e-3)
 
 
 def _scene(run, **kw):
     """Table 1 run number -> Scene (omega1 variable, as Table 3)."""
-    from models.study.paper import table1_runs
+    from labtool.models.study.paper import table1_runs
     r = table1_runs().iloc[run - 1]
     return Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
 
@@ -82,8 +82,8 @@ def test_tables_are_eq16_and_the_moment_over_its_arm(run):
     """The per-run tables take one division an angle (mass_factors precomputed): they must be the
     textbook forms, M1 = 4 Jcam/Db1^2, M2 = 4 J''/Db2^2, M = M1 M2/(M1 + M2), R31 = MR13D/arm,
     evaluated with numpy from the same angle terms, to a few ulps."""
-    from models.mechanism.cam_tables import grid_terms
-    from models.mechanism.motor import cam_inertia, transmission_ratio
+    from labtool.models.mechanism.cam_tables import grid_terms
+    from labtool.models.mechanism.motor import cam_inertia, transmission_ratio
     scene = _scene(run)
     span, n = E._span(scene)
     tab = E.grid_tables(scene, span, n)
@@ -107,7 +107,7 @@ def test_tables_are_eq16_and_the_moment_over_its_arm(run):
 def test_tolerance_scales_are_numpys_max_and_min(r31, mass):
     """_tolerances reads the largest |R31| and the smallest M without a branch an element: its
     scales must be numpy's max and min of them, NaN included (then the tolerances are NaN)."""
-    from models.dynamics.contact import penetration_under
+    from labtool.models.dynamics.contact import penetration_under
     n = min(len(r31), len(mass))
     R31, M = np.array(r31[:n]), np.array(mass[:n])
     atol, caps = E._tolerances(R31, M, KC, 1e-7, 8.0, False, 1.0)
@@ -125,7 +125,7 @@ def test_tolerance_scales_are_numpys_max_and_min(r31, mass):
 def test_the_stall_check_alone_reads_the_same_slack():
     """The indicator path asks _energy_budget for the slack only (lowest_too=False, two divisions
     an angle saved): the slack must be the full balance's, bit for bit."""
-    from models.dynamics import validity
+    from labtool.models.dynamics import validity
     rng = np.random.default_rng(3)
     n = 500
     t = np.linspace(0.0, 0.05, n)
@@ -343,7 +343,7 @@ def test_endless_chatter_is_a_solver_error(monkeypatch):
     rounding; the guard turns that into a SolverError (one line, exit 2) instead of an endless loop.
     (The compiled loop's sign test does not re-fire on a start exactly at zero.)"""
     solver = "scipy"
-    from common.errors import SolverError
+    from labtool.common.errors import SolverError
     monkeypatch.setattr(E, "BOUNDARY_NUDGE", 0.0)
     s = Scene(cam_speed_rpm=300, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
     with pytest.raises(SolverError, match="chatter"):
@@ -412,9 +412,9 @@ def test_a_run_starting_unloaded_starts_on_the_flank_about_to_be_loaded(sign):
 
 def test_stiff_contact_approaches_the_rigid_model():
     """j = 0, omega1 const: as Kc grows the elastic MR13D and omega2 converge on the rigid model's
-    (models.dynamics.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
+    (labtool.models.dynamics.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
     drops the load of the dwell, is left out)."""
-    pytest.importorskip("models.dynamics.rigid")
+    pytest.importorskip("labtool.models.dynamics.rigid")
     s = Scene(Fu=65.0, backlash=0.0, omega1_mode="const")
     rig = simulate(s, "rigid").dataset
     errs = []

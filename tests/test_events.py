@@ -1,4 +1,4 @@
-"""The one event record (models.dynamics.events): its layout in both models' datasets, one
+"""The one event record (labtool.models.dynamics.events): its layout in both models' datasets, one
 definition of each count, a file round trip."""
 import numpy as np
 import pytest
@@ -6,10 +6,10 @@ import xarray as xr
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.errors import FileFormatError
-from models.dynamics import events
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.common.errors import FileFormatError
+from labtool.models.dynamics import events
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 
 def _record():
@@ -108,8 +108,8 @@ def test_both_models_write_the_same_record_and_count_from_it(model):
 def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
     # complete_events takes the impulse from the momentum balance, M dv + int drive dt; here the
     # contact force itself is integrated over each landing's window on the dense output
-    from models.dynamics import elastic
-    from models.dynamics.kernels import elastic_nb as eq
+    from labtool.models.dynamics import elastic
+    from labtool.models.dynamics.kernels import elastic_nb as eq
     s = Scene(backlash=0.016e-3, omega1_mode="var")                     # Table 1 run 1: a dozen landings
     run = elastic._solve(s, "consistent", None, None, None, raw=True)
     phases = elastic.phase_table(run.segments, run.raw)
@@ -144,7 +144,7 @@ def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
 def test_the_landings_scalar_interp_is_numpys(xp, fp, x, on_node):
     # complete_events' compiled passes read the drive, the mass and the arm with elastic._interp,
     # which promises np.interp's value bit for bit: between nodes, on a node, outside, NaN
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
     xp = np.sort(np.array(xp))
     fp = np.array(fp[:xp.size])
     for at in (x, xp[on_node % xp.size]):

@@ -20,11 +20,11 @@ import xarray as xr
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.errors import InputError
-from execution import backends, chunked
-from execution.design import hyperslabs, parts_folder
-from execution.parts import PartStore
-from execution.progress import LineProgress
+from labtool.common.errors import InputError
+from labtool.execution import backends, chunked
+from labtool.execution.design import hyperslabs, parts_folder
+from labtool.execution.parts import PartStore
+from labtool.execution.progress import LineProgress
 from labtool.cli import main
 
 LABTOOL = [sys.executable, "-m", "labtool.cli"]
@@ -155,7 +155,7 @@ def test_a_reopened_store_resumes_and_another_work_is_refused(tmp_path):
 @pytest.mark.slow
 def test_a_store_has_one_writer_across_processes(tmp_path):
     store = _store(tmp_path)
-    code = ("import sys; from execution.parts import PartStore\n"
+    code = ("import sys; from labtool.execution.parts import PartStore\n"
             f"PartStore({str(tmp_path / 'out.parts')!r}, {{'work': 'squares', 'n': 50}}, ['x', 'y', 'error'])")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode != 0 and f"being written by another process (pid {os.getpid()})" in proc.stderr
@@ -272,8 +272,8 @@ def test_a_second_doe_run_into_the_same_output_is_refused(tmp_path):
 @pytest.mark.hostile("silent_wrong")
 def test_finished_chunks_of_another_design_are_not_mixed_in(tmp_path, capsys):
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     other = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="standard"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), other.fingerprint(), other.columns + ["wall_s", "error"])
     store.write(0, 2, pd.DataFrame([other.row(0), other.row(1)]))
@@ -289,9 +289,9 @@ def test_finished_chunks_of_another_design_are_not_mixed_in(tmp_path, capsys):
 def test_chunks_finished_by_other_code_are_not_mixed_in(tmp_path, capsys, monkeypatch):
     """A run killed, labtool upgraded (the models' source changed), the run resumed: refused."""
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    from models.dynamics import provenance
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics import provenance
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
     before = design.fingerprint()
     monkeypatch.setattr(provenance, "models_source_sha256", lambda: "0" * 64)
@@ -313,7 +313,7 @@ def test_the_models_source_hash_follows_the_files(tmp_path):
     """An edited constant changes the hash; a compiled cache beside the sources does not."""
     import shutil
 
-    from models.dynamics import provenance
+    from labtool.models.dynamics import provenance
     src = Path(provenance.__file__).resolve().parents[1]
     copy = tmp_path / "models"
     shutil.copytree(src, copy, ignore=shutil.ignore_patterns("__pycache__"))
@@ -395,7 +395,7 @@ def test_a_part_reads_back_as_pandas_reads_it(tmp_path_factory, rows):
     """The parts are written with the csv module; pandas (what wrote and read them before) reads
     the same values: floats bit for bit, NaN and None as empty cells, any text (commas, quotes,
     line breaks) whole."""
-    from execution.parts import float_cells
+    from labtool.execution.parts import float_cells
     store = PartStore(tmp_path_factory.mktemp("parts") / "p.parts", {"w": 1}, ["a", "b", "error"])
     path = store.write(0, len(rows), rows)
     cells = store.read(path)
@@ -447,8 +447,8 @@ print(rc, "pandas" in sys.modules)
 @pytest.mark.slow
 def test_a_part_with_text_where_a_number_belongs_is_refused_in_one_line(tmp_path, capsys):
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
     rows = [design.row(i) for i in range(100)]
     rows[7][design.responses[0]] = "12.5 N m"                  # a hand-edited or damaged cell
@@ -466,7 +466,7 @@ def test_a_part_cell_is_the_same_text_for_exact_and_derived_types():
     """The exact-type fast path of parts._cell writes what the generic path writes."""
     import numpy as np
 
-    from execution.parts import _cell
+    from labtool.execution.parts import _cell
 
     assert _cell(0.1) == _cell(np.float64(0.1)) == "0.10000000000000001"
     assert _cell(float("nan")) == _cell(np.float64("nan")) == _cell(None) == ""

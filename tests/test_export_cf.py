@@ -43,8 +43,8 @@ def test_cf_conventions_found_by_cf_xarray(measured):
 
 
 def test_cf_apply_on_a_dataset():
-    """common.cf.apply, offered to the other NetCDF writers (simulate, kinematics)."""
-    from common import cf
+    """labtool.common.cf.apply, offered to the other NetCDF writers (simulate, kinematics)."""
+    from labtool.common import cf
     ds = xr.Dataset({"omega2": ("time", np.zeros(3), {"units": "rad/s", "long_name": "omega2"}),
                      "x": ("event", np.arange(2.0), {"units": "m"})},
                     coords={"time": ("time", np.arange(3) * 0.5, {"units": "s"})})
@@ -82,7 +82,7 @@ def test_simulate_and_kinematics_outputs_are_cf(argv, tmp_path, capsys):
     ("rad/s^3", "rad s-3"), ("m^2", "m2"), ("(m/s^2)^2/Hz", "m2 s-4 Hz-1"), ("kg*m^2", "kg m2"), ("N", "N"),
 ])
 def test_udunits_spelling(text, expected):
-    from common.cf import udunits
+    from labtool.common.cf import udunits
     assert udunits(text) == expected
 
 

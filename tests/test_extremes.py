@@ -3,7 +3,7 @@
 Ranges: backlash 1 um .. 1 mm, cam speed 60 .. 1000 rpm, Jt x0.25 .. x10, Fu 0 .. 500 N,
 restitution k 0 .. 1 (rigid), Kc x1e-2 .. x1e3 (elastic). Each factor at both ends (the others at
 Table 1's level 1: 180 rpm, j 0.016 mm, Jt x1, Fu 0), plus six mixed corners, run through
-``models.dynamics.simulate.simulate(Scene(...), level)`` at the ``standard`` preset. Every case must end with
+``labtool.models.dynamics.simulate.simulate(Scene(...), level)`` at the ``standard`` preset. Every case must end with
 
 - finite time series and indicators (no NaN, no infinity),
 - a finite event count, within the model's event cap,
@@ -13,7 +13,7 @@ Table 1's level 1: 180 rpm, j 0.016 mm, Jt x1, Fu 0), plus six mixed corners, ru
   energy, to 5e-3 of the energy scale, the quadrature error of the output samples),
 - the same answer when the step is halved (step limit / 2, tolerances / 32), within the error the
   ``standard`` preset was measured to make against the reference solution on Table 1
-  (models.dynamics.accuracy.MEASURED) times EXTREME_FACTOR = 10 (the corners lie outside Table 1's range;
+  (labtool.models.dynamics.accuracy.MEASURED) times EXTREME_FACTOR = 10 (the corners lie outside Table 1's range;
   the largest ratios met are 4.0, rigid MR13D at rounding level, and 3.5, elastic omega2 at
   60 rpm: benchmarks/results/extremes.csv), and the same number of events;
 
@@ -25,10 +25,10 @@ import math
 import numpy as np
 import pytest
 
-from models.dynamics import accuracy, events, rigid
-from common.errors import SolverError
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.models.dynamics import accuracy, events, rigid
+from labtool.common.errors import SolverError
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 EXTREME_FACTOR = 10.0
 BASE = dict(cam_speed_rpm=180.0, Fu=0.0, backlash=0.016e-3, jt_factor=1.0, omega1_mode="var",
@@ -90,7 +90,7 @@ def test_rigid_model_at_the_extremes(kw):
     ds = res.dataset
     ev = events.read(ds)
     assert ev.sizes["event"] <= 2 * rigid.PRESETS[scene.accuracy]["max_events"]
-    # the counts are the record's (one definition, models.dynamics.events)
+    # the counts are the record's (one definition, labtool.models.dynamics.events)
     rise = events.within_rise(ev, scene.program.rise_angle)
     assert res.indicators["jumps"] == events.flights(rise) and res.indicators["impacts"] == events.impacts(rise)
     # energy and Newton's law at every impact (the model's only energy statement: flights are
@@ -125,7 +125,7 @@ def test_elastic_model_at_the_extremes(kw):
     ds = res.dataset
     x = ds["x_el"].values
     F = np.abs(ds["contact_force"].values)
-    from models.dynamics.contact import contact_stiffness, static_penetration
+    from labtool.models.dynamics.contact import contact_stiffness, static_penetration
     p_max = float(static_penetration(F.max(), contact_stiffness(scene.contact_length, scene.kc_factor)))
     assert x.min() >= -p_max * (1 + 1e-6) - 1e-12
     assert x.max() <= scene.backlash + p_max * (1 + 1e-6) + 1e-12
@@ -142,7 +142,7 @@ def test_elastic_model_at_the_extremes(kw):
 def _elastic_energy_error(ds, scene):
     from scipy.integrate import cumulative_trapezoid
 
-    from models.dynamics.contact import contact_potential, contact_stiffness
+    from labtool.models.dynamics.contact import contact_potential, contact_stiffness
     t, v, M = ds["time"].values, ds["dx_el"].values, ds["reduced_mass"].values
     E = 0.5 * M * v**2 + contact_potential(ds["deformation"].values, contact_stiffness(scene.contact_length, scene.kc_factor))
     W = cumulative_trapezoid(-ds["R31"].values * v + 0.5 * np.gradient(M, t) * v**2, t, initial=0.0)
@@ -173,8 +173,8 @@ def test_compiled_rigid_step_cap_names_the_limit():
 
 
 def test_compiled_elastic_step_cap_names_the_limit():
-    from models.dynamics import elastic
-    from models.dynamics.contact import contact_stiffness
+    from labtool.models.dynamics import elastic
+    from labtool.models.dynamics.contact import contact_stiffness
     scene = Scene(**BASE)
     tab = elastic.build_tables(scene, scene.program.rise_angle / elastic.cam_speed(scene))
     with pytest.raises(SolverError, match="50 steps"):
@@ -187,7 +187,7 @@ def test_compiled_elastic_step_cap_names_the_limit():
 def test_elastic_endless_chatter_is_a_solver_error_not_a_hang(solver):
     # a drive that is exactly zero with no backlash and a huge stiffness: the follower sits on the
     # boundary; forcing it to switch phase at every step must stop at the chatter guard, not loop
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
     t = np.linspace(0.0, 1e-3, 11)
     drive = np.where(np.arange(11) % 2 == 0, 1.0, -1.0) * 1e-9
     try:

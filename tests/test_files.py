@@ -1,4 +1,4 @@
-"""common.files: atomic writes with the user's umask, sets of outputs all-or-nothing, disk errors."""
+"""labtool.common.files: atomic writes with the user's umask, sets of outputs all-or-nothing, disk errors."""
 import errno
 import os
 import subprocess
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from common.errors import InputError, OutputError
-from common.files import (OutputSet, atomic_write, check_output_dir, check_output_path, disk_error,
+from labtool.common.errors import InputError, OutputError
+from labtool.common.files import (OutputSet, atomic_write, check_output_dir, check_output_path, disk_error,
                           remove_stale_temporaries, write_netcdf, write_text)
 
 
@@ -74,7 +74,7 @@ def test_the_temporary_keeps_the_extension(tmp_path):
 
 
 def test_temporaries_of_a_killed_process_are_removed_by_the_next_write(tmp_path):
-    code = ("import os, sys; from pathlib import Path; from common.files import atomic_write\n"
+    code = ("import os, sys; from pathlib import Path; from labtool.common.files import atomic_write\n"
             "atomic_write(Path(sys.argv[1]), lambda tmp: os.kill(os.getpid(), 9))\n")
     proc = subprocess.run([sys.executable, "-c", code, str(tmp_path / "r.nc")])
     assert proc.returncode == -9

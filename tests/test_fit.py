@@ -1,6 +1,6 @@
 """labtool fit (issue 16): the identification's logic on a stand-in model with a known answer.
 
-The stand-in (``stand_in``) replaces reports.pipeline.run_simulation by the kinematic cycle
+The stand-in (``stand_in``) replaces labtool.reports.pipeline.run_simulation by the kinematic cycle
 shifted in cam angle by 0.05 ln(j / 0.2 mm) rad and scaled by 1 + 0.8 (k - 0.5): a smooth model
 whose parameters are known to be j = 0.2 mm, k = 0.5 on a synthetic kinematic measurement, and
 that costs nothing, so the search, the intervals, the verdicts and the bad inputs are tested in the
@@ -18,20 +18,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.errors import InputError, SolverError
-from common.files import write_netcdf
-from identification import parameters, uncertainty
-from identification.fit import FitRequest, identify, load_fit
-from identification.parameters import make_space, parse_free
-from reports import align, pipeline
-from reports.synthetic import synthetic_measured
+from labtool.common.errors import InputError, SolverError
+from labtool.common.files import write_netcdf
+from labtool.identification import parameters, uncertainty
+from labtool.identification.fit import FitRequest, identify, load_fit
+from labtool.identification.parameters import make_space, parse_free
+from labtool.reports import align, pipeline
+from labtool.reports.synthetic import synthetic_measured
 
 TWO_PI = 2.0 * math.pi
 TRUTH = {"backlash_mm": 0.2, "restitution": 0.5}
 
 
 def _kinematic_cycle():
-    from models.mechanism.kinematics import analyze
+    from labtool.models.mechanism.kinematics import analyze
     grid = np.linspace(0.0, TWO_PI, 7201)
     kin = analyze(rpm=180.0, phi1=grid)
     return grid, {n: np.asarray(kin[n].values, float) for n in ("omega2", "epsilon2")}

@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
-from common.files import write_netcdf
+from labtool.common.files import write_netcdf
 from hostile import default_signals
-from identification.fit import FitRequest, identify, load_fit
+from labtool.identification.fit import FitRequest, identify, load_fit
 from labtool.cli import main
 
 pytestmark = pytest.mark.slow
@@ -107,4 +107,4 @@ def test_an_interrupted_fit_says_so_and_writes_nothing(recording, tmp_path):
     err = first + err
     assert proc.returncode == 130 and "labtool: interrupted" in err and "Traceback" not in err
     assert not out.exists() and not out.with_suffix(".png").exists()
-    assert not list(tmp_path.glob(".*.part"))          # common.files.atomic_write's temporary files
+    assert not list(tmp_path.glob(".*.part"))          # labtool.common.files.atomic_write's temporary files

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquisition.recorder import read_recording
+from labtool.acquisition.recorder import read_recording
 from labtool.cli import main
 
 OLD_H5PY = "h5py==3.11.*"

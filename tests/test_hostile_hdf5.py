@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from common.errors import FileFormatError
+from labtool.common.errors import FileFormatError
 from stand_data import stand_recording
 
 BOUND_S = 60  # a hang is what is tested; the bound only keeps the suite from hanging with it
@@ -44,7 +44,7 @@ def test_process_of_a_cut_recording_ends_with_one_line(recording, tmp_path, size
 def test_superblock_check_on_every_cut(tmp_path, libver):
     """Every prefix of a small file shorter than the whole is refused by the superblock check (or is
     not HDF5 at all), for the old and the SWMR-capable file format."""
-    from common.hdf5 import check_superblock, open_file
+    from labtool.common.hdf5 import check_superblock, open_file
     p = tmp_path / "f.h5"
     with h5py.File(p, "w", libver=(libver, "latest")) as f:
         f.attrs["format"] = "labtool.recording"
@@ -78,7 +78,7 @@ f.close()
 @pytest.mark.slow
 def test_a_file_still_open_by_a_swmr_writer_is_read(tmp_path):
     """What must keep working: a live SWMR writer's file (another process) opens with a note."""
-    from common.hdf5 import open_file
+    from labtool.common.hdf5 import open_file
     p = tmp_path / "live.h5"
     w = subprocess.Popen([sys.executable, "-c", WRITER, str(p)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:

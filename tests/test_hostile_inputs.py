@@ -171,8 +171,8 @@ def _toml(v) -> str:
 def test_any_value_in_any_line_of_the_mechanism_file(line, value):
     """Every parameter line of stb216.toml, given any TOML value: a Mechanism with finite SI
     values, or one InputError line naming the file."""
-    from common.errors import InputError
-    from models.mechanism import Mechanism
+    from labtool.common.errors import InputError
+    from labtool.models.mechanism import Mechanism
 
     lines = TEXT.splitlines()
     key, sep, _ = lines[line].partition("=")
@@ -308,7 +308,7 @@ def test_mathtext_and_markup_in_file_names_are_text(tmp_path, capsys, measured_n
 @pytest.mark.hostile("real_file")
 def test_a_mechanism_file_saved_by_notepad(tmp_path):
     """Notepad (Windows 10 before 1903, and 'UTF-8 with BOM' today) writes a BOM and CRLF."""
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
 
     path = _mech(tmp_path, b"\xef\xbb\xbf" + TEXT.replace("\n", "\r\n").encode())
     mine, ref = Mechanism.from_toml(path), Mechanism.default()
@@ -327,7 +327,7 @@ def test_a_mechanism_file_saved_as_utf16(tmp_path, capsys):
 @pytest.mark.hostile("real_file")
 def test_threshold_and_scene_files_with_bom_and_crlf(tmp_path):
     from labtool.commands.acquire import load_scene
-    from reports.thresholds import load_thresholds
+    from labtool.reports.thresholds import load_thresholds
 
     th = tmp_path / "th.toml"
     th.write_bytes(b"\xef\xbb\xbf[omega2]\r\niso_rating = 0.6\r\n[apply]\r\nmodels = [\"rigid\"]\r\n")

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from execution.design import parts_folder
-from execution.parts import PartStore
+from labtool.execution.design import parts_folder
+from labtool.execution.parts import PartStore
 from labtool.cli import main
 
 FACTORS_9 = "factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,5,10\nB,n1,rpm,150,165,180\n"
@@ -28,8 +28,8 @@ def _refused(rc, err, *words) -> None:
 
 def _finished_design(tmp_path: Path) -> Path:
     """The parts folder of a 3 x 3 kinematic design with every run finished (made-up values)."""
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
     design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
@@ -127,8 +127,8 @@ def test_a_point_folder_that_is_a_file_is_named_with_what_to_do(tmp_path, capsys
 
 def _doe_parts(tmp_path: Path) -> Path:
     """A 3 x 3 kinematic design with its first 3 runs finished (made-up values), not yet assembled."""
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
     design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])

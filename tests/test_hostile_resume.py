@@ -15,16 +15,16 @@ from pathlib import Path
 
 import pytest
 
-from execution.design import parts_folder
-from execution.parts import PartStore
+from labtool.execution.design import parts_folder
+from labtool.execution.parts import PartStore
 from labtool.cli import main
 
 FACTORS_9 = "factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,5,10\nB,n1,rpm,150,165,180\n"
 
 
 def _design(tmp_path: Path, model: str):
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
     return Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), model)
 
@@ -204,9 +204,9 @@ def _campaign_point(tmp_path: Path, steps) -> tuple[Path, Path]:
     """A plan (test_campaign_run.quick_plan) and its first point's folder holding a recording and a
     point.json with ``steps`` (a function of the acquire step's true inputs digest); returns (plan,
     campaign folder)."""
-    from campaign.plan import load_plan
-    from campaign.runner import _inputs, point_folder
-    from campaign.state import PointState, sha256_file
+    from labtool.campaign.plan import load_plan
+    from labtool.campaign.runner import _inputs, point_folder
+    from labtool.campaign.state import PointState, sha256_file
     from test_campaign_run import quick_plan
     plan_path = quick_plan(tmp_path)           # its first point is the one made here
     plan = load_plan(plan_path)

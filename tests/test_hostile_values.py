@@ -352,7 +352,7 @@ def test_acquire_refuses_a_ka_no_chain_has(tmp_path, capsys, ka):
 ], ids=["list", "empty", "headline-text"])
 @pytest.mark.slow
 def test_campaign_report_on_a_hand_edited_summary_is_one_line(tmp_path, capsys, text):
-    from common.files import write_netcdf
+    from labtool.common.files import write_netcdf
 
     point = tmp_path / "camp" / "points" / "01_180rpm"
     point.mkdir(parents=True)
@@ -370,10 +370,10 @@ def test_campaign_report_on_a_foreign_cycles_file_is_one_line(tmp_path, capsys):
     error: KeyError: "No variable named 'phi1'..."."""
     import json
 
-    from campaign.collect import load_measured_file
-    from campaign.plan import check_compare
-    from common.files import write_netcdf
-    from reports.synthetic import synthetic_measured
+    from labtool.campaign.collect import load_measured_file
+    from labtool.campaign.plan import check_compare
+    from labtool.common.files import write_netcdf
+    from labtool.reports.synthetic import synthetic_measured
 
     measured = tmp_path / "measured.nc"
     write_netcdf(synthetic_measured(rpm=180.0, revolutions=3.4, seed=1), measured)

@@ -1,5 +1,5 @@
 """processing/impacts.py: velocity steps found behind the processing low-pass, with known answers
-built from impulses through the same zero-phase Butterworth (processing.filters)."""
+built from impulses through the same zero-phase Butterworth (labtool.processing.filters)."""
 import math
 
 import numpy as np
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from processing import impacts
-from processing.filters import lowpass_sos, zero_phase
+from labtool.processing import impacts
+from labtool.processing.filters import lowpass_sos, zero_phase
 
 FS, FC = 10_000.0, 300.0
 DET = impacts.Detector(FS, FC)
@@ -150,7 +150,7 @@ def test_a_weak_step_in_a_strong_ones_shadow_is_merged_into_it():
 
 
 def test_a_pickup_just_after_the_law_starts_is_hidden_a_landing_after_a_flight_is_not():
-    from reports.events import flight_starts, hidden_pickups
+    from labtool.reports.events import flight_starts, hidden_pickups
     w1, r = 50.0, 0.8e-3                        # rad/s (~480 rpm), resolution s
     starts = [0.0, math.radians(180.0)]
     # contacts: at 2 deg of the rise (0.7 ms after it began) after resting in the gap since -5 ms;

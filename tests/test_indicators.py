@@ -1,4 +1,4 @@
-"""The Dataset-free indicator path (issue 17): ``models.dynamics.simulate.indicators(scene, model)``
+"""The Dataset-free indicator path (issue 17): ``labtool.models.dynamics.simulate.indicators(scene, model)``
 gives the indicators of ``simulate(scene, model).indicators`` exactly (the same loops, the same
 output samples, the same arithmetic), raises what ``simulate`` raises, and is what ``doe run``
 uses."""
@@ -9,11 +9,11 @@ import math
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from common.errors import LabtoolError
-from models.dynamics.result import INDICATORS
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import indicators, simulate
-from models.study.paper import table1_runs
+from labtool.common.errors import LabtoolError
+from labtool.models.dynamics.result import INDICATORS
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import indicators, simulate
+from labtool.models.study.paper import table1_runs
 
 RUNS = list(table1_runs().itertuples())
 
@@ -83,7 +83,7 @@ def test_random_scenes_give_the_same_indicators_or_the_same_error(model, rpm, Fu
 
 
 def test_doe_rows_are_the_indicator_paths():
-    from models.study import doe
+    from labtool.models.study import doe
     scene = _scene(RUNS[5])
     for model in ("rigid", "elastic"):
         res = doe.simulate_run(scene, model)
@@ -98,7 +98,7 @@ def test_doe_rows_are_the_indicator_paths():
 def test_the_compiled_indicator_pass_is_the_general_path(reading):
     """``elastic.simulate_indicators`` runs tables to counts in one compiled pass; the general path
     (``_solve``, the loop's arrays, numpy) gives the same numbers or the same refusal."""
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
 
     def general(scene):
         return elastic._general_indicators(scene, reading, None, None, None)
@@ -118,7 +118,7 @@ def test_a_drive_zero_at_the_start_goes_to_the_general_path(monkeypatch):
     to the general path, which begins it with an AtRest phase; the answer is the general path's."""
     import numpy as np
 
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
 
     scene = _scene(RUNS[0])
     real = elastic._angle_block

@@ -1,4 +1,4 @@
-"""The numba disk cache of the compiled loops cannot go stale (issue 14, models.dynamics.jit).
+"""The numba disk cache of the compiled loops cannot go stale (issue 14, labtool.models.dynamics.jit).
 
 A copy of the package runs in fresh processes that share one NUMBA_CACHE_DIR: a second run loads
 the loop from the cache; after a constant of the Dormand-Prince driver (a file the loop inlines,
@@ -18,9 +18,9 @@ DRIVER = Path("models/dynamics/kernels/dopri5.py")
 
 PROBE = """
 import json
-from models.dynamics import accuracy, jit
-from models.dynamics.scene import Scene
-from models.dynamics.kernels import dopri5
+from labtool.models.dynamics import accuracy, jit
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.kernels import dopri5
 stats = {}
 accuracy.run_model(Scene(accuracy="fast"), "elastic", stats=stats)
 loop = dopri5.run
@@ -39,9 +39,11 @@ def _run(tree: Path, cache: Path) -> dict:
 
 @pytest.mark.slow
 def test_an_edited_kernel_constant_is_recompiled_not_loaded_stale(tmp_path):
-    tree = tmp_path / "tree"
+    tree = tmp_path / "tree"                     # laid out as the wheel installs it: labtool/models, ...
+    (tree / "labtool").mkdir(parents=True)
+    shutil.copy2(ROOT / "labtool" / "__init__.py", tree / "labtool" / "__init__.py")
     for pkg in ("models", "common"):
-        shutil.copytree(ROOT / pkg, tree / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+        shutil.copytree(ROOT / pkg, tree / "labtool" / pkg, ignore=shutil.ignore_patterns("__pycache__"))
     cache = tmp_path / "numba_cache"
     first = _run(tree, cache)
     assert first["caching"] is True
@@ -49,7 +51,7 @@ def test_an_edited_kernel_constant_is_recompiled_not_loaded_stale(tmp_path):
     assert again["hits"] >= 1 and again["misses"] == 0            # loaded from the disk cache
     assert again["nfev"] == first["nfev"]
 
-    driver = tree / DRIVER
+    driver = tree / "labtool" / DRIVER
     text = driver.read_text()
     assert "SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9," in text
     driver.write_text(text.replace("SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9,", "SAFETY, MIN_FACTOR, MAX_FACTOR = 0.5,"))

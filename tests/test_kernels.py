@@ -1,15 +1,15 @@
-"""The one compiled driver (models.dynamics.kernels.dopri5) and the scipy reference loop over the same
+"""The one compiled driver (labtool.models.dynamics.kernels.dopri5) and the scipy reference loop over the same
 compiled equations: closed forms, the same numerics, the same events, caching."""
 import math
 
 import numpy as np
 import pytest
 
-from models.dynamics import elastic, events, rigid
-from models.dynamics.contact import contact_potential, contact_stiffness
-from models.dynamics.kernels import dopri5
-from models.dynamics.scene import Scene
-from models.study.paper import table1_runs
+from labtool.models.dynamics import elastic, events, rigid
+from labtool.models.dynamics.contact import contact_potential, contact_stiffness
+from labtool.models.dynamics.kernels import dopri5
+from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import table1_runs
 
 T, KIND, SIDE = events.COL_TIME, events.COL_KIND, events.COL_SIDE
 
@@ -47,7 +47,7 @@ def test_step_factor_is_scipys_controller_to_a_few_ulps():
 def test_grid_lookup_is_np_interp_on_a_nonuniform_grid():
     """The right-hand side's table lookup (a guess from the mean rate, then a walk) is np.interp on
     grids far from uniform, at and between the nodes and outside the grid."""
-    from models.dynamics.kernels import elastic_nb as eq
+    from labtool.models.dynamics.kernels import elastic_nb as eq
     rng = np.random.default_rng(7)
     for _ in range(20):
         tg = np.cumsum(rng.uniform(0.05, 3.0, 200)) * 1e-5
@@ -144,9 +144,9 @@ MICRO_BOUNCE = dict(law="sine", cam_speed_rpm=408.0, Fu=124.0, backlash=1.6e-05,
 def test_compiled_and_reference_loops_give_the_same_events(model, kw):
     """The compiled loop (standard) and the independent reference (scipy DOP853 at the reference
     preset) on the same compiled equations: the same events, at times within the standard preset's
-    measured error (models.dynamics.accuracy) times 10."""
-    from models.dynamics import accuracy
-    from models.dynamics.simulate import simulate
+    measured error (labtool.models.dynamics.accuracy) times 10."""
+    from labtool.models.dynamics import accuracy
+    from labtool.models.dynamics.simulate import simulate
 
     kw = dict(kw)
     scene = _scene(kw.pop("run")) if "run" in kw else Scene(**kw)
@@ -186,14 +186,14 @@ def test_dense_output_is_continuous_across_steps():
 
 
 def test_kernels_are_compiled_with_an_on_disk_cache():
-    from models.dynamics.jit import CACHING
+    from labtool.models.dynamics.jit import CACHING
     assert CACHING
     for fn in (dopri5.run, dopri5.error_norm, rigid.eq.contact_terms, elastic.eq.rhs):
         assert fn._cache.__class__.__name__ == "FunctionCache", fn
 
 
 def test_start_on_a_flank_at_a_later_time_continues_the_run():
-    # the escalation in time of models.dynamics.auto: restarting the contact run from its own state later
+    # the escalation in time of labtool.models.dynamics.auto: restarting the contact run from its own state later
     # gives the same run
     s = _scene(1)
     model, _ = rigid.build_model(s)

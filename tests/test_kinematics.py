@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from models.mechanism.cam_profile import contact_geometry, groove, undercut
-from models.mechanism.kinematics import analyze, rise_summary
-from models.mechanism.linkage import linkage_state
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
-from models.study.paper import kinematic_vs_table3
+from labtool.models.mechanism.cam_profile import contact_geometry, groove, undercut
+from labtool.models.mechanism.kinematics import analyze, rise_summary
+from labtool.models.mechanism.linkage import linkage_state
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.models.study.paper import kinematic_vs_table3
 
 MECH = Mechanism.default()
 PROG = CamProgram.for_mechanism(MECH)

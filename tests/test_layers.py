@@ -21,7 +21,7 @@ RANK = {
     "models.mechanism": 1,
     "models.dynamics": 2,
     "models.study": 3,
-    "models": 3,                 # models/__init__ and models.data
+    "models": 3,                 # models/__init__ and labtool.models.data
     "acquisition": 4,
     "processing": 4,
     # execution backends of sweeps (chunks on local processes or Dask, results streamed to disk):
@@ -32,8 +32,8 @@ RANK = {
     "identification": 6,         # labtool fit: imports reports, processing, models; only labtool imports it
     "labtool": 7,
 }
-FIRST_PARTY = {"common", "models", "acquisition", "processing", "execution", "reports", "campaign", "identification",
-               "labtool"}
+# the folders installed as labtool's sub-packages (labtool.models lives in models/, ...)
+SUBPACKAGES = {"common", "models", "acquisition", "processing", "execution", "reports", "campaign", "identification"}
 
 # Known wrong-way imports and cycles, to be removed, never added to (issue 14).
 KNOWN_UPWARD: set[tuple[str, str]] = set()
@@ -42,12 +42,14 @@ KNOWN_CYCLES: list[set[str]] = []
 
 def _modules() -> dict[str, Path]:
     mods = {}
-    for top in FIRST_PARTY:
+    for top in SUBPACKAGES | {"labtool"}:
         for path in sorted((ROOT / top).rglob("*.py")):
             rel = path.relative_to(ROOT).with_suffix("")
             parts = list(rel.parts)
             if parts[-1] == "__init__":
                 parts = parts[:-1]
+            if top != "labtool":
+                parts.insert(0, "labtool")
             mods[".".join(parts)] = path
     return mods
 
@@ -70,11 +72,15 @@ def _imports(path: Path, name: str, is_package: bool) -> set[str]:
         elif isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "import_module":
             if node.args and isinstance(node.args[0], ast.Constant):
                 out.add(node.args[0].value)
-    return {m for m in out if m.split(".")[0] in FIRST_PARTY}
+    return {m for m in out if m.split(".")[0] == "labtool"}
 
 
 def _layer(module: str) -> str:
     parts = module.split(".")
+    if len(parts) > 1 and parts[1] in SUBPACKAGES:
+        parts = parts[1:]                       # 'labtool.models.dynamics.x' -> 'models.dynamics.x'
+    else:
+        return "labtool"
     if parts[0] == "models" and len(parts) > 1 and f"models.{parts[1]}" in RANK:
         return f"models.{parts[1]}"
     return parts[0]
@@ -86,7 +92,7 @@ def _graph():
     for name, path in mods.items():
         targets = set()
         for imp in _imports(path, name, path.name == "__init__.py"):
-            # resolve to the longest known module name ('models.dynamics.rigid.Phase' -> module)
+            # resolve to the longest known module name ('labtool.models.dynamics.rigid.Phase' -> module)
             parts = imp.split(".")
             while parts and ".".join(parts) not in mods:
                 parts.pop()
@@ -107,7 +113,7 @@ def test_imports_point_down_the_layers():
     for src, targets in _graph().items():
         for dst in targets:
             a, b = _layer(src), _layer(dst)
-            if a == b or dst in ("models",) and a.startswith("models"):
+            if a == b or dst == "labtool.models" and a.startswith("models"):
                 continue
             if RANK[b] >= RANK[a] and not (src, dst) in KNOWN_UPWARD:
                 wrong.add((src, dst))
@@ -151,25 +157,26 @@ def _cycles(graph) -> list[set[str]]:
 def test_no_import_cycles():
     graph = _graph()
     # a package's __init__ re-exporting from its own modules is not a cycle of the design
+    mods = _modules()
     for name in list(graph):
-        if (ROOT / name.replace(".", "/") / "__init__.py").exists():
+        if mods[name].name == "__init__.py":
             graph[name] = {t for t in graph[name] if not t.startswith(name + ".")}
     cycles = [c for c in _cycles(graph) if c not in KNOWN_CYCLES]
     assert not cycles, "modules importing each other in a cycle:\n" + "\n".join(
         "  " + " <-> ".join(sorted(c)) for c in cycles)
 
 
-@pytest.mark.parametrize("bad", ["from reports.metrics import iso_rating", "import labtool.cli"])
+@pytest.mark.parametrize("bad", ["from labtool.reports.metrics import iso_rating", "import labtool.cli"])
 def test_the_checker_sees_a_wrong_way_import(tmp_path, bad):
     fake = tmp_path / "models" / "mechanism"
     fake.mkdir(parents=True)
     (fake / "probe.py").write_text(f"def f():\n    {bad}\n")
-    names = _imports(fake / "probe.py", "models.mechanism.probe", False)
+    names = _imports(fake / "probe.py", "labtool.models.mechanism.probe", False)
     layers = {_layer(n) for n in names}
     assert any(RANK[l] > RANK["models.mechanism"] for l in layers)
 
 
 def test_the_checker_sees_a_cycle():
-    graph = {"models.dynamics.a": {"models.dynamics.b"}, "models.dynamics.b": {"models.dynamics.c"},
-             "models.dynamics.c": {"models.dynamics.a"}, "models.dynamics.d": {"models.dynamics.a"}}
-    assert _cycles(graph) == [{"models.dynamics.a", "models.dynamics.b", "models.dynamics.c"}]
+    graph = {"labtool.models.dynamics.a": {"labtool.models.dynamics.b"}, "labtool.models.dynamics.b": {"labtool.models.dynamics.c"},
+             "labtool.models.dynamics.c": {"labtool.models.dynamics.a"}, "labtool.models.dynamics.d": {"labtool.models.dynamics.a"}}
+    assert _cycles(graph) == [{"labtool.models.dynamics.a", "labtool.models.dynamics.b", "labtool.models.dynamics.c"}]

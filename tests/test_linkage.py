@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from models.mechanism.linkage import linkage_state
-from models.mechanism import Mechanism
+from labtool.models.mechanism.linkage import linkage_state
+from labtool.models.mechanism import Mechanism
 
 MECH = Mechanism.default()
 

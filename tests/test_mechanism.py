@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from labtool.cli import main
-from common.errors import InputError
-from models.mechanism import Mechanism
+from labtool.common.errors import InputError
+from labtool.models.mechanism import Mechanism
 
-TEXT = resources.files("models.data").joinpath("stb216.toml").read_text()
+TEXT = resources.files("labtool.models.data").joinpath("stb216.toml").read_text()
 
 
 def test_default_is_in_si():

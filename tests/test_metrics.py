@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.errors import InputError
-from reports import metrics
+from labtool.common.errors import InputError
+from labtool.reports import metrics
 
 N = 720
 X = np.linspace(0.0, 2.0 * math.pi, N, endpoint=False)   # one whole period, uniform grid

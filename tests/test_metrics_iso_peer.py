@@ -11,7 +11,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from objective_rating_metrics.rating import ISO18571
 
-from reports import metrics
+from labtool.reports import metrics
 
 N = 720
 X = np.linspace(0.0, 2.0 * math.pi, N, endpoint=False)

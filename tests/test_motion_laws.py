@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from common.errors import InputError
-from models.mechanism.motion_laws import LAWS, CamProgram, get_law
+from labtool.common.errors import InputError
+from labtool.models.mechanism.motion_laws import LAWS, CamProgram, get_law
 
 U = np.linspace(0.0, 1.0, 400001)
 
@@ -93,7 +93,7 @@ def test_impossible_programs_are_rejected(kw):
 def test_a_program_keeps_its_hash_but_does_not_pickle_it():
     import pickle
 
-    from models.dynamics.scene import Scene
+    from labtool.models.dynamics.scene import Scene
     program = Scene(law="cosine").program
     assert Scene(law="cosine").program is program            # one per mechanism and law: found by identity
     h = hash(program)

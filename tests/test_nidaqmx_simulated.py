@@ -13,11 +13,11 @@ import os
 import numpy as np
 import pytest
 
-from acquisition import nidaqmx_config as nc
-from acquisition import session
-from acquisition.nidaqmx_driver import NIDAQmxDevice, list_devices
-from acquisition.recorder import read_recording
-from common.errors import InputError
+from labtool.acquisition import nidaqmx_config as nc
+from labtool.acquisition import session
+from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, list_devices
+from labtool.acquisition.recorder import read_recording
+from labtool.common.errors import InputError
 
 HOWTO = ("needs an NI-DAQmx simulated device: create one (e.g. a simulated PCI-4462 named SimDev1) in NI MAX or "
          "with nidaqmxconfig --import, then set LABTOOL_NIDAQMX_DEVICE=SimDev1 (docs/acquisition.md)")

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from common.errors import InputError
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
-from processing import cam_angle, cycles, events, filters, follower, spectra
-from processing.calibration_file import read_calibration
-from common.history import History
+from labtool.common.errors import InputError
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.processing import cam_angle, cycles, events, filters, follower, spectra
+from labtool.processing.calibration_file import read_calibration
+from labtool.common.history import History
 
 
 def test_lowpass_rule_and_gain():
@@ -182,7 +182,7 @@ def test_calibration_file(tmp_path):
 
 def test_history_is_json_with_parameters():
     """Steps record typed parameters; numpy scalars become numbers, NaN null; the schema reads back."""
-    from common.history import CheckNormal, Lowpass
+    from labtool.common.history import CheckNormal, Lowpass
 
     h = History()
     h.add(Lowpass(kind="butterworth", order=np.int64(4), cutoff_hz=np.float64(300.0), zero_phase=True, rule="given",

@@ -10,7 +10,7 @@ from scipy import signal
 
 import scipy.fft as scipy_fft
 
-from processing import accumulators, cam_angle, cycles, events, filters, follower, kernels
+from labtool.processing import accumulators, cam_angle, cycles, events, filters, follower, kernels
 
 
 @settings(max_examples=20, deadline=None)

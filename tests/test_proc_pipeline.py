@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from common.history import History, Lowpass
+from labtool.common.history import History, Lowpass
 from labtool.cli import main
-from processing.pipeline import ProcessOptions, process_recording
-from processing.readers import open_recording
+from labtool.processing.pipeline import ProcessOptions, process_recording
+from labtool.processing.readers import open_recording
 from stand_data import impact_bursts, stand_recording, stand_volts, write_v1
 
 
@@ -248,7 +248,7 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
 def test_property_events_anywhere(tmp_path_factory, cuts, clips, kinds):
     """Gaps, overruns and clips anywhere: the run ends cleanly (or with a LabtoolError), never
     integrates across a cut, and whatever omega2 it gives over complete motion intervals is right."""
-    from common.errors import LabtoolError
+    from labtool.common.errors import LabtoolError
 
     tmp = tmp_path_factory.mktemp("ev")
     evs = [(c, k, "") for c, k in zip(cuts, kinds)] + [(c, "clip", "") for c in clips]
@@ -306,7 +306,7 @@ def test_missed_tacho_pulse_and_dead_tacho(tmp_path):
 
 @pytest.mark.slow
 def test_spike_records_are_bounded(tmp_path, monkeypatch):
-    import processing.accumulators as acc
+    import labtool.processing.accumulators as acc
 
     monkeypatch.setattr(acc, "MAX_SPIKES", 2)
     ds, tr, s, msgs = _run(tmp_path, duration_s=2.0, extra_m_s2=impact_bursts([0.3, 0.8, 1.3, 1.7]))
@@ -316,7 +316,7 @@ def test_spike_records_are_bounded(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_a_channel_missing_from_the_calibration_names_its_fallback(tmp_path):
-    from processing.calibration_file import ChannelCalibration
+    from labtool.processing.calibration_file import ChannelCalibration
 
     cal = {"aE_t": ChannelCalibration(90.0, 0.01)}
     opts = ProcessOptions(calibration=cal, calibration_source="cal.toml")

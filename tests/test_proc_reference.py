@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from measured_compare import compare_measured
-from processing.pipeline import ProcessOptions, process_recording
-from processing.readers import open_recording
+from labtool.processing.pipeline import ProcessOptions, process_recording
+from labtool.processing.readers import open_recording
 
 REF = Path(__file__).parent / "data" / "process_reference"
 

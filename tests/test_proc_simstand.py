@@ -8,7 +8,7 @@ import xarray as xr
 
 from labtool.cli import main
 
-sc = pytest.importorskip("acquisition.signal_chain")
+sc = pytest.importorskip("labtool.acquisition.signal_chain")
 
 
 @pytest.mark.slow

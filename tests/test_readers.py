@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from common.errors import FileFormatError, InputError, LabtoolError
-from processing.readers import open_recording, sniff
+from labtool.common.errors import FileFormatError, InputError, LabtoolError
+from labtool.processing.readers import open_recording, sniff
 from stand_data import write_v1
 
 NAMES = ["aE_t", "aE_n", "tacho"]

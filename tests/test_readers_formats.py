@@ -192,7 +192,7 @@ def test_lvm_dialects(tmp_path, original, sep, dec, x_column):
 def test_lvm_cross_checked_with_lvm_read(tmp_path, original):
     """The samples as lvm_read (the nearest library) reads them."""
     lvm_read = pytest.importorskip("lvm_read")
-    from processing.readers import open_recording
+    from labtool.processing.readers import open_recording
     volts, _ = original
     p = tmp_path / "x.lvm"
     _lvm(p, volts[:3000].astype(np.float32), "\t", ".", True)

@@ -11,11 +11,11 @@ import h5py
 import numpy as np
 import pytest
 
-from acquisition import session
-from acquisition import signal_chain as sc
-from acquisition.device import Block, Device, Event
-from acquisition.recorder import EVENT_DTYPE, Recorder, read_recording
-from acquisition.sim_stand import Fault, SimStand
+from labtool.acquisition import session
+from labtool.acquisition import signal_chain as sc
+from labtool.acquisition.device import Block, Device, Event
+from labtool.acquisition.recorder import EVENT_DTYPE, Recorder, read_recording
+from labtool.acquisition.sim_stand import Fault, SimStand
 from labtool.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,8 +93,8 @@ def test_event_index_is_the_row_even_after_a_gap(tmp_path):
 
 WRITER = r"""
 import sys
-from acquisition import session, signal_chain as sc
-from acquisition.sim_stand import SimStand
+from labtool.acquisition import session, signal_chain as sc
+from labtool.acquisition.sim_stand import SimStand
 dev = SimStand(sc.StandScene(truth_model="kinematic"), seed=11, duration_s=60.0, realtime=True)
 def flushed(n):
     print(n, flush=True)
@@ -288,7 +288,7 @@ def _sigterm_after_blocks(n):
 def test_sigterm_to_a_recording_stops_it_and_the_command_goes_on(tmp_path):
     """labtool acquire on its own: SIGTERM is the user's stop, the file is closed complete and the
     run returns (exit 0 in the CLI: test_ctrl_c_or_sigterm_to_a_realtime_cli_run_closes_the_file)."""
-    from common.files import command_scope, signals_interrupt
+    from labtool.common.files import command_scope, signals_interrupt
     p = tmp_path / "t.h5"
     with command_scope(), signals_interrupt():
         res = session.run(sim(duration=5.0), p, 10000, 5.0, on_block=_sigterm_after_blocks(5))
@@ -300,8 +300,8 @@ def test_sigterm_to_a_recording_stops_it_and_the_command_goes_on(tmp_path):
 def test_sigterm_to_a_recording_another_command_runs_ends_that_command(tmp_path):
     """labtool demo runs acquire: a SIGTERM there must end the demo (found by CI: the demo went on
     and exited 0), once the recording is closed."""
-    from common.errors import Interrupted
-    from common.files import command_scope, signals_interrupt
+    from labtool.common.errors import Interrupted
+    from labtool.common.files import command_scope, signals_interrupt
     p = tmp_path / "t.h5"
     with pytest.raises(Interrupted) as caught:
         with command_scope(), signals_interrupt():          # the outer command (demo)
@@ -319,8 +319,8 @@ def test_a_command_that_another_runs_passes_the_interrupt_on(tmp_path):
     so that the outer command ends with it (and cleans up) instead of reporting a failed step."""
     import threading
 
-    from common.errors import Interrupted
-    from common.files import command_scope, signals_interrupt
+    from labtool.common.errors import Interrupted
+    from labtool.common.files import command_scope, signals_interrupt
     p = tmp_path / "r.h5"
     done = threading.Event()
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from labtool.cli import main
-from common.files import write_netcdf
-from common.errors import InputError
-from reports import align, pipeline
-from reports.synthetic import synthetic_measured
+from labtool.common.files import write_netcdf
+from labtool.common.errors import InputError
+from labtool.reports import align, pipeline
+from labtool.reports.synthetic import synthetic_measured
 
 EVIL_CHANNEL = "<img src=x onerror=alert(1)>"
 EVIL_ATTR = "aE_t,<script>alert('x')</script>"
@@ -237,7 +237,7 @@ def test_the_processing_lowpass_is_reapplied_to_the_simulations(tmp_path, monkey
     same); without it epsilon2 clearly disagrees."""
     import json as _json
 
-    from processing.filters import lowpass_sos, zero_phase
+    from labtool.processing.filters import lowpass_sos, zero_phase
     ds = synthetic_measured(noise=0.0, revolutions=4.3)
     sos = lowpass_sos(10_000.0, 30.0, 4)
     for name in ("omega2", "epsilon2"):
@@ -330,7 +330,7 @@ def test_the_models_run_at_the_measured_speed_not_the_stated_one(tmp_path):
 
 
 def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_stand_in(files, monkeypatch):
-    import models.dynamics.simulate as ms
+    import labtool.models.dynamics.simulate as ms
     real = ms.simulate
 
     def broken(scene, model="auto"):
@@ -347,11 +347,11 @@ def test_a_failing_model_ends_the_report_but_the_demo_lets_the_kinematic_level_s
 
 
 def test_model_events_read_the_one_record():
-    """The report reads a simulation's events from the one record (models.dynamics.events): contacts
+    """The report reads a simulation's events from the one record (labtool.models.dynamics.events): contacts
     with the step of omega2 the model recorded, separations with none; no record, no events."""
     import xarray as xr
-    from models.dynamics import events as model_events
-    from reports import events
+    from labtool.models.dynamics import events as model_events
+    from labtool.reports import events
     two = 2 * math.pi
     phi = np.array([0.5, 1.0, 1.0, two + 0.3, two + 0.4, two + 0.4, two + 0.9])
     kind = ["separation", "contact", "separation", "separation", "contact", "separation", "contact"]

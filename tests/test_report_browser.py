@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from labtool.cli import main
-from common.files import write_netcdf
-from reports.synthetic import synthetic_measured
+from labtool.common.files import write_netcdf
+from labtool.reports.synthetic import synthetic_measured
 
 CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "", shutil.which("chromium-browser") or "")
                  if p and Path(p).exists()), None)

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.files import write_netcdf
-from reports import align, pipeline
-from reports.synthetic import synthetic_measured
+from labtool.common.files import write_netcdf
+from labtool.reports import align, pipeline
+from labtool.reports.synthetic import synthetic_measured
 
 GRID = align.Conditioning().grid
 

@@ -3,9 +3,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.errors import InputError
-from reports.metrics import METRICS
-from reports.thresholds import evaluate, load_thresholds, parse_thresholds
+from labtool.common.errors import InputError
+from labtool.reports.metrics import METRICS
+from labtool.reports.thresholds import evaluate, load_thresholds, parse_thresholds
 
 
 def _comp(model="elastic", mode="const", signal="omega2", overall=None, revs=()):

@@ -7,15 +7,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from models.dynamics import events, rigid, rigid_tables
-from models.dynamics.contact import contact_stiffness, static_penetration
-from models.mechanism.cam_profile import contact_geometry
-from common.errors import InputError
-from models.dynamics.impact import impact, kinetic_energy, paper_eq10
-from models.mechanism.kinematics import analyze, load_force_x
-from models.mechanism.linkage import reduced_follower
-from models.mechanism.motor import motor_moment_on_cam, no_load_cam_speed
-from models.dynamics.scene import Scene
+from labtool.models.dynamics import events, rigid, rigid_tables
+from labtool.models.dynamics.contact import contact_stiffness, static_penetration
+from labtool.models.mechanism.cam_profile import contact_geometry
+from labtool.common.errors import InputError
+from labtool.models.dynamics.impact import impact, kinetic_energy, paper_eq10
+from labtool.models.mechanism.kinematics import analyze, load_force_x
+from labtool.models.mechanism.linkage import reduced_follower
+from labtool.models.mechanism.motor import motor_moment_on_cam, no_load_cam_speed
+from labtool.models.dynamics.scene import Scene
 
 finite = dict(allow_nan=False, allow_infinity=False)
 
@@ -68,12 +68,12 @@ def geo_a2(sc, phi):
 
 # --- the 1-DOF model (j = 0) -------------------------------------------------------------------
 def test_const_speed_contact_is_the_kinetostatic_model():
-    """omega1 const, j = 0: the follower follows the law and MR13D is models.mechanism.kinematics' value."""
+    """omega1 const, j = 0: the follower follows the law and MR13D is labtool.models.mechanism.kinematics' value."""
     sc = Scene(omega1_mode="const", backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300)
     ds = rigid.simulate(sc).dataset
     assert np.all(ds["contact"].values != 0) and ds.sizes["event"] == 0
     np.testing.assert_allclose(ds["omega1"], sc.omega1_nominal, rtol=1e-12)
-    phi1 = ds["phi1"].values[:-1]     # the rise's end belongs to the dwell in models.mechanism.kinematics
+    phi1 = ds["phi1"].values[:-1]     # the rise's end belongs to the dwell in labtool.models.mechanism.kinematics
     kin = analyze(sc.mechanism, sc.program, 300, 65.0, 4.0, phi1=phi1)
     np.testing.assert_allclose(ds["phi2"].values[:-1], kin["phi2"], atol=1e-10)
     np.testing.assert_allclose(ds["omega2"].values[:-1], kin["omega2"], atol=1e-8)
@@ -83,7 +83,7 @@ def test_const_speed_contact_is_the_kinetostatic_model():
 @pytest.mark.slow
 def test_variable_speed_power_balance():
     """omega1 var, j = 0: d/dt(1/2 J' w1^2 + 1/2 J'' w2^2) = motor + cam gravity + gravity + load power,
-    each term from models.mechanism.motor / models.mechanism.linkage (not from the model's tables)."""
+    each term from labtool.models.mechanism.motor / labtool.models.mechanism.linkage (not from the model's tables)."""
     sc = Scene(backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300, accuracy="reference")
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism
@@ -148,7 +148,7 @@ def test_k1_conserves_energy_and_reverses_normal_velocity(backlash_mm, jt):
                                 dict(Fu=65.0, backlash=0.128e-3, cam_speed_rpm=300, restitution=0.8)])
 def test_energy_balance_through_flights_and_impacts(kw):
     """Whole hybrid run (contact, flights, impacts): T(t) - T(0) = work of motor, cam gravity,
-    follower gravity and load - the impacts' losses, all recomputed from models.mechanism.motor/linkage."""
+    follower gravity and load - the impacts' losses, all recomputed from labtool.models.mechanism.motor/linkage."""
     sc = Scene(**kw)
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism
@@ -197,7 +197,7 @@ def _toy_model(a2=0.05, J=0.01, M=-0.5, k=0.5, j=1e-3, phi1_end=100.0):
 @pytest.mark.parametrize("k", [0.3, 0.5, 0.8])
 def test_zeno_accumulation_time_and_switch_to_contact(k):
     """Dropped from height h0: impacts at t1 = sqrt(2 h0/a), intervals 2 v0 k^n / a (ratio k), the
-    accumulation point T = t1 + 2 k v0 / (a (1 - k)); the settle rule (models.dynamics.kernels.rigid_nb)
+    accumulation point T = t1 + 2 k v0 / (a (1 - k)); the settle rule (labtool.models.dynamics.kernels.rigid_nb)
     ends the series at the first rebound whose apex v^2 / (2 a) lies below the contact deformation
     under the flank's force, delta = (|lam| / Kc)^(9/10): no later than T and no earlier than the
     flights the rule skips, 2 v_crit / (a (1 - k)) with v_crit = sqrt(2 a delta); then persistent

@@ -1,7 +1,7 @@
 """The rigid model on the 16 runs of Table 1 (sine law, omega1 variable) against the paper's Table 2."""
 import pytest
 
-from models.study.paper import PAPER_DIRECTIONS, main_effects, rigid_vs_table2
+from labtool.models.study.paper import PAPER_DIRECTIONS, main_effects, rigid_vs_table2
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""common.schema: TOML inputs checked for type, range and unknown keys; every failure one line."""
+"""labtool.common.schema: TOML inputs checked for type, range and unknown keys; every failure one line."""
 import math
 import tomllib
 
@@ -6,9 +6,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from common.errors import InputError
-from common.names import shown
-from common.schema import (Bool, Integer, ListOf, MapOf, Number, OneOf, SchemaError, String, Table,
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.common.schema import (Bool, Integer, ListOf, MapOf, Number, OneOf, SchemaError, String, Table,
                            load_toml, parse_toml)
 
 SCHEMA = Table({

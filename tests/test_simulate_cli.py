@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from labtool.cli import main
-from models.dynamics.simulate import INDICATORS
+from labtool.models.dynamics.simulate import INDICATORS
 
 
 def _json(capsys, args):
@@ -30,7 +30,7 @@ def test_auto_picks_kinematic_without_sign_change(capsys):
     # run 9: MR13D > 0 over the rise; with the cam as input nothing dynamic is needed
     out = _json(capsys, ["--fu", "65", "--omega1", "const", "--accuracy", "fast"])
     assert out["model"] == "kinematic"
-    from models.mechanism.kinematics import analyze, rise_summary
+    from labtool.models.mechanism.kinematics import analyze, rise_summary
 
     assert out["MR13D_max_Nm"] == pytest.approx(rise_summary(analyze(rpm=180, Fu=65))["MR13D_max_Nm"], rel=1e-6)
     assert out["jumps"] == 0
@@ -113,16 +113,16 @@ def test_elastic_contact_options_reject_impossible_values(args, needle, capsys):
 @pytest.mark.slow
 def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
     """Every Scene field, the mechanism's source and hash, labtool's version: enough to simulate
-    the file again from its attributes alone (models.dynamics.provenance)."""
+    the file again from its attributes alone (labtool.models.dynamics.provenance)."""
     import dataclasses
     import hashlib
 
-    from models.dynamics.provenance import SCENE_ATTRIBUTES
-    from models.dynamics.scene import Scene
+    from labtool.models.dynamics.provenance import SCENE_ATTRIBUTES
+    from labtool.models.dynamics.scene import Scene
 
     mech_file = tmp_path / "mech.toml"
     from importlib import resources
-    text = resources.files("models.data").joinpath("stb216.toml").read_text().replace("R_mm = 8.0", "R_mm = 7.5")
+    text = resources.files("labtool.models.data").joinpath("stb216.toml").read_text().replace("R_mm = 8.0", "R_mm = 7.5")
     mech_file.write_text(text)
     path = tmp_path / "sim.nc"
     args = ["simulate", "--model", "elastic", "--accuracy", "fast", "--rpm", "200", "--fu", "10", "--backlash-mm", "0.05",

@@ -1,4 +1,4 @@
-"""The stand's twin (models.dynamics.twin) against independent facts: energy, the bending mode's closed
+"""The stand's twin (labtool.models.dynamics.twin) against independent facts: energy, the bending mode's closed
 form, the contact law's static deflection, the elastic and rigid models where they are exact, the
 kinematic limit, streaming, and the defaults docs/twin.md promises."""
 import math
@@ -6,17 +6,17 @@ import math
 import numpy as np
 import pytest
 
-from models.dynamics import events as model_events
+from labtool.models.dynamics import events as model_events
 
-from common.errors import InputError, SolverError
-from models.dynamics import elastic, rigid, twin
-from models.dynamics.contact import contact_potential, static_penetration
-from models.dynamics.kernels import twin_nb as nb
-from models.dynamics.scene import Scene
-from models.mechanism import Mechanism
-from models.mechanism.cam_profile import cached_sense
-from models.mechanism.kinematics import follower_motion
-from models.mechanism.linkage import linkage_state
+from labtool.common.errors import InputError, SolverError
+from labtool.models.dynamics import elastic, rigid, twin
+from labtool.models.dynamics.contact import contact_potential, static_penetration
+from labtool.models.dynamics.kernels import twin_nb as nb
+from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.cam_profile import cached_sense
+from labtool.models.mechanism.kinematics import follower_motion
+from labtool.models.mechanism.linkage import linkage_state
 
 OFF = dict(friction_torque=0.0, friction_radius=0.0)          # no pivot friction
 PLAIN = dict(drive="input", ripple=0.0, mode_mass_share=0.0, warmup_revolutions=0, **OFF)
@@ -24,7 +24,7 @@ PLAIN = dict(drive="input", ripple=0.0, mode_mass_share=0.0, warmup_revolutions=
 
 def _potential_energy(mech, sense, phi1, phi2):
     """Gravity potential (J) of the cam and the follower side from the mass centres' heights
-    (models.mechanism.linkage positions): independent of the tabulated gravity moments."""
+    (labtool.models.mechanism.linkage positions): independent of the tabulated gravity moments."""
     st = linkage_state(mech, phi2, np.zeros_like(phi2), np.zeros_like(phi2))
     y = mech.m2 * st.K2[1] + mech.m3 * st.C[1] + mech.m4 * st.K4[1] + mech.m5 * st.K5[1]
     y_cam = mech.m1 * mech.AK1 * np.sin(mech.theta10 + sense * phi1)
@@ -138,7 +138,7 @@ def test_converges_to_the_elastic_model_where_its_linearisation_is_exact(rpm):
     el = model_events.read(ds)
     t_el = el["event_time"].values
     assert list(el["event_kind"].values) == ["separation"] and list(el["event_side"].values) == ["interior"]
-    # with j = 0 a change of flank is a separation only (models.dynamics.events), as the elastic model's
+    # with j = 0 a change of flank is a separation only (labtool.models.dynamics.events), as the elastic model's
     assert list(ev["event_kind"]) == ["separation"] and list(ev["event_side"]) == ["interior"]
     assert ev["event_time"][0] == pytest.approx(t_el[0], abs=2e-6)
     w = ds["omega2"].values
@@ -169,7 +169,7 @@ def test_the_flight_across_the_gap_converges_to_the_rigid_models():
 @pytest.mark.parametrize("drive", ["input", "motor"])
 def test_kinematic_limit_at_low_speed_without_backlash(drive):
     """10 rpm, no backlash, every twin effect on: the follower follows the cam. omega2 equals the
-    kinematics (models.mechanism.kinematics.follower_motion) at the twin's own cam motion to 2e-5,
+    kinematics (labtool.models.mechanism.kinematics.follower_motion) at the twin's own cam motion to 2e-5,
     phi2 to 1e-6 rad; with the cam as input phi1 is the kinematic truth's ripple law."""
     scene = Scene(cam_speed_rpm=10, backlash=0.0, contact_damping=40.0, accuracy="fast")
     run = twin.TwinRun(scene, twin.TwinPhysics(drive=drive, ripple=0.005))
@@ -237,7 +237,7 @@ def test_simulate_dataset_carries_the_event_record():
     persistent = ds["event_persistent"].values
     assert np.isnan(ds["event_percussion"].values[~contact]).all() and (ds["event_percussion"].values[contact] >= 0).all()
     assert (ds["event_v_rel"].values >= 0).all()
-    # models.dynamics.events: a lift-off changes nothing (domega2 0), a rebound's separation has none
+    # labtool.models.dynamics.events: a lift-off changes nothing (domega2 0), a rebound's separation has none
     assert (ds["event_domega2"].values[~contact & persistent] == 0).all()
     assert np.isnan(ds["event_domega2"].values[~contact & ~persistent]).all()
     # a separation is persistent exactly when the contact it ends was

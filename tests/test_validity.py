@@ -1,4 +1,4 @@
-"""Each model checks its own validity (models.dynamics.validity): the edge cases of issue 14 end in a
+"""Each model checks its own validity (labtool.models.dynamics.validity): the edge cases of issue 14 end in a
 finite, plausible answer with a warning, or in one line, with the same verdict at every preset."""
 import json
 import math
@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from common.errors import InputError, SolverError
+from labtool.common.errors import InputError, SolverError
 from labtool.cli import main
-from models.dynamics import events
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
-from models.mechanism import Mechanism
-from models.study.paper import table1_runs
+from labtool.models.dynamics import events
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
+from labtool.models.mechanism import Mechanism
+from labtool.models.study.paper import table1_runs
 
 RANDOM_POINT = dict(omega1_mode="var", Fu=83.08451831611706, backlash=0.16261007916261438e-3,
                     cam_speed_rpm=263.4775377785051, jt_factor=1.3244428636474361, restitution=1.0)
@@ -44,7 +44,7 @@ def test_a_5_degree_rise_is_refused_as_an_undercut_groove(model):
 def test_the_undercut_groove_is_one_line_on_the_command_line(tmp_path, capsys):
     from importlib import resources
 
-    text = resources.files("models.data").joinpath("stb216.toml").read_text()
+    text = resources.files("labtool.models.data").joinpath("stb216.toml").read_text()
     (tmp_path / "steep.toml").write_text(text.replace("rise_deg = 58.0", "rise_deg = 5.0")
                                          .replace("upper_dwell_deg = 122.0", "upper_dwell_deg = 175.0")
                                          .replace("return_deg = 58.0", "return_deg = 5.0")

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from benchmarks.whole_call_bound import peer_outputs_call
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import simulate
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import simulate
 
 
 @pytest.mark.parametrize("rpm,fu,j_mm,jt", [(200.0, 0.0, 0.016, 1.0), (300.0, 75.0, 0.128, 4.0)])

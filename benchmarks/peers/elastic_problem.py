@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from models.mechanism.cam_tables import angle_terms, grid_terms
-from models.mechanism.motor import cam_inertia, no_load_cam_speed, transmission_ratio
+from labtool.models.mechanism.cam_tables import angle_terms, grid_terms
+from labtool.models.mechanism.motor import cam_inertia, no_load_cam_speed, transmission_ratio
 
 GRID_POINTS = 4001          # cam angles of the coefficient tables over the rise
 OUTPUT_STEP = 2e-5          # s, the output instants (uniform), as the model's datasets

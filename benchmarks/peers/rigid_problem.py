@@ -1,6 +1,6 @@
 """The rigid model's coefficients for the peer solvers: labtool's plant tables, flattened.
 
-The one place where a peer touches labtool's dynamics code: ``models.dynamics.rigid.build_plant``
+The one place where a peer touches labtool's dynamics code: ``labtool.models.dynamics.rigid.build_plant``
 gives the model's piecewise-cubic tables of the mechanism (functions of phi1 and of phi2) and its
 numbers (J', motor line, load, backlash, restitution). The equations, events, impacts and the
 integration are the peers' own (``rigid_solvers``). If the plant's layout changes, only this
@@ -39,8 +39,8 @@ class RigidProblem:
 def build(scene, t_out=None) -> RigidProblem:
     import math
 
-    from models.dynamics import rigid
-    from models.dynamics.rigid_tables import cam_table, follower_table
+    from labtool.models.dynamics import rigid
+    from labtool.models.dynamics.rigid_tables import cam_table, follower_table
 
     span = rigid.simulated_span(scene)
     m, info = rigid.build_model(scene)
@@ -55,7 +55,7 @@ def build(scene, t_out=None) -> RigidProblem:
     if t_out is None:     # labtool's standard sampling, on the rise duration at the start speed
         t_out = np.linspace(0.0, scene.program.rise_angle / omega1_0, 4001)[:-1]
     # the peers settle an impact below a fixed speed (labtool's rule is the contact's deformation,
-    # models.dynamics.kernels.rigid_nb.settles; no Table 1 impact settles under either)
+    # labtool.models.dynamics.kernels.rigid_nb.settles; no Table 1 impact settles under either)
     return RigidProblem(header, tables, m.j, omega1_0, span, V_SETTLE, np.ascontiguousarray(t_out, dtype=float))
 
 

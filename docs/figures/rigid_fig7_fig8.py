@@ -2,8 +2,8 @@
 .venv/bin/python docs/figures/rigid_fig7_fig8.py  ->  docs/figures/rigid_fig7_fig8.png"""
 import matplotlib; matplotlib.use("Agg")
 import matplotlib.pyplot as plt, numpy as np
-from models.dynamics.scene import Scene
-from models.dynamics.rigid import simulate
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.rigid import simulate
 r10 = simulate(Scene(cam_speed_rpm=180, Fu=65, backlash=0.016e-3, jt_factor=4)).dataset
 r13 = simulate(Scene(cam_speed_rpm=180, Fu=65, backlash=0.128e-3, jt_factor=1)).dataset
 fig, ax = plt.subplots(3, 2, figsize=(11, 9))

@@ -15,8 +15,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from processing.pipeline import ProcessOptions, process_recording  # noqa: E402
-from processing.readers import open_recording  # noqa: E402
+from labtool.processing.pipeline import ProcessOptions, process_recording  # noqa: E402
+from labtool.processing.readers import open_recording  # noqa: E402
 from stand_data import stand_recording  # noqa: E402  (the simulated stand's chain, tests/stand_data.py)
 
 
@@ -40,7 +40,7 @@ def errors(ds, tr):
 
 
 def sim_stand(tmp, rpm):
-    from acquisition import signal_chain as sc
+    from labtool.acquisition import signal_chain as sc
     from labtool.cli import main
 
     rec, out = Path(tmp) / "s.h5", Path(tmp) / "s.nc"
@@ -91,7 +91,7 @@ def main():
         t = ds["time"].values - ds["time"].values[0]
         sel = (t >= 1.0) & (t < 1.7)
         fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-        ax[0].plot(t[sel], tr["omega2"][sel], "k", lw=2, label="truth (models.mechanism.kinematics)")
+        ax[0].plot(t[sel], tr["omega2"][sel], "k", lw=2, label="truth (labtool.models.mechanism.kinematics)")
         ax[0].plot(t[sel], ds["omega2"].values[sel], "C1", lw=1, label="recovered omega2")
         ax[0].plot(t[sel], np.sqrt(np.maximum(ds["aE_n"].values[sel], 0) / ds.attrs["DE_m"]), "C2", lw=0.7,
                    label="sqrt(aE_n/DE) (check)")

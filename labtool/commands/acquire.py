@@ -8,12 +8,12 @@ from typing import List, Optional
 
 import typer
 
-from acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
-from common.errors import InputError
-from common.files import check_output_path
-from common.names import shown
-from common.schema import Integer, Number, String, Table, load_toml
-from processing.calibration_file import KA_MAX, KA_MIN
+from labtool.acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
+from labtool.common.errors import InputError
+from labtool.common.files import check_output_path
+from labtool.common.names import shown
+from labtool.common.schema import Integer, Number, String, Table, load_toml
+from labtool.processing.calibration_file import KA_MAX, KA_MIN
 
 # keys a scene file's [stand] table may hold -> option name
 SCENE_KEYS = {
@@ -32,7 +32,7 @@ def register(app: typer.Typer) -> None:
     app.command("acquire")(acquire)
 
 
-# the [stand] table of a scene file (common.schema): types, plausible bounds, unknown keys named
+# the [stand] table of a scene file (labtool.common.schema): types, plausible bounds, unknown keys named
 STAND_SCHEMA = Table({
     "mode": String(choices=("run", "calibration"), required=False),
     "law": String(required=False),
@@ -51,19 +51,19 @@ STAND_SCHEMA = Table({
     "truth_model": String(max_len=64, required=False),      # checked by StandScene (TRUTH_MODELS)
 })
 assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
-# [truth] is checked key by key by acquisition.signal_chain.truth_settings
+# [truth] is checked key by key by labtool.acquisition.signal_chain.truth_settings
 SCENE_SCHEMA = Table({"stand": STAND_SCHEMA, "truth": Table({}, extra=True, required=False)})
 
 
 def load_scene(path: Path) -> dict:
     """Option values from a scene file's [stand] table (keys in SCENE_KEYS), and under "_truth"
-    the StandScene arguments of its optional [truth] table (acquisition.signal_chain.TRUTH_TABLE_KEYS);
-    InputError if bad (common.schema: types, bounds, unknown keys named)."""
+    the StandScene arguments of its optional [truth] table (labtool.acquisition.signal_chain.TRUTH_TABLE_KEYS);
+    InputError if bad (labtool.common.schema: types, bounds, unknown keys named)."""
     doc = SCENE_SCHEMA.check(load_toml(path, "scene file"), where=f"scene file {path}")
     out = {SCENE_KEYS[k]: v for k, v in doc["stand"].items()}
     table = doc.get("truth")
     if table is not None:
-        from acquisition.signal_chain import truth_settings
+        from labtool.acquisition.signal_chain import truth_settings
         settings = truth_settings(table, f"scene file {path}")
         if "truth_model" in settings:
             out["truth"] = settings.pop("truth_model")
@@ -117,7 +117,7 @@ def acquire(
     force: bool = typer.Option(False, help="overwrite an existing output file (never one being recorded)"),
 ) -> None:
     """Record aE_t, aE_n (volts) and the tacho from the stand into DESIGN.md's recording format v1."""
-    from acquisition.device import parse_device
+    from labtool.acquisition.device import parse_device
 
     given = {k: v for k, v in dict(rpm=rpm, duration=duration, rate=rate, seed=seed, law=law, fu=fu,
                                      backlash_mm=backlash_mm, jt_factor=jt_factor, ripple=ripple, ka=ka, mode=mode,
@@ -189,9 +189,9 @@ def _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_giv
     """The NI device (configuration checked, nothing touched yet), per-channel Ka and the attributes:
     the operating point as the operator stated it (each value with its source), the run metadata
     (device file's [metadata], then the options), and where each channel's Ka comes from."""
-    from acquisition import nidaqmx_config as nc
-    from acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
-    from acquisition.trigger import SoftwareTrigger
+    from labtool.acquisition import nidaqmx_config as nc
+    from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
+    from labtool.acquisition.trigger import SoftwareTrigger
 
     doc = nc.load_device_file(device_file) if device_file is not None else None
     cfg = nc.build(expand_channels(arg) if arg else None, doc, overrides=ni,
@@ -228,8 +228,8 @@ def _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_giv
 
 
 def _sim_device(opts, realtime, faults, dur):
-    from acquisition import signal_chain as sc
-    from acquisition.sim_stand import SimStand, parse_fault
+    from labtool.acquisition import signal_chain as sc
+    from labtool.acquisition.sim_stand import SimStand, parse_fault
 
     model = str(opts["truth"])
     if model in sc.MODEL_TRUTHS and opts.get("_ripple_given") is None:
@@ -257,7 +257,7 @@ def _model_truth_for(scene, dur):
     periodic) a run over the whole duration up to MAX_MODEL_REVOLUTIONS turns; InputError else."""
     import dataclasses
 
-    from acquisition import signal_chain as sc
+    from labtool.acquisition import signal_chain as sc
 
     if sc.model_truth_span(scene) >= dur:
         return scene
@@ -299,7 +299,7 @@ def _check_sampled(duration_s: float, rate_hz: float, shaker: bool, cal_freq_hz:
 def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, status_every: float = 5.0):
     from labtool.output import console
 
-    from acquisition import session
+    from labtool.acquisition import session
 
     con = console(stderr=True)
     display = _Display(con, dev, duration, ka_ch, status_every)
@@ -332,7 +332,7 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, st
 
 
 class _Display:
-    """The live monitor (acquisition.monitor figures, labtool.monitor_view layout): a rich Live panel
+    """The live monitor (labtool.acquisition.monitor figures, labtool.monitor_view layout): a rich Live panel
     on a terminal (4 updates/s), else one status line on stderr every ``status_every`` s of wall time."""
 
     def __init__(self, con, dev, duration, ka_ch, status_every: float):
@@ -355,7 +355,7 @@ class _Display:
 
     def _feed(self, block) -> None:
         if self.monitor is None:
-            from acquisition.monitor import Monitor
+            from labtool.acquisition.monitor import Monitor
             self.monitor = Monitor(self.dev.channel_names, self.dev.actual_rate_hz, self.ka, self.dev.input_range_v,
                                    self.duration)
             if self.con.is_terminal:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 bench_app = typer.Typer(help="Benchmarks: solver work-precision (accuracy vs wall time).", no_args_is_help=True)
 

@@ -6,8 +6,8 @@ from typing import List
 
 import typer
 
-from common.files import check_output_path
-from common.names import utf8_text
+from labtool.common.files import check_output_path
+from labtool.common.names import utf8_text
 
 
 def register(app: typer.Typer) -> None:
@@ -28,9 +28,9 @@ def calibrate(
     """Fit a sine at the reference frequency (least squares, frequency refined) in each channel and
     write Ka with its uncertainty, all channels in one file. A clipped, distorted or non-volt
     reference is refused, naming the channel."""
-    from processing.calibration import ReferenceSpec, calibrate_pairs, pair_channels
-    from processing.calibration_file import calibration_document, write_calibration
-    from processing.readers import open_recording
+    from labtool.processing.calibration import ReferenceSpec, calibrate_pairs, pair_channels
+    from labtool.processing.calibration_file import calibration_document, write_calibration
+    from labtool.processing.readers import open_recording
 
     reference = ReferenceSpec(reference_accel, reference_freq, convention, reference_uncertainty)
     check_output_path(output, force)
@@ -51,9 +51,9 @@ def _print_table(results, reference, sources) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from common.names import shown
+    from labtool.common.names import shown
     from labtool.output import console
-    from processing.calibration_file import PAPER_KA_M_S2_PER_V as PAPER_KA
+    from labtool.processing.calibration_file import PAPER_KA_M_S2_PER_V as PAPER_KA
 
     what = shown(Path(sources[0]).name) if len(sources) == 1 else f"{len(sources)} reference recordings"
     table = Table(title=escape(f"Calibration from {what}: {reference.accel_m_s2:g} m/s^2 {reference.convention} "

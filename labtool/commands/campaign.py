@@ -14,7 +14,7 @@ from typing import List, Optional
 
 import typer
 
-from common.files import check_output_path
+from labtool.common.files import check_output_path
 
 campaign_app = typer.Typer(
     help="Test campaigns: a plan of operating points acquired, processed and compared, one verdict across them.",
@@ -29,9 +29,9 @@ def register(app: typer.Typer) -> None:
 def _reporter():
     """The runner's progress as lines on stderr, one per step and point (a pipe or a log reads
     them as well as a terminal); on a terminal the acquisition's sample count runs live."""
-    from campaign.runner import Reporter
-    from common.errors import InputError
-    from common.names import shown
+    from labtool.campaign.runner import Reporter
+    from labtool.common.errors import InputError
+    from labtool.common.names import shown
 
     class Lines(Reporter):
         def __init__(self):
@@ -87,8 +87,8 @@ def run(
     report: bool = typer.Option(True, "--report/--no-report", help="write the cross-point page at the end"),
 ) -> None:
     """Acquire, process and compare every point of the plan; one folder per point; resumable."""
-    from campaign.plan import load_plan
-    from campaign.runner import run_campaign
+    from labtool.campaign.plan import load_plan
+    from labtool.campaign.runner import run_campaign
 
     p = load_plan(plan)
     rep = _reporter()
@@ -114,7 +114,7 @@ def report_cmd(
 ) -> None:
     """One page across the points: ratings against rpm per model, the closest model and where it
     changes, omega2/epsilon2 overlays per speed, events against speed, and a JSON/CSV table."""
-    from common.errors import InputError
+    from labtool.common.errors import InputError
 
     if output is None:
         folders = [p for p in inputs if p.is_dir() and (p / "points").is_dir()]
@@ -124,7 +124,7 @@ def report_cmd(
         output = folders[0] / "campaign.html"
     json_path = json_path or output.with_suffix(".json")
     csv_path = csv_path or output.with_suffix(".csv")
-    from campaign.plan import check_compare
+    from labtool.campaign.plan import check_compare
 
     cmp = check_compare({"models": _split(models), "omega1": _split(omega1), "accuracy": accuracy,
                          **({} if revolutions is None else {"revolutions": float(revolutions)})}, "options")
@@ -136,8 +136,8 @@ def _split(text: str) -> list[str]:
 
 
 def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, compare=None) -> None:
-    from common.errors import InputError
-    from campaign.report import collect_inputs, write_outputs
+    from labtool.common.errors import InputError
+    from labtool.campaign.report import collect_inputs, write_outputs
 
     outs = [html, json_path, csv_path]
     if len({p.resolve() for p in outs}) != len(outs):

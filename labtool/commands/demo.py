@@ -25,7 +25,7 @@ def demo(
     import matplotlib
 
     matplotlib.use("Agg")
-    from common.files import staged_folder
+    from labtool.common.files import staged_folder
     from labtool.demo_steps import run_demo
 
     shown_as = output.absolute()

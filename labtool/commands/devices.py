@@ -5,7 +5,7 @@ import json as jsonlib
 
 import typer
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 
 def register(app: typer.Typer) -> None:
@@ -15,7 +15,7 @@ def register(app: typer.Typer) -> None:
 def devices(json: bool = typer.Option(False, "--json", help="print one JSON object on stdout")) -> None:
     """List the devices acquire can use: the simulated stand, and every NI-DAQmx device (real or
     NI MAX simulated) with its AI channels, ranges and maximum rate; says why when NI-DAQmx is absent."""
-    from acquisition.nidaqmx_driver import list_devices
+    from labtool.acquisition.nidaqmx_driver import list_devices
 
     try:
         ni, ni_error = list_devices(), ""

@@ -13,8 +13,8 @@ from typing import List, Optional
 
 import typer
 
-from common.files import atomic_write, check_output_path
-from common.names import shown
+from labtool.common.files import atomic_write, check_output_path
+from labtool.common.names import shown
 
 doe_app = typer.Typer(
     help="Simulated experiments: full factorial runs (Tables 2-3) and their ANOVA (eqs 20-28).",
@@ -62,11 +62,11 @@ def run(
     per-run cost / workers) at more than 10 min asks for confirmation, or needs --yes when not on
     a terminal.
     """
-    from common.errors import InputError, SolverError
-    from execution.backends import backend_for, check_scheduler_address
-    from execution.design import parts_folder, run_design
-    from models.dynamics.scene import Scene
-    from models.study.doe import Design, read_factors, responses_for, table1_factors
+    from labtool.common.errors import InputError, SolverError
+    from labtool.execution.backends import backend_for, check_scheduler_address
+    from labtool.execution.design import parts_folder, run_design
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, read_factors, responses_for, table1_factors
 
     responses_for(model)
     if scheduler is not None:
@@ -97,11 +97,11 @@ def run(
                + (f" --factors {factors}" if factors else ""))
 
     from labtool.output import terminal_console
-    from execution.progress import BarProgress, LineProgress
+    from labtool.execution.progress import BarProgress, LineProgress
     err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
 
     def on_estimate(cost_s, n_left, n_workers):
-        from execution.chunked import estimate_text
+        from labtool.execution.chunked import estimate_text
         total = cost_s * n_left / max(n_workers, 1)
         if total <= CONFIRM_ABOVE_S or yes:
             return
@@ -179,7 +179,7 @@ def analyze(
     force: bool = typer.Option(False, help="overwrite an existing plot file"),
 ) -> None:
     """Effects in the paper's +-1 coding, ANOVA with Fisher's F, reduced models (eqs 20-28)."""
-    from models.study import anova
+    from labtool.models.study import anova
 
     anova.check_alpha(alpha)
     if not 1 <= digits <= 17:
@@ -202,7 +202,7 @@ def _print_text(data, out, digits: int) -> None:
     from rich.table import Table
 
     from labtool.output import console
-    from models.study.anova import matrix_form
+    from labtool.models.study.anova import matrix_form
 
     con = console()
     names = ", ".join(f"{f.name} = {f.symbol} ({len(f.levels)} levels)" for f in data.factors)
@@ -243,7 +243,7 @@ def plot_effects(data, out, path: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from models.study.anova import RESPONSE_UNITS, cell_means
+    from labtool.models.study.anova import RESPONSE_UNITS, cell_means
 
     factors = data.factors
     pairs = list(itertools.combinations(range(len(factors)), 2))

@@ -32,8 +32,8 @@ def export(
     force: bool = typer.Option(False, help="overwrite existing tables"),
 ) -> None:
     """Cycle statistics and time series of a measured file as CSV (units in the column names)."""
-    from common.errors import InputError
-    from common.files import check_output_path
+    from labtool.common.errors import InputError
+    from labtool.common.files import check_output_path
 
     if not csv:
         raise InputError("say which format to export: --csv")
@@ -56,8 +56,8 @@ def _prefix(output, measured: Path) -> str:
     """The path prefix of the tables: -o as given (the input without .nc by default). An empty
     -o or a folder is refused: Path("") became "." (hidden ._cycles.csv files) and "out/" lost its
     slash (out_cycles.csv beside the folder)."""
-    from common.errors import InputError
-    from common.names import shown
+    from labtool.common.errors import InputError
+    from labtool.common.names import shown
 
     if output is None:
         return str(measured.with_suffix(""))
@@ -72,8 +72,8 @@ def _open(path: Path):
     """The measured dataset, its variables checked for what export needs (numbers, not text)."""
     import xarray as xr
 
-    from common.errors import FileFormatError, InputError
-    from common.hdf5 import check_superblock
+    from labtool.common.errors import FileFormatError, InputError
+    from labtool.common.hdf5 import check_superblock
 
     if not path.is_file():
         raise InputError(f"{path} does not exist (give the measured.nc that 'labtool process' wrote)")
@@ -87,8 +87,8 @@ def _open(path: Path):
     if missing:
         ds.close()
         raise FileFormatError(f"{path}: not a measured file from 'labtool process' (missing {', '.join(missing)})")
-    from common.cf import in_seconds
-    from common.names import shown
+    from labtool.common.cf import in_seconds
+    from labtool.common.names import shown
     if not in_seconds(ds["time"].attrs.get("units")):
         ds.close()
         raise FileFormatError(f"{path}: its time is in '{shown(str(ds['time'].attrs['units']))}', export writes 'time [s]' "
@@ -115,7 +115,7 @@ def _label(ds, name: str) -> str:
 def _write_all(ds, targets: dict) -> dict:
     """Write every table as one OutputSet (both or neither, with the user's umask; a full disk is
     one line saying nothing was exported)."""
-    from common.files import OutputSet
+    from labtool.common.files import OutputSet
 
     out = {}
     with OutputSet(kept="the measured file is untouched") as outputs:

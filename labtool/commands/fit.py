@@ -1,4 +1,4 @@
-"""``labtool fit``: identify a model's parameters from a measurement (identification.fit).
+"""``labtool fit``: identify a model's parameters from a measurement (labtool.identification.fit).
 
 Prints the identified parameters with their 95 % intervals, whether this measurement identifies
 them, the objective and the grades before and after; ``-o fit.json`` writes the result (and the
@@ -16,7 +16,7 @@ from typing import Optional
 
 import typer
 
-from common.files import atomic_write, check_output_path
+from labtool.common.files import atomic_write, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -63,9 +63,9 @@ def fit(
 ) -> None:
     """Identify backlash, restitution, contact damping/length, Ka gain or delay from a measurement:
     least squares of the model's cycle statistics against the measured ones, with 95 % intervals."""
-    from common.errors import InputError
-    from identification.fit import FitRequest, identify
-    from identification.parameters import parse_assignments
+    from labtool.common.errors import InputError
+    from labtool.identification.fit import FitRequest, identify
+    from labtool.identification.parameters import parse_assignments
     from labtool.output import ProgressLines, console
 
     for name, value in (("--restitution", restitution), ("--contact-damping", contact_damping),
@@ -90,7 +90,7 @@ def fit(
         fig = None
         if figure is not None:
             status.update("drawing the figure")
-            from identification.figures import fit_figure
+            from labtool.identification.figures import fit_figure
             fig = fit_figure(outcome)
         # both outputs are ready before either is written (each atomically)
         if output is not None:
@@ -109,7 +109,7 @@ def fit(
 
 def _outputs(output: Path | None, figure: Path | None, force: bool) -> Path | None:
     """Check the output files before any work; the figure defaults to beside the JSON."""
-    from common.errors import InputError
+    from labtool.common.errors import InputError
 
     if figure is None and output is not None:
         figure = output.with_suffix(".png")

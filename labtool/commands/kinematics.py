@@ -6,9 +6,9 @@ from typing import Optional
 
 import typer
 
-from common import budget
-from common.files import OutputSet, check_outputs
-from common.units import DEG
+from labtool.common import budget
+from labtool.common.files import OutputSet, check_outputs
+from labtool.common.units import DEG
 
 PROBE_ABOVE_POINTS = 200_000        # smaller requests take under ~3 s: no estimate needed
 
@@ -40,11 +40,11 @@ def kinematics(
     from labtool.output import console
     from rich.table import Table
 
-    from models.mechanism.cam_profile import export_groove_csv, undercut
-    from models.mechanism.kinematics import analyze, rise_summary
-    from models.mechanism import Mechanism
-    from models.mechanism.motion_laws import CamProgram, get_law
-    from common.errors import InputError
+    from labtool.models.mechanism.cam_profile import export_groove_csv, undercut
+    from labtool.models.mechanism.kinematics import analyze, rise_summary
+    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism.motion_laws import CamProgram, get_law
+    from labtool.common.errors import InputError
 
     check_outputs({"-o": output, "--groove-csv": groove_csv}, force)
     budget.check_limit(max_seconds)
@@ -93,16 +93,16 @@ def kinematics(
         table.add_row(*r)
     console().print(table)
     if output is not None:
-        from models.dynamics.provenance import labtool_version, mechanism_attributes
+        from labtool.models.dynamics.provenance import labtool_version, mechanism_attributes
 
         ds.attrs.update(mechanism_attributes(mech), labtool_version=labtool_version(), points=points)
-        from common import cf
+        from labtool.common import cf
 
         command = " ".join([
             f"labtool kinematics --law {law} --rpm {rpm!r} --fu {fu!r} --jt-factor {jt_factor!r}",
             f"--rise-deg {rise_deg!r} --stroke-deg {stroke_deg!r} --points {points}",
             *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
-        # CF-1.10 (common.cf): UDUNITS units, Conventions/title/source; the command line in history
+        # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
         cf.apply(ds, title="labtool kinematic analysis", source="labtool kinematics (motion law and linkage)",
                  history=command)
     # one output set: both files, or neither (a full disk left a truncated groove CSV)

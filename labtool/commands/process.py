@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from common.files import check_output_path
+from labtool.common.files import check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -35,10 +35,10 @@ def process(
 ) -> None:
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
     averages and spikes, with every step in the processing history (docs/processing.md)."""
-    from common.errors import InputError
-    from processing.calibration_file import read_calibrations
-    from processing.pipeline import ProcessOptions, process_recording
-    from processing.readers import open_recording
+    from labtool.common.errors import InputError
+    from labtool.processing.calibration_file import read_calibrations
+    from labtool.processing.pipeline import ProcessOptions, process_recording
+    from labtool.processing.readers import open_recording
 
     check_output_path(output, force)
     if output.resolve() == recording.resolve():
@@ -48,7 +48,7 @@ def process(
     for name, v in (("--rpm", rpm), ("--lowpass-hz", lowpass_hz), ("--sample-rate", sample_rate), ("--ac-tau", ac_tau)):
         if v is not None and not (v > 0 and v < float("inf")):
             raise InputError(f"{name} must be a positive number, got {v}")
-    from models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism
 
     mapping = _channel_map(channels) if channels else {}
     mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
@@ -88,7 +88,7 @@ def process(
 
 def _ka_line(history) -> str:
     """'Ka: aE_t 864.39 +- 0.07 m/s^2/V (source), aE_n ...' from the apply_ka step of the history."""
-    from common.names import shown
+    from labtool.common.names import shown
 
     step = next((h for h in history if isinstance(h, dict) and h.get("step") == "apply_ka"), {})
     chans = step.get("channels") or step.get("parameters", {}).get("channels") or {}
@@ -105,7 +105,7 @@ def _ka_line(history) -> str:
 
 def _channel_map(text: str) -> dict[str, str]:
     """'aE_t=ai0,aE_n=ai1' -> {"aE_t": "ai0", "aE_n": "ai1"}; InputError on anything else."""
-    from common.errors import InputError
+    from labtool.common.errors import InputError
 
     out = {}
     for part in text.split(","):
@@ -119,7 +119,7 @@ def _channel_map(text: str) -> dict[str, str]:
 
 
 def _delimiter(text):
-    from common.errors import InputError
+    from labtool.common.errors import InputError
     if text is None:
         return None
     d = {"comma": ",", ",": ",", "semicolon": ";", ";": ";", "tab": "\t", "\\t": "\t", "\t": "\t"}.get(text.lower())
@@ -129,7 +129,7 @@ def _delimiter(text):
 
 
 def _decimal(text):
-    from common.errors import InputError
+    from labtool.common.errors import InputError
     if text is None:
         return None
     if text not in (".", ","):
@@ -138,8 +138,8 @@ def _decimal(text):
 
 
 def _time_unit(text):
-    from common.errors import InputError
-    from processing.readers.units import time_unit
+    from labtool.common.errors import InputError
+    from labtool.processing.readers.units import time_unit
     if text is None:
         return None
     f = time_unit(text)

@@ -12,8 +12,8 @@ from typing import List, Optional
 
 import typer
 
-from common import budget
-from common.files import OutputSet, check_outputs
+from labtool.common import budget
+from labtool.common.files import OutputSet, check_outputs
 
 PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no estimate needed
 
@@ -26,8 +26,8 @@ def _check_budget(models, modes, accuracy, revolutions, robustness, max_seconds)
     """Estimate the simulations of a long report from each dynamic model at 2 and 4 revolutions
     (the paper's operating point; the file's may differ, so this is an order of magnitude) times
     the runs it makes (models x omega1 modes, x2 with the robustness check at the other preset)."""
-    from models.dynamics.scene import Scene
-    from models.dynamics.simulate import simulate
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import simulate
 
     seconds, peak, bases = 0.0, 0.0, []
     for model in [m for m in models if m in ("rigid", "elastic")]:
@@ -82,10 +82,10 @@ def report(
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
     from labtool.output import ProgressLines, console
 
-    from common.errors import InputError
-    from reports.align import Conditioning
-    from reports.pipeline import build_report, headline, verdict_lines
-    from reports.thresholds import load_thresholds
+    from labtool.common.errors import InputError
+    from labtool.reports.align import Conditioning
+    from labtool.reports.pipeline import build_report, headline, verdict_lines
+    from labtool.reports.thresholds import load_thresholds
 
     check_outputs({"-o": output, "--pdf": pdf, "--json": json_path}, force)
     budget.check_limit(max_seconds)
@@ -94,7 +94,7 @@ def report(
     th = load_thresholds(thresholds) if thresholds else None
     fitted = None
     if fit:
-        from identification.fit import load_fit
+        from labtool.identification.fit import load_fit
         fitted = [load_fit(p) for p in fit]
     cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
     overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
@@ -110,16 +110,16 @@ def report(
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
                            progress=lambda msg: status.update(msg), robustness=robustness, fitted=fitted)
         status.update("drawing the figures")
-        from reports.figures import all_figures, render
-        from reports.html import render_html
-        from reports.summary import to_json
+        from labtool.reports.figures import all_figures, render
+        from labtool.reports.html import render_html
+        from labtool.reports.summary import to_json
         figs = render(all_figures(rep))          # drawn once, for the page and the PDF
         html = render_html(rep, figs)
         # the HTML, PDF and JSON are one set: all written, or none (a full disk, Ctrl-C)
         with OutputSet() as out:
             out.write_text(output, html, "-o")
             if pdf is not None:
-                from reports.pdf import write_pdf
+                from labtool.reports.pdf import write_pdf
                 status.update("writing the PDF")
                 out.write(pdf, lambda tmp: write_pdf(rep, tmp, figs), "--pdf")
             if json_path is not None:

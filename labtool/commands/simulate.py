@@ -1,10 +1,10 @@
 """``labtool simulate``: one scene through any model level (kinematic, rigid, elastic, auto).
 
-Dispatches through ``models.dynamics.simulate.simulate(scene, model)``; prints the paper's indicators as a
+Dispatches through ``labtool.models.dynamics.simulate.simulate(scene, model)``; prints the paper's indicators as a
 table, or with ``--json`` one JSON object (DESIGN.md: the indicator keys of Tables 2-3, then
 ``model``, ``accuracy``, ``wall_s``); prints the model's validity warnings on stderr
 (``labtool: warning: ...``); writes the time series as NetCDF with ``-o``, with the whole scene,
-the mechanism's source and labtool's version among its attributes (models.dynamics.provenance) and
+the mechanism's source and labtool's version among its attributes (labtool.models.dynamics.provenance) and
 the command line in ``history``.
 """
 from __future__ import annotations
@@ -16,9 +16,9 @@ from typing import Optional
 
 import typer
 
-from common import budget
-from common.files import check_output_path, write_netcdf
-from common.units import MM
+from labtool.common import budget
+from labtool.common.files import check_output_path, write_netcdf
+from labtool.common.units import MM
 
 PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 
@@ -63,11 +63,11 @@ def simulate(
                                       "estimated run time of many --revolutions is longer [s]"),
 ) -> None:
     """Simulate the mechanism at one operating point and report the jump indicators."""
-    from common.errors import InputError
-    from models.dynamics.scene import Scene
-    from models.dynamics.simulate import INDICATORS
-    from models.dynamics.simulate import simulate as run
-    from models.mechanism import Mechanism
+    from labtool.common.errors import InputError
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import INDICATORS
+    from labtool.models.dynamics.simulate import simulate as run
+    from labtool.models.mechanism import Mechanism
 
     if output is not None:
         check_output_path(output, force)
@@ -99,7 +99,7 @@ def simulate(
     else:
         _print(result, scene)
     if output is not None:
-        from common import cf
+        from labtool.common import cf
 
         ds = result.dataset
         command = " ".join([
@@ -109,7 +109,7 @@ def simulate(
             f"--kc-factor {kc_factor!r} --contact-damping {contact_damping!r} --elastic-gap {elastic_gap}",
             "--rise-only" if rise_only else "--full-cycle",
             *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
-        # CF-1.10 (common.cf): UDUNITS units, Conventions/title/source; the command line in history
+        # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
         cf.apply(ds, title=f"labtool simulation, {result.model} model", source=f"labtool {result.model} model",
                  history=command)
         write_netcdf(ds, output)
@@ -119,7 +119,7 @@ def simulate(
 def _check_budget(scene, model: str, revolutions: float, max_seconds: float, writes: bool) -> None:
     """Refuse (or ask, on a terminal) a run estimated over ``max_seconds`` or the memory there is,
     from the same scene at 2 and 4 revolutions (peak memory ~2x the Dataset, +1x for the NetCDF)."""
-    from models.dynamics.simulate import simulate as run
+    from labtool.models.dynamics.simulate import simulate as run
 
     est = budget.probe_linear(lambda n: run(scene.replace(revolutions=float(n)), model).dataset,
                               (2, 4), revolutions, "revolution",

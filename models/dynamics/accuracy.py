@@ -10,9 +10,9 @@ The reference solution (``reference_run``) is scipy's DOP853 (8th order, a diffe
 the compiled Dormand-Prince 5(4)) at rtol 1e-12 on the model's own equations, with the step limits
 of the model's ``reference`` preset and its absolute tolerances scaled to rtol 1e-12.
 
-``fast`` and ``standard`` run the shared compiled loop (models.dynamics.kernels.dopri5, numba) with the
-model's tolerances (``models.dynamics.rigid.PRESETS``, ``models.dynamics.elastic.PRESETS``); ``reference``
-runs the scipy ``solve_ivp`` loop (models.dynamics.reference) over the same compiled equations. ``MEASURED`` holds the worst error over the 16 runs of Table 1 (omega1
+``fast`` and ``standard`` run the shared compiled loop (labtool.models.dynamics.kernels.dopri5, numba) with the
+model's tolerances (``labtool.models.dynamics.rigid.PRESETS``, ``labtool.models.dynamics.elastic.PRESETS``); ``reference``
+runs the scipy ``solve_ivp`` loop (labtool.models.dynamics.reference) over the same compiled equations. ``MEASURED`` holds the worst error over the 16 runs of Table 1 (omega1
 variable, sine law) of each preset against the reference solution, as written by
 ``benchmarks/work_precision.py`` (its CSV is benchmarks/results/work_precision.csv):
 
@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
-from models.dynamics import elastic, events, rigid
+from labtool.common.errors import InputError
+from labtool.models.dynamics import elastic, events, rigid
 
 MODELS = ("rigid", "elastic")
 PRESET_NAMES = ("fast", "standard", "reference")
@@ -114,7 +114,7 @@ def solver(model: str, preset: str) -> str:
 
 
 def run_model(scene, model: str, solver: str | None = None, preset: dict | None = None, stats: dict | None = None):
-    """``models.dynamics.<model>.simulate(scene)`` with an explicit loop ("compiled" or "scipy") and
+    """``labtool.models.dynamics.<model>.simulate(scene)`` with an explicit loop ("compiled" or "scipy") and
     preset dict (None: what ``scene.accuracy`` selects). ``stats`` (dict) receives loop_s, the wall
     time in the integration loops (s), nfev and n_steps."""
     _check(model, scene.accuracy)
@@ -162,7 +162,7 @@ INDICATOR_KEYS = ("MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_
 
 
 def event_times(ds) -> np.ndarray:
-    """The event instants (s) of a model's dataset, from its event record (models.dynamics.events),
+    """The event instants (s) of a model's dataset, from its event record (labtool.models.dynamics.events),
     each instant once: a rigid rebound is two rows (a contact, then a separation) at one instant."""
     t = np.asarray(events.read(ds)["event_time"].values, dtype=float)
     return t[np.concatenate([[True], np.diff(t) > 0])] if t.size else t

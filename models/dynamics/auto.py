@@ -6,7 +6,7 @@ The ladder (DESIGN.md): kinematic -> rigid (1 DOF, the motor's speed variation) 
 1. Contact outputs requested (x_el, contact force, deformation): the elastic model, the only
    level that has them.
 2. Otherwise the kinematic level first (cam as input, kinetostatic MR13D over the rise, read from
-   the shared cam-angle table of models.mechanism.cam_tables; the kinematic dataset is built only when it is
+   the shared cam-angle table of labtool.models.mechanism.cam_tables; the kinematic dataset is built only when it is
    the answer).
    MR13D keeps its sign (by more than SIGN_MARGIN of its range) and omega1 is constant: the follower
    never leaves the flank, so the rigid model *is* the kinematic model; no dynamic model runs, and
@@ -29,9 +29,9 @@ import math
 
 import numpy as np
 
-from models.dynamics import elastic, kinematic, rigid
-from models.dynamics.kernels import rigid_nb
-from models.dynamics.scene import Scene
+from labtool.models.dynamics import elastic, kinematic, rigid
+from labtool.models.dynamics.kernels import rigid_nb
+from labtool.models.dynamics.scene import Scene
 
 CONTACT_OUTPUTS = frozenset({"x_el", "xel_max_mm", "xel_min_mm", "contact_force", "deformation",
                              "MR13D_contact"})
@@ -77,7 +77,7 @@ def _choose(scene: Scene, contact: bool):
 
 def rise_moment_range(scene: Scene) -> tuple[float, float]:
     """(min, max) of the kinetostatic MR13D (N m) over the rise at the cam speed the kinematic level
-    runs at, from the shared cam-angle table (models.mechanism.cam_tables: the grid the elastic model uses,
+    runs at, from the shared cam-angle table (labtool.models.mechanism.cam_tables: the grid the elastic model uses,
     4001 angles over the rise, computed once per mechanism and law): the decision costs ~0.1 ms
     instead of a whole kinematic analysis."""
     tab = elastic.grid_tables(scene.replace(rise_only=True), scene.program.rise_angle)
@@ -85,7 +85,7 @@ def rise_moment_range(scene: Scene) -> tuple[float, float]:
 
 
 class SharedPrefixLoop:
-    """An integration loop for ``models.dynamics.rigid.simulate`` (compiled) that integrates the prefix the
+    """An integration loop for ``labtool.models.dynamics.rigid.simulate`` (compiled) that integrates the prefix the
     backlash run and the no-backlash run share only once.
 
     First call (the backlash model, j > 0): integrate the no-backlash run (j = 0) over the span,
@@ -153,7 +153,7 @@ def _time_at_phi1(phase, phi1_end: float) -> float:
 
 
 def simulate_auto(scene: Scene, outputs=()):
-    """Run the cheapest level the scene needs (module doc). Returns models.dynamics.result.SimulationResult."""
+    """Run the cheapest level the scene needs (module doc). Returns labtool.models.dynamics.result.SimulationResult."""
     level, reason, kin = _choose(scene, bool(CONTACT_OUTPUTS.intersection(outputs)))
     stats: dict = {}
     escalation = None

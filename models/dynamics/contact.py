@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
-from models.dynamics.jit import jit, kernel
+from labtool.common.errors import InputError
+from labtool.models.dynamics.jit import jit, kernel
 
 N_EXP = 10.0 / 9.0                     # Palmgren exponent n of eq. (12)-(15)
 PALMGREN_MM = 8.05e4                   # N / mm^(10/9) per mm^(8/9) of contact length (eq. 15)

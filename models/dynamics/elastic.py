@@ -11,7 +11,7 @@ Equation of motion (the "consistent" reading, default):
 
     M(t) x'' = F_int(x) - F_ext(x - j) - R31(t)
 
-with F = Kc p^(10/9) (models.dynamics.contact), R31 = MR13D_kin / (l cos alpha) the normal force the cam
+with F = Kc p^(10/9) (labtool.models.dynamics.contact), R31 = MR13D_kin / (l cos alpha) the normal force the cam
 must exert to impose the kinematic motion (positive: pushes in the rise direction), and
 M = M1 M2 / (M1 + M2), M1 = 4 Jcam / Db1^2, M2 = 4 J''red / Db2^2 (eqs 16-18). The paper's literal
 eqs (12)-(14) read M x'' + Kc x^n = R31, i.e. the same with the sign of R31 reversed: a positive
@@ -23,14 +23,14 @@ The gap j between the flanks is the scene's backlash (``elastic_gap = "physical"
 not depend on j and its xel max stays below j; docs/models.md, "The backlash in Table 3").
 
 The cam turns at constant speed: n1 (omega1 'const') or n1 * n_sync / n_nominal (omega1 'var',
-the speed the paper's variable-speed drive settles at; models.dynamics.kinematic.cam_speed).
+the speed the paper's variable-speed drive settles at; labtool.models.dynamics.kinematic.cam_speed).
 
 The equations, events, restart and initial state are compiled once
-(models.dynamics.kernels.elastic_nb); ``integrate`` runs them in the shared compiled Dormand-Prince
+(labtool.models.dynamics.kernels.elastic_nb); ``integrate`` runs them in the shared compiled Dormand-Prince
 loop (fast, standard) or in scipy's solve_ivp (reference). This module builds the tables, samples
 the run into a Dataset, completes the event record and computes the indicators.
 
-Events (models.dynamics.events): a separation when x leaves a flank's contact range, a contact when
+Events (labtool.models.dynamics.events): a separation when x leaves a flank's contact range, a contact when
 a flight ends on a flank. A landing's impact window is its bounce time (the duration of a free
 undamped landing at that speed on the contact law, ``bounce_time``) or the contact, whichever is
 shorter: ``event_domega2`` is the change of x'/(l cos alpha) over it, ``event_percussion`` the
@@ -50,20 +50,20 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
-from common.datasets import dataset
-from common.errors import InputError, SolverError
-from models.dynamics import events, validity
-from models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
-from models.dynamics.kernels import dopri5 as dp
-from models.dynamics.kernels import elastic_nb as eq
-from models.dynamics.kinematic import cam_speed
-from models.dynamics.result import SimulationResult, empty_indicators
-from models.dynamics.scene import Scene
-from models.dynamics.jit import jit, kernel
-from models.mechanism.cam_profile import cached_sense, pitch_geometry
-from models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, load_arm, operating_point, stroke_spline
-from models.mechanism.memo import cached
-from models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
+from labtool.common.datasets import dataset
+from labtool.common.errors import InputError, SolverError
+from labtool.models.dynamics import events, validity
+from labtool.models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
+from labtool.models.dynamics.kernels import dopri5 as dp
+from labtool.models.dynamics.kernels import elastic_nb as eq
+from labtool.models.dynamics.kinematic import cam_speed
+from labtool.models.dynamics.result import SimulationResult, empty_indicators
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.jit import jit, kernel
+from labtool.models.mechanism.cam_profile import cached_sense, pitch_geometry
+from labtool.models.mechanism.cam_tables import AngleTerms, angle_terms, grid_terms, load_arm, operating_point, stroke_spline
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
 
 INTERIOR, FLIGHT, EXTERIOR = eq.INTERIOR, eq.FLIGHT, eq.EXTERIOR
 READINGS = ("consistent", "literal")
@@ -74,7 +74,7 @@ READINGS = ("consistent", "literal")
 # fraction of the linearised contact period, in the contact phases, and in flight too where
 # ``cap_flight`` (a flight has no contact to resolve: the fast and standard presets' flights are
 # limited by their tolerances alone, which cuts Table 1's steps by 12 % at the same measured
-# accuracy, models.dynamics.accuracy.MEASURED); the reference preset runs scipy's DOP853 (8th order,
+# accuracy, labtool.models.dynamics.accuracy.MEASURED); the reference preset runs scipy's DOP853 (8th order,
 # another method than the compiled Dormand-Prince 5(4): an independent check of the numerics)
 PRESETS = {
     "fast": dict(rtol=1e-6, atol=1e-5, steps_per_period=4.0, cap_flight=False),
@@ -181,7 +181,7 @@ def build_tables(scene: Scene, t_end: float, n_points: int = GRID_POINTS, t=None
                  linkage: str = "exact") -> Tables:
     """Kinematic tables over 0 <= t <= t_end at the scene's cam speed (phi1 = 0 at rise start);
     ``t`` (s, array) overrides the uniform grid, evaluated at those instants (the linkage exactly
-    or from its stroke spline, ``linkage="spline"``: models.mechanism.cam_tables.angle_terms)."""
+    or from its stroke spline, ``linkage="spline"``: labtool.models.mechanism.cam_tables.angle_terms)."""
     omega1 = cam_speed(scene)
     if t is not None:
         t = np.asarray(t, dtype=float)
@@ -194,7 +194,7 @@ def grid_tables(scene: Scene, span: float, n_points: int = GRID_POINTS) -> Table
     """Tables on the uniform cam-angle grid linspace(0, span, n_points) (rad), t = phi1/omega1.
 
     The speed-independent terms of the grid are shared with every run of the same mechanism, law
-    and span (models.mechanism.cam_tables): only the combination with the operating point is per run.
+    and span (labtool.models.mechanism.cam_tables): only the combination with the operating point is per run.
     """
     omega1 = cam_speed(scene)
     terms = grid_terms(scene.mechanism, scene.program, span, n_points, _until(scene))
@@ -261,7 +261,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
     """Integrate M x'' = F - drive over the grid, phase by phase: (segments, event rows).
 
     segments: list of (phase, run) with ``run.t`` the step times and ``run(t)`` the dense output
-    (x m, x' m/s); event rows: array (n, dopri5.EV_WIDTH) in models.dynamics.events' layout (the
+    (x m, x' m/s); event rows: array (n, dopri5.EV_WIDTH) in labtool.models.dynamics.events' layout (the
     impact columns of landings not yet completed: ``simulate`` does that). ``y0`` = (x0, v0, phase)
     or None for the model's start (static equilibrium; with no drive at the start, at rest until it
     departs from zero). ``solver``: "compiled" (Dormand-Prince 5(4) of kernels.dopri5) or "scipy"
@@ -296,7 +296,7 @@ def integrate(t_grid, drive_grid, m_grid, kc, gap, damping=0.0, t_end=None, y0=N
             return None, out[15][:nev].copy(), out
         status, t_fail, _, phases, rows, nfev, nst = dp.unpack(out, lambda row: 2)
     else:
-        from models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
+        from labtool.models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
         status, t_fail, _, phases, rows, nfev, nst = reference.run(model, eq, ctl, ph0, y_start, float(t0),
                                                                    method=method, name="elastic model")
     _count(stats, nfev, nst)

@@ -16,7 +16,7 @@ variable               units  meaning
                               approach speed, for a separation the speed it leaves with)
 ``event_domega2``      rad/s  change of the follower's omega2 the event causes (rigid: the
                               impact's jump; elastic: over the landing's impact window, see
-                              models.dynamics.elastic); 0 for a lift-off, NaN where undefined
+                              labtool.models.dynamics.elastic); 0 for a lift-off, NaN where undefined
 ``event_percussion``   N s    impulse of the landing (>= 0; rigid: the impact law's; elastic: the
                               contact force over the impact window); NaN for separations
 ``event_persistent``   bool   separation: it ends a persistent contact (a lift-off, not a
@@ -26,7 +26,7 @@ variable               units  meaning
 A model may add variables of its own on the same dimension (the rigid model's velocities and
 energies before and after each impact). Attributes of the dataset: ``event_record`` = RECORD_VERSION.
 
-One definition of each count, used by the models' indicators, models.dynamics.accuracy and the
+One definition of each count, used by the models' indicators, labtool.models.dynamics.accuracy and the
 report alike (each a boolean mask over the rows, the count its sum):
 
 - ``flights``: separations, each begins a flight (``side=`` restricts to one flank);
@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
-from common.errors import FileFormatError
+from labtool.common.errors import FileFormatError
 
 RECORD_VERSION = 1
 DIM = "event"
@@ -58,7 +58,7 @@ KIND_SEPARATION, KIND_CONTACT = 0, 1
 SIDE_INTERIOR, SIDE_EXTERIOR = 0, 1
 KIND_CODES = {KIND_SEPARATION: SEPARATION, KIND_CONTACT: CONTACT}
 SIDE_CODES = {SIDE_INTERIOR: INTERIOR, SIDE_EXTERIOR: EXTERIOR}
-# columns of an event row as the compiled loops write it (rows of models.dynamics.kernels.dopri5.EV_WIDTH
+# columns of an event row as the compiled loops write it (rows of labtool.models.dynamics.kernels.dopri5.EV_WIDTH
 # numbers): the shared columns first, a model's own from N_SHARED on
 COL_TIME, COL_PHI1, COL_KIND, COL_SIDE, COL_V_REL, COL_DOMEGA2, COL_PERCUSSION, COL_PERSISTENT = range(8)
 N_SHARED = 8

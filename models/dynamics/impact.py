@@ -21,7 +21,7 @@ A cam driven at constant speed (omega1 'const') has J' = infinity: pass ``inv_Jc
 """
 from __future__ import annotations
 
-from models.dynamics.jit import jit
+from labtool.models.dynamics.jit import jit
 
 
 @jit
@@ -32,7 +32,7 @@ def impact(omega1, omega2, G1, G2, inv_Jcam, J_follower, k):
     about A and D, signed as above); inv_Jcam = 1/J' in 1/(kg m^2) (0: cam as input);
     J_follower = J'' in kg m^2; k in [0, 1].
     Returns (omega1+, omega2+, P [N s, signed: > 0 pushes the follower towards the outer flank],
-    v_n- [m/s], v_n+ [m/s]). Compiled: the rigid model's loops call it (models.dynamics.kernels.rigid_nb).
+    v_n- [m/s], v_n+ [m/s]). Compiled: the rigid model's loops call it (labtool.models.dynamics.kernels.rigid_nb).
     """
     v_before = G2 * omega2 - G1 * omega1
     P = -(1.0 + k) * v_before / (G2 * G2 / J_follower + G1 * G1 * inv_Jcam)

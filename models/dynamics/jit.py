@@ -25,14 +25,16 @@ from pathlib import Path
 import numba
 from numba import njit
 
-_ROOT = Path(__file__).resolve().parents[2]          # the tree that holds models/ and common/
-_SEED = "from models.dynamics.jit import"          # a module that compiles code (jit or kernel)
-_IMPORT = re.compile(r"^\s*(?:from\s+((?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)|import\s+((?:models|common)(?:\.\w+)*))",
-                     re.MULTILINE)
+# the folder that holds models/ and common/: the repository in a source tree, site-packages/labtool
+# in a wheel (labtool.models.x lives in <_ROOT>/models/x.py either way)
+_ROOT = Path(__file__).resolve().parents[2]
+_SEED = "from labtool.models.dynamics.jit import"          # a module that compiles code (jit or kernel)
+_IMPORT = re.compile(r"^\s*(?:from\s+(labtool\.(?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)"
+                     r"|import\s+(labtool\.(?:models|common)(?:\.\w+)*))", re.MULTILINE)
 
 
 def _module_file(name: str) -> Path | None:
-    base = _ROOT.joinpath(*name.split("."))
+    base = _ROOT.joinpath(*name.split(".")[1:])         # 'labtool.models.x' -> <_ROOT>/models/x
     for candidate in (base.with_suffix(".py"), base / "__init__.py"):
         if candidate.is_file():
             return candidate
@@ -46,7 +48,7 @@ def _first_party_imports(text: str) -> set[str]:
             out.add(m.group(3))
             continue
         out.add(m.group(1))
-        for name in re.split(r"[\s,()]+", m.group(2)):     # 'from models.dynamics import contact'
+        for name in re.split(r"[\s,()]+", m.group(2)):     # 'from labtool.models.dynamics import contact'
             if name:
                 out.add(f"{m.group(1)}.{name}")
     return out

@@ -1,17 +1,17 @@
 """The kinematic level of the fidelity ladder: the cam as input at constant speed, MR13D kinetostatic."""
 from __future__ import annotations
 
-from common.units import rad_s_to_rpm
-from models.dynamics import validity
-from models.dynamics.result import SimulationResult, empty_indicators
-from models.dynamics.scene import Scene
-from models.mechanism.kinematics import analyze, rise_summary
-from models.mechanism.motor import no_load_cam_speed
+from labtool.common.units import rad_s_to_rpm
+from labtool.models.dynamics import validity
+from labtool.models.dynamics.result import SimulationResult, empty_indicators
+from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism.kinematics import analyze, rise_summary
+from labtool.models.mechanism.motor import no_load_cam_speed
 
 
 def cam_speed(scene: Scene) -> float:
     """Cam speed (rad/s) of the kinematic level: n1, or with omega1 'var' the speed the motor
-    settles at with no mean load (models.mechanism.motor.no_load_cam_speed)."""
+    settles at with no mean load (labtool.models.mechanism.motor.no_load_cam_speed)."""
     if scene.omega1_mode == "var":
         return no_load_cam_speed(scene.mechanism, scene.omega1_nominal)
     return scene.omega1_nominal

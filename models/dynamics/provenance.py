@@ -1,6 +1,6 @@
 """Provenance of a simulation dataset: the whole scene, the mechanism's source and labtool's version.
 
-Every dataset ``models.dynamics.simulate.simulate`` returns carries these attributes (CF: a dataset's
+Every dataset ``labtool.models.dynamics.simulate.simulate`` returns carries these attributes (CF: a dataset's
 attributes say how it was made), so a file written by ``labtool simulate -o`` can be simulated
 again from its attributes alone.
 """
@@ -32,7 +32,7 @@ def labtool_version() -> str:
 def models_source_sha256() -> str:
     """SHA-256 of every Python source and data file of the ``models`` package: what a sweep's
     results depend on besides its inputs. labtool's version alone does not change in a checkout,
-    and the kernels' hash (models.dynamics.jit) covers compiled code only."""
+    and the kernels' hash (labtool.models.dynamics.jit) covers compiled code only."""
     from pathlib import Path
     return tree_sha256(Path(__file__).resolve().parents[1])
 
@@ -58,7 +58,7 @@ def mechanism_attributes(mech) -> dict:
 def scene_attributes(scene) -> dict:
     """Every field of the scene (netCDF attributes: booleans as 0/1), the mechanism's source and
     labtool's version with the hash of its compiled kernels' source."""
-    from models.dynamics.jit import KERNEL_SOURCES_HASH
+    from labtool.models.dynamics.jit import KERNEL_SOURCES_HASH
 
     fields = {f.name for f in dataclasses.fields(scene)} - {"mechanism"}
     missing = fields - set(SCENE_ATTRIBUTES)

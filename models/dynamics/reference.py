@@ -1,6 +1,6 @@
 """The independent reference integrator: scipy ``solve_ivp`` (DOP853 by default), phase by phase,
 over a model's compiled equations, the same hooks the compiled driver runs
-(models.dynamics.kernels.dopri5: rhs, event, n_events, direction, state_size, transition).
+(labtool.models.dynamics.kernels.dopri5: rhs, event, n_events, direction, state_size, transition).
 
 Only the integration differs from ``dopri5.run``: scipy's method, step control and event location
 (brentq on the dense output). An event's sign is also read at ``ctl.nsub`` points of every step
@@ -16,8 +16,8 @@ from numba import typeof
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from common.errors import SolverError
-from models.dynamics.kernels import dopri5 as dp
+from labtool.common.errors import SolverError
+from labtool.models.dynamics.kernels import dopri5 as dp
 
 
 class ScipyRun:

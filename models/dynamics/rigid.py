@@ -13,23 +13,23 @@ free (2 DOF, eqs 4-7)     cam+motor and follower move independently inside the b
     J' eps1 = M1(omega1) + Mc(phi1);  J'' eps2 + 1/2 dJ'' omega2^2 = M_gravity + M_load.
     State (phi1, omega1, q, omega2) with q = phi2 - phi2_pitch(phi1) the follower's angle off the
     inner flank (integrated directly so that the gap keeps full precision).
-impact (eqs 8-11)         Newton's k on the normal velocity of C (models.dynamics.impact).
+impact (eqs 8-11)         Newton's k on the normal velocity of C (labtool.models.dynamics.impact).
 
 The gap. The groove's flanks are offset curves of the pitch curve (inner at 0, outer at j along the
 contact normal n). The normal distance of C from the pitch curve is linearised in q:
 g = A2(phi1) q, A2 = n . (k x DC) = l cos(alpha) = Db2/2 (m), so the angular gap is j / A2
 (the lead's j / (l cos alpha)). Neglected: terms of order j / rho (rho the pitch curve's radius of
-curvature, > 14 mm here), i.e. < 1 % of the gap for j <= 0.128 mm (models.dynamics.validity warns
+curvature, > 14 mm here), i.e. < 1 % of the gap for j <= 0.128 mm (labtool.models.dynamics.validity warns
 above 5 %). The same g defines the contact (g = 0 or j), the events and the impact's normal velocity
 v_n = dg/dt = A2 omega2 - G1 omega1 with G1 = A2 psi' - A2' q (= the paper's A1 = Db1/2 on the inner
 flank, a check in the tests), so the model is self-consistent: k = 1 conserves energy and
 v+ = -k v- hold to rounding.
 
 The equations, events, impact, settle rule, restart and initial state are compiled once
-(models.dynamics.kernels.rigid_nb, read the event and settle rules there); ``integrate`` runs them in
+(labtool.models.dynamics.kernels.rigid_nb, read the event and settle rules there); ``integrate`` runs them in
 the shared compiled Dormand-Prince loop (fast, standard) or in scipy's solve_ivp (reference, DOP853).
 This module builds the model struct from a scene, samples the run, computes the indicators and
-writes the dataset with the event record of models.dynamics.events. At most ``max_events`` events
+writes the dataset with the event record of labtool.models.dynamics.events. At most ``max_events`` events
 per run, then ``SolverError``.
 """
 from __future__ import annotations
@@ -44,19 +44,19 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
-from common.datasets import dataset
-from common.errors import InputError, SolverError
-from models.dynamics import events, validity
-from models.dynamics.contact import contact_stiffness
-from models.dynamics.kernels import dopri5 as dp
-from models.dynamics.kernels import rigid_nb as eq
-from models.dynamics.result import SimulationResult, empty_indicators
-from models.dynamics.rigid_tables import cam_table, follower_table
-from models.dynamics.scene import Scene
-from models.mechanism.cam_profile import cached_sense
-from models.mechanism.memo import cached
-from models.mechanism.motion_laws import CamProgram
-from models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam, no_load_cam_speed, transmission_ratio
+from labtool.common.datasets import dataset
+from labtool.common.errors import InputError, SolverError
+from labtool.models.dynamics import events, validity
+from labtool.models.dynamics.contact import contact_stiffness
+from labtool.models.dynamics.kernels import dopri5 as dp
+from labtool.models.dynamics.kernels import rigid_nb as eq
+from labtool.models.dynamics.result import SimulationResult, empty_indicators
+from labtool.models.dynamics.rigid_tables import cam_table, follower_table
+from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism.cam_profile import cached_sense
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam, no_load_cam_speed, transmission_ratio
 
 TWO_PI = 2.0 * math.pi
 INNER, OUTER, FREE = eq.INNER, eq.OUTER, eq.FREE
@@ -64,7 +64,7 @@ CONTACT, FREE_MODE = eq.CONTACT_MODE, eq.FREE_MODE
 
 # solver presets: relative tolerance, max step (fraction of the rise's duration), output samples
 # per rise, event cap. Their error and cost against the reference solution are measured in
-# models.dynamics.accuracy (benchmarks/work_precision.py). The step caps are what the stated
+# labtool.models.dynamics.accuracy (benchmarks/work_precision.py). The step caps are what the stated
 # accuracy needs (issue 17, measured over Table 1): standard at rise/1000 made 204 000 RHS
 # evaluations for 1.5e-8 in omega2, at rise/20 14 700 for 1.9e-8 (stated 1e-7); fast at rise/250
 # 52 300 for 3.8e-6, at rise/50 12 300 for 6.1e-6 (stated 1e-5); no event lost or added.
@@ -119,7 +119,7 @@ def build_model(scene: Scene, backlash: float | None = None, phi1_end: float | N
     span = simulated_span(scene) if phi1_end is None else phi1_end
     hi = simulated_span(scene) + 0.2
     # both tables depend on the mechanism and the cam program only: built once per process and
-    # shared by every speed, load, inertia factor and backlash (models.mechanism.memo.cached)
+    # shared by every speed, load, inertia factor and backlash (labtool.models.mechanism.memo.cached)
     cam = cached(("rigid_cam_table", mech.cache_key, program, sense, -0.05, hi),
                  lambda: cam_table(mech, program, sense, -0.05, hi).packed())
     lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
@@ -168,10 +168,10 @@ def integrate(model: eq.RigidModel, omega1_0: float, preset: dict, t_rise: float
     """Integrate from t_start until phi1 reaches model.phi1_end: (phases, event rows).
 
     start: None = contact at phi1 = 0, omega1_0, on the flank whose force is compressive;
-    ("contact", phi1, omega1, flank) to start on a flank (models.dynamics.auto escalates this way);
+    ("contact", phi1, omega1, flank) to start on a flank (labtool.models.dynamics.auto escalates this way);
     ("free", phi1, omega1, q, omega2) to start in the gap. ``solver``: "compiled" (kernels.dopri5)
     or "scipy" (solve_ivp with preset["method"]). ``stats`` (dict) receives nfev and n_steps.
-    Event rows: array (n, dopri5.EV_WIDTH) in models.dynamics.events' layout.
+    Event rows: array (n, dopri5.EV_WIDTH) in labtool.models.dynamics.events' layout.
     """
     ph0 = np.zeros(dp.PHASE_WIDTH)
     if start is None or start[0] == "contact":
@@ -192,7 +192,7 @@ def integrate(model: eq.RigidModel, omega1_0: float, preset: dict, t_rise: float
     if solver == "compiled":
         status, t, y, raw, rows, nfev, nst = dp.unpack(dp.run(model, ctl, ph0, y0, float(t_start)), width)
     else:
-        from models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
+        from labtool.models.dynamics import reference      # scipy's solve_ivp: loaded when a reference run needs it
         status, t, y, raw, rows, nfev, nst = reference.run(model, eq, ctl, ph0, y0, float(t_start),
                                                            method=preset["method"], name="rigid model")
     if stats is not None:
@@ -282,7 +282,7 @@ def simulate(scene: Scene, solver: str | None = None, preset: dict | None = None
 
     ``solver`` ("compiled" | "scipy") and ``preset`` (a dict like PRESETS[...]) override what
     ``scene.accuracy`` selects; ``stats`` (dict) receives nfev, n_steps and loop_s (s in the
-    loops); ``integrate_with`` replaces ``integrate`` (same arguments: models.dynamics.auto shares
+    loops); ``integrate_with`` replaces ``integrate`` (same arguments: labtool.models.dynamics.auto shares
     the no-backlash prefix this way).
     """
     t_start = _time.perf_counter()
@@ -334,7 +334,7 @@ def _run(scene: Scene, solver, preset, stats, integrate_with):
     n = max(int(preset["samples"] * model.phi1_end / program.rise_angle), 200)
     times = np.linspace(0.0, t_end, n + 1)
     # the last sample just inside the simulated span: at phi1 = rise exactly the dwell begins (the
-    # load switches off, as in models.mechanism.kinematics), which would put a step into every time series
+    # load switches off, as in labtool.models.mechanism.kinematics), which would put a step into every time series
     times[-1] = t_end * (1.0 - 1e-9)
     s = sample(model, phases, times)
     rfj = sample(model0, phases0, times)

@@ -1,7 +1,7 @@
 """The rigid model's tables: every function of phi1 and phi2 it needs, as piecewise-cubic Hermite
 tables built once per mechanism and cam program from the exact kinematics (motion law, linkage,
 contact geometry), with cells that never straddle a segment boundary of the cam program (the motion
-law's jerk may jump there). The compiled equations (models.dynamics.kernels.rigid_nb) read them.
+law's jerk may jump there). The compiled equations (labtool.models.dynamics.kernels.rigid_nb) read them.
 
 cam table (columns over phi1, rad): psi, psi', psi'', A2 (m), A2' (m/rad), A2'' (m/rad^2),
 Mc (N m, cam gravity), direction (+1 rise, -1 return, 0 dwell). follower table (over phi2, rad,
@@ -15,10 +15,10 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
-from models.mechanism import Mechanism
-from models.mechanism.cam_tables import linkage_columns
-from models.mechanism.motion_laws import CamProgram
+from labtool.common.errors import InputError
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.cam_tables import linkage_columns
+from labtool.models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
 
@@ -69,7 +69,7 @@ def make_table(nodes, left, right, slope_left, slope_right) -> Table:
 # --------------------------------------------------------------------------------------------
 def _arms(mech: Mechanism, sense: int, psi, p):
     """Moment arms (m) of the contact normal about D (A2) and A (A1) for follower stroke psi and
-    dpsi/dphi1 = p (the normal depends on both; the same construction as models.mechanism.cam_profile)."""
+    dpsi/dphi1 = p (the normal depends on both; the same construction as labtool.models.mechanism.cam_profile)."""
     phi2 = mech.phiD + mech.psi0 + psi
     r = mech.l * np.stack([np.cos(phi2), np.sin(phi2)])
     C = mech.D[:, None] + r
@@ -145,7 +145,7 @@ def follower_table(mech: Mechanism, lo: float, hi: float, n: int = 4001) -> Tabl
 
     def cols(x):
         J, dJ, Mg, vNx, slide = linkage_columns(mech, x)
-        # load per N of Fu and per unit direction (models.mechanism.kinematics.load_force_x): Fu_x = Fu *
+        # load per N of Fu and per unit direction (labtool.models.mechanism.kinematics.load_force_x): Fu_x = Fu *
         # sign(ds ux) * direction; its moment about D is Fu_x * vN_x (vN per unit omega2)
         return np.stack([J, dJ, Mg, np.sign(slide) * vNx])
 

@@ -9,12 +9,12 @@ import dataclasses
 import functools
 import math
 
-from common.errors import InputError
-from common.units import rpm_to_rad_s
-from models.mechanism import Mechanism
-from models.mechanism.kinematics import check_load_and_inertia
-from models.mechanism.memo import cached
-from models.mechanism.motion_laws import CamProgram, get_law
+from labtool.common.errors import InputError
+from labtool.common.units import rpm_to_rad_s
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.kinematics import check_load_and_inertia
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motion_laws import CamProgram, get_law
 
 ACCURACY_PRESETS = ("fast", "standard", "reference")
 # how the backlash enters the elastic model (docs/models.md, "the backlash in Table 3"):
@@ -27,7 +27,7 @@ ELASTIC_GAPS = ("physical", "closed")
 class Scene:
     """Operating point and model options.
 
-    law            motion law name (models.mechanism.motion_laws.LAWS)
+    law            motion law name (labtool.models.mechanism.motion_laws.LAWS)
     cam_speed_rpm  nominal cam speed n1 (rpm; the only non-SI field, as the paper's factor C)
     Fu             load at N (N, >= 0)
     backlash       groove backlash j (m, >= 0)
@@ -89,7 +89,7 @@ class Scene:
     @functools.cached_property
     def program(self) -> CamProgram:
         """The cam program of the mechanism with the scene's law: one object per mechanism and law
-        in a process, so that the per-process tables keyed on it (models.mechanism.memo) find it by
+        in a process, so that the per-process tables keyed on it (labtool.models.mechanism.memo) find it by
         identity, without comparing its segments."""
         return cached(("cam_program", self.mechanism.cache_key, self.law),
                       lambda: CamProgram.for_mechanism(self.mechanism, law=self.law))

@@ -1,10 +1,10 @@
 """One entry point for every model level: ``simulate(scene, model) -> SimulationResult``.
 
 Levels (DESIGN.md, fidelity ladder): ``kinematic`` (cam as input), ``rigid`` (eqs 1-11),
-``elastic`` (eqs 12-19), and ``auto`` (the cheapest level the scene needs, models.dynamics.auto).
+``elastic`` (eqs 12-19), and ``auto`` (the cheapest level the scene needs, labtool.models.dynamics.auto).
 ``LEVELS`` is the registry: a level's module is imported when a run needs it (the compiled models
 load numba; a kinematic run does not), always downwards: no level imports this module.
-Every result's dataset gets the scene's provenance (models.dynamics.provenance) and the level
+Every result's dataset gets the scene's provenance (labtool.models.dynamics.provenance) and the level
 that ran, and why.
 
 ``indicators(scene, model)`` is the path for sweeps and fits that need the paper's indicators
@@ -15,29 +15,29 @@ from __future__ import annotations
 
 import time
 
-from common.errors import InputError
-from models.dynamics.provenance import scene_attributes
-from models.dynamics.result import INDICATORS, SimulationResult  # noqa: F401  (the public names)
-from models.dynamics.scene import Scene
+from labtool.common.errors import InputError
+from labtool.models.dynamics.provenance import scene_attributes
+from labtool.models.dynamics.result import INDICATORS, SimulationResult  # noqa: F401  (the public names)
+from labtool.models.dynamics.scene import Scene
 
 
 def _kinematic(scene: Scene, **options) -> SimulationResult:
-    from models.dynamics import kinematic
+    from labtool.models.dynamics import kinematic
     return kinematic.simulate(scene)
 
 
 def _rigid(scene: Scene, **options) -> SimulationResult:
-    from models.dynamics import rigid
+    from labtool.models.dynamics import rigid
     return rigid.simulate(scene, **options)
 
 
 def _elastic(scene: Scene, **options) -> SimulationResult:
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
     return elastic.simulate(scene, **options)
 
 
 def _auto(scene: Scene, **options) -> SimulationResult:
-    from models.dynamics import auto
+    from labtool.models.dynamics import auto
     return auto.simulate_auto(scene, **options)
 
 
@@ -45,12 +45,12 @@ LEVELS = {"kinematic": _kinematic, "rigid": _rigid, "elastic": _elastic}
 
 
 def _rigid_indicators(scene: Scene, **options) -> dict:
-    from models.dynamics import rigid
+    from labtool.models.dynamics import rigid
     return rigid.simulate_indicators(scene, **options)
 
 
 def _elastic_indicators(scene: Scene, **options) -> dict:
-    from models.dynamics import elastic
+    from labtool.models.dynamics import elastic
     return elastic.simulate_indicators(scene, **options)
 
 

@@ -1,17 +1,17 @@
 """The stand's twin: a model of the STB-216 stand richer than the rigid and the elastic model.
 
-It is the simulated stand's default truth (acquisition.signal_chain, ``--truth twin``), the
+It is the simulated stand's default truth (labtool.acquisition.signal_chain, ``--truth twin``), the
 physics the two models are measured against; docs/twin.md gives the parameters and why. Three
 bodies and their couplings, in SI:
 
-* cam + motor (phi1, omega1; inertia J' = models.mechanism.motor.cam_inertia): driven by the
-  asynchronous motor's linear characteristic (models.mechanism.motor: slip under load, omega1
+* cam + motor (phi1, omega1; inertia J' = labtool.models.mechanism.motor.cam_inertia): driven by the
+  asynchronous motor's linear characteristic (labtool.models.mechanism.motor: slip under load, omega1
   variable) through a variator set so that the cam's no-load speed is the nominal n1, with a
   once-per-turn ripple of the drive's no-load speed, M1 = s (W0 (1 + r sin phi1) - omega1). The
   contact force acts back on the cam (moment -N G1), and so does the cam's own gravity.
   ``drive = "input"`` imposes omega1 = Omega (1 + r sin(Omega t)) instead (the cam as input).
 * follower side (phi2 = phi2_pitch(phi1) + q, omega2): J''red(phi2) x Jt of the paper's links 2-5
-  (models.mechanism.linkage through the rigid model's tables), gravity on all of them, the load Fu
+  (labtool.models.mechanism.linkage through the rigid model's tables), gravity on all of them, the load Fu
   (as the models apply it), pivot friction Mf = -(T_f + r_f |N|) tanh(omega2 / w_f) (a constant
   torque plus mu r_pin times the contact force, regularised below w_f).
 * the follower's first bending mode (u, du): a modal mass m_b at E on a spring k_b and damper c_b
@@ -19,8 +19,8 @@ bodies and their couplings, in SI:
   sqrt(k_b / m_b) = 2 pi mode_hz is the mode with the follower's root held. The accelerometer at
   E reads the modal mass: aE_t = DE omega2' + u'' = -(k_b u + c_b du) / m_b (the mode is a degree
   of freedom here, so the measuring chain must not add it again as a filter).
-* the groove: both flanks elastic (Palmgren, Kc = models.dynamics.contact.contact_stiffness) with
-  Hunt-Crossley damping (models.dynamics.contact.hunt_crossley_force), the backlash j crossed
+* the groove: both flanks elastic (Palmgren, Kc = labtool.models.dynamics.contact.contact_stiffness) with
+  Hunt-Crossley damping (labtool.models.dynamics.contact.hunt_crossley_force), the backlash j crossed
   physically: g = A2(phi1) q is the normal distance of the roller centre from the pitch curve
   (interior flank at g = 0, exterior at g = j; the rigid model's geometry), and N along the normal
   acts on the follower with the moment N A2 and on the cam with -N G1, G1 = A2 psi' - A2' q. The
@@ -30,7 +30,7 @@ bodies and their couplings, in SI:
 With the mode, the friction, the drive and the cam inertia switched off it is the elastic model's
 system without its linearisation in the deviation (tests/test_twin.py shows the convergence).
 
-The integration is compiled (models.dynamics.kernels.twin_nb, Dormand-Prince 5(4) with events at the
+The integration is compiled (labtool.models.dynamics.kernels.twin_nb, Dormand-Prince 5(4) with events at the
 contact boundaries) and streams: ``TwinRun.sample(t)`` continues the same trajectory for every new
 block of times, so a 1-hour recording is produced block by block with carried state. The run
 starts ``warmup_revolutions`` turns before t = 0 (phi1 = 0 at the start of a rise, t = 0), so a
@@ -41,7 +41,7 @@ beginning a ``contact``; ``event_domega2`` is the change of the follower's speed
 flank (q' = omega2 - psi' omega1) and ``event_percussion`` the integral of the contact force, over
 the contact or its first ``persistence_s`` if it lasts longer (then it is ``persistent``, and so
 is the separation that ends it; its domega2 is 0, a rebound's separation has NaN). With j = 0 a
-change of flank is a separation only (no flight ends). These follow models.dynamics.events; the
+change of flank is a separation only (no flight ends). These follow labtool.models.dynamics.events; the
 persistence is the twin's own: its rebounds last 1-3 times the elastic model's bounce time (the
 damping and the bending mode lengthen them), so "longer than two bounce times" would call its
 rebounds lift-offs (docs/twin.md).
@@ -54,10 +54,10 @@ import math
 import numpy as np
 import xarray as xr
 
-from common.errors import InputError, SolverError
-from models.dynamics.contact import contact_stiffness, static_penetration
-from models.dynamics.scene import Scene
-from models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam
+from labtool.common.errors import InputError, SolverError
+from labtool.models.dynamics.contact import contact_stiffness, static_penetration
+from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam
 
 TWO_PI = 2.0 * math.pi
 DRIVES = ("motor", "input")
@@ -159,16 +159,16 @@ class TwinPlant:
 
 
 def _tables(mech, program):
-    from models.dynamics.rigid_tables import cam_table, follower_table
-    from models.mechanism.cam_profile import cached_sense
-    from models.mechanism.memo import cached
+    from labtool.models.dynamics.rigid_tables import cam_table, follower_table
+    from labtool.models.mechanism.cam_profile import cached_sense
+    from labtool.models.mechanism.memo import cached
 
     sense = cached_sense(mech, program)
     lo, hi = -0.05, TWO_PI + 0.05
     cam = cached(("twin_cam_table", mech.cache_key, program, sense, lo, hi), lambda: cam_table(mech, program, sense, lo, hi))
     lo2, hi2 = mech.phiD + mech.psi0 - 0.05, mech.phiD + mech.psi0 + program.stroke + 0.05
     fol = cached(("twin_follower_table", mech.cache_key, lo2, hi2), lambda: follower_table(mech, lo2, hi2))
-    from models.dynamics.kernels import twin_nb as nb
+    from labtool.models.dynamics.kernels import twin_nb as nb
 
     return nb.compact_cam(cam), nb.compact_follower(fol), sense
 
@@ -176,8 +176,8 @@ def _tables(mech, program):
 def _scales(scene: Scene, kc: float, J_side):
     """Force, deflection and frequency scales of the scene: the largest kinetostatic normal force
     over a turn, its static deflection, the contact's angular frequency, the arm A2 range."""
-    from models.dynamics.elastic import contact_period
-    from models.mechanism.cam_tables import grid_terms
+    from labtool.models.dynamics.elastic import contact_period
+    from labtool.models.mechanism.cam_tables import grid_terms
 
     mech, program = scene.mechanism, scene.program
     terms = grid_terms(mech, program, TWO_PI, 2001)
@@ -192,7 +192,7 @@ def _scales(scene: Scene, kc: float, J_side):
 
 def build_plant(scene: Scene, physics: TwinPhysics) -> TwinPlant:
     """Tables and parameters of the twin for a scene (rigid-model tables shared per process)."""
-    from models.dynamics.kernels import twin_nb as nb
+    from labtool.models.dynamics.kernels import twin_nb as nb
 
     mech, program = scene.mechanism, scene.program
     cam, fol, sense = _tables(mech, program)
@@ -237,7 +237,7 @@ def build_plant(scene: Scene, physics: TwinPhysics) -> TwinPlant:
 
 def _follower_at(fol, phi2: float) -> np.ndarray:
     """(J0, dJ0, M_gravity, M_load per N) of the follower table at phi2 (rad)."""
-    from models.dynamics.kernels import twin_nb as nb
+    from labtool.models.dynamics.kernels import twin_nb as nb
 
     out = np.zeros(4)
     nb.follower_eval(*fol, phi2, out)
@@ -258,8 +258,8 @@ class TwinRun:
 
     def __init__(self, scene: Scene, physics: TwinPhysics | None = None, keep_events: bool = True,
                  start: dict | None = None):
-        from models.dynamics import validity
-        from models.dynamics.kernels import twin_nb as nb
+        from labtool.models.dynamics import validity
+        from labtool.models.dynamics.kernels import twin_nb as nb
 
         validity.check_scene(scene)   # a groove no cam realises (an undercut, a backlash past R): refused, as the models do
         self.scene, self.physics = scene, physics or TwinPhysics()
@@ -302,7 +302,7 @@ class TwinRun:
 
     def _rest_state(self):
         """At phi1 = 0 (end of the lower dwell) at rest on the flank that carries gravity and load."""
-        from models.dynamics.kernels import twin_nb as nb
+        from labtool.models.dynamics.kernels import twin_nb as nb
 
         P, mech = self.plant, self.scene.mechanism
         cam, fol = np.zeros(6), np.zeros(4)
@@ -326,7 +326,7 @@ class TwinRun:
         self.plant.p[nb.P_MAXSTEPS] = self._S[nb.S_NSTEP] + max(1e5, 4e6 * span_s)
 
     def _check(self, status):
-        from models.dynamics.kernels import dopri5 as dp
+        from labtool.models.dynamics.kernels import dopri5 as dp
 
         nb = self._nb
         if status == nb.OK:
@@ -421,9 +421,9 @@ class TwinRun:
 
 
 def event_arrays(rows) -> dict:
-    """The kernel's event rows as the one event record's arrays (models.dynamics.events, SI)."""
-    from models.dynamics import events
-    from models.dynamics.kernels import twin_nb as nb
+    """The kernel's event rows as the one event record's arrays (labtool.models.dynamics.events, SI)."""
+    from labtool.models.dynamics import events
+    from labtool.models.dynamics.kernels import twin_nb as nb
 
     rows = np.asarray(rows, dtype=float).reshape(-1, nb.NE)
     return events.columns(events.record(
@@ -432,8 +432,8 @@ def event_arrays(rows) -> dict:
 
 
 def event_dataset(event_columns: dict) -> xr.Dataset:
-    """The event record (models.dynamics.events) as a Dataset over dimension ``event``."""
-    from models.dynamics import events
+    """The event record (labtool.models.dynamics.events) as a Dataset over dimension ``event``."""
+    from labtool.models.dynamics import events
 
     c = event_columns
     return xr.Dataset(events.record(c["event_time"], c["event_phi1"], c["event_kind"], c["event_side"],

@@ -28,7 +28,7 @@ SolverError for a run whose physics leaves the model's ground). The thresholds a
   refused. The rigid model integrates omega1 and
   warns when the motor's slip leaves the neighbourhood of its rated point (eq. 3 is a straight line
   through the synchronous and the nominal point: SLIP_WARN times the nominal slip).
-- the elastic energy balance of an undamped run (models.dynamics.elastic.energy_error) above the
+- the elastic energy balance of an undamped run (labtool.models.dynamics.elastic.energy_error) above the
   project's ENERGY_BOUND: the output samples miss part of the contact dynamics.
 """
 from __future__ import annotations
@@ -38,11 +38,11 @@ import math
 
 import numpy as np
 
-from common.errors import InputError, SolverError
-from models.dynamics.jit import jit
-from models.mechanism.cam_profile import contact_geometry
-from models.mechanism.memo import cached
-from models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
+from labtool.common.errors import InputError, SolverError
+from labtool.models.dynamics.jit import jit
+from labtool.models.mechanism.cam_profile import contact_geometry
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motor import cam_inertia, motor_moment_on_cam, transmission_ratio
 
 PRESSURE_ANGLE_WARN = 60.0     # deg
 PRESSURE_ANGLE_LIMIT = 80.0    # deg

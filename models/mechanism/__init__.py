@@ -2,6 +2,6 @@
 
 ``Mechanism`` (the STB-216 parameters) is re-exported here because every layer names it.
 """
-from models.mechanism.parameters import Mechanism
+from labtool.models.mechanism.parameters import Mechanism
 
 __all__ = ["Mechanism"]

@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 
-from common.errors import InputError
-from models.mechanism import Mechanism
-from models.mechanism.memo import cached
-from models.mechanism.motion_laws import CamProgram
+from labtool.common.errors import InputError
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motion_laws import CamProgram
 
 
 def _rotate(v, angle):
@@ -29,7 +29,7 @@ def pitch_geometry(xD, yD, l, sense, phi2, dpsi, ddpsi):
     the cam turning with ``sense`` (module doc): (C_x, C_y m; the unit normal n_x, n_y, oriented
     away from the cam axis A; the signed radius of curvature rho m; the pressure angle alpha rad,
     folded to (-pi/2, pi/2]; Db1, Db2 m of eq. (18); the curvature's sign). Plain arithmetic on
-    arrays or floats, so that compiled code (models.dynamics.elastic) runs this same source."""
+    arrays or floats, so that compiled code (labtool.models.dynamics.elastic) runs this same source."""
     rx, ry = l * np.cos(phi2), l * np.sin(phi2)
     Cx, Cy = xD + rx, yD + ry
     dCx, dCy = dpsi * -ry, dpsi * rx                        # C' = psi' perp(r)
@@ -69,7 +69,7 @@ def choose_sense(mech: Mechanism, program: CamProgram) -> int:
 
 
 def cached_sense(mech: Mechanism, program: CamProgram) -> int:
-    """``choose_sense`` remembered per (mechanism, program) (models.mechanism.memo.cached): it costs
+    """``choose_sense`` remembered per (mechanism, program) (labtool.models.mechanism.memo.cached): it costs
     two 721-point geometry passes and every contact-geometry call needs it."""
     return cached(("cam_sense", mech.cache_key, program), lambda: choose_sense(mech, program))
 

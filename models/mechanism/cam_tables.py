@@ -8,18 +8,18 @@ factor Jt as scalar multipliers (sec. 2.1.1):
     MR13D    = Jt (J0 epsilon2 + 1/2 dJ0 omega2^2) - M_gravity - Fu m_load
     J''red   = Jt J0
 
-with J0, dJ0 the follower-side inertia reduced to the follower at Jt = 1 (models.mechanism.linkage), m_load
+with J0, dJ0 the follower-side inertia reduced to the follower at Jt = 1 (labtool.models.mechanism.linkage), m_load
 the moment about D of a unit load (N m per N, its sign opposing the rod's sliding, zero in the
-dwells: models.mechanism.kinematics.load_force_x), and the contact geometry (pressure angle, Db1, Db2:
-models.mechanism.cam_profile) a function of phi1 alone. So the expensive part (the linkage and the cam
+dwells: labtool.models.mechanism.kinematics.load_force_x), and the contact geometry (pressure angle, Db1, Db2:
+labtool.models.mechanism.cam_profile) a function of phi1 alone. So the expensive part (the linkage and the cam
 geometry, ~0.7 us per angle) is evaluated once on an angle grid and shared by every speed, load
 and inertia factor: the 16 runs of Table 1 share one table. ``at_speed`` combines a table with an
 operating point in a handful of array operations.
 
-Values agree with models.mechanism.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
-models.mechanism.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
+Values agree with labtool.models.mechanism.kinematics (follower_motion, load_force_x, kinetostatic_moment) and
+labtool.models.mechanism.cam_profile.contact_geometry to rounding (tests/test_cam_tables.py).
 
-The grids and the stroke spline are memoised per process (models.mechanism.memo).
+The grids and the stroke spline are memoised per process (labtool.models.mechanism.memo).
 """
 from __future__ import annotations
 
@@ -27,11 +27,11 @@ import dataclasses
 
 import numpy as np
 
-from models.mechanism.cam_profile import cached_sense, contact_geometry
-from models.mechanism.linkage import linkage_state, reduced_follower
-from models.mechanism import Mechanism
-from models.mechanism.memo import cached
-from models.mechanism.motion_laws import CamProgram
+from labtool.models.mechanism.cam_profile import cached_sense, contact_geometry
+from labtool.models.mechanism.linkage import linkage_state, reduced_follower
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.memo import cached
+from labtool.models.mechanism.motion_laws import CamProgram
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +63,7 @@ class AngleTerms:
 def operating_point(dpsi, ddpsi, J0, dJ0, M_gravity, m_load, omega1, Fu, jt_factor):
     """The module doc's combination of the terms (arrays, or floats at one angle) with an operating
     point (omega1 rad/s, Fu N, Jt): (omega2 rad/s, epsilon2 rad/s^2, MR13D N m, J''red kg m^2).
-    Plain arithmetic only, so that compiled code (models.dynamics.elastic) runs this same source."""
+    Plain arithmetic only, so that compiled code (labtool.models.dynamics.elastic) runs this same source."""
     omega2 = dpsi * omega1
     epsilon2 = ddpsi * omega1**2
     J = jt_factor * J0
@@ -77,13 +77,13 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None 
 
     ``until`` (rad): every term is taken at min(phi1, until) (``phi1`` itself is kept), so that a
     run ending at the end of the rise keeps the rise's motion and load at its last instant instead
-    of the dwell's (models.dynamics.elastic).
+    of the dwell's (labtool.models.dynamics.elastic).
     ``linkage``: "exact" evaluates the linkage at every angle; "spline" reads J0, dJ0, M_gravity
     and the load's arm from a cubic spline over the follower's stroke (``stroke_spline``: the
     linkage depends on phi2 alone, analytically; 1e-13 relative, 1e-11 for dJ0), 4x cheaper for
     thousands of arbitrary instants. The motion law and the contact geometry are always exact.
     ``geometry=False`` leaves the contact geometry out (alpha, Db1, Db2 None): what the kinetostatic
-    moment alone needs (``at_speed``), half the cost (models.dynamics.elastic's indicator path).
+    moment alone needs (``at_speed``), half the cost (labtool.models.dynamics.elastic's indicator path).
     """
     phi1 = np.asarray(phi1, dtype=float)
     at = phi1 if until is None else np.minimum(phi1, until)
@@ -104,10 +104,10 @@ def angle_terms(mech: Mechanism, program: CamProgram, phi1, until: float | None 
 
 
 def load_arm(slide, direction, vNx):
-    """The moment about D of a unit load (N m per N): models.mechanism.kinematics.load_force_x per N
+    """The moment about D of a unit load (N m per N): labtool.models.mechanism.kinematics.load_force_x per N
     of Fu (its sign opposes the rod's sliding ``slide``, zero in a dwell: ``direction`` +1 rise, -1
     return, 0 dwell) times its arm, the x velocity coefficient of N ``vNx`` (m/rad). Plain
-    arithmetic on arrays or floats, so that compiled code (models.dynamics.elastic) runs it too."""
+    arithmetic on arrays or floats, so that compiled code (labtool.models.dynamics.elastic) runs it too."""
     return np.sign(slide) * direction * vNx
 
 
@@ -119,7 +119,7 @@ def linkage_columns(mech: Mechanism, phi2):
     of the unit-velocity linkage: J''red and dJ''red/dphi2 at Jt = 1 (kg m^2, kg m^2/rad), the
     moment of gravity about D (N m), the x velocity coefficient of N (m/rad, the load's arm) and the
     x component of the rod's sliding per unit omega2 (its sign opposes the load,
-    models.mechanism.kinematics.load_force_x)."""
+    labtool.models.mechanism.kinematics.load_force_x)."""
     unit = linkage_state(mech, phi2, 1.0, 0.0)
     red = reduced_follower(mech, phi2, None, 1.0, unit=unit)
     return red.J, red.dJ, red.M_gravity, unit.vN[0], unit.ds * np.cos(unit.phi4)

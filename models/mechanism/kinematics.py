@@ -19,14 +19,14 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # loaded where a Dataset is built (a sweep's indicator path needs none)
     import xarray as xr
 
-from models.mechanism.cam_profile import contact_geometry
-from common.datasets import dataset
-from common.errors import InputError
-from common.units import rpm_to_rad_s
-from models.mechanism.linkage import linkage_state, reduced_follower
-from models.mechanism import Mechanism
-from models.mechanism.motion_laws import CamProgram
-from models.mechanism.motor import cam_inertia, transmission_ratio
+from labtool.models.mechanism.cam_profile import contact_geometry
+from labtool.common.datasets import dataset
+from labtool.common.errors import InputError
+from labtool.common.units import rpm_to_rad_s
+from labtool.models.mechanism.linkage import linkage_state, reduced_follower
+from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.models.mechanism.motor import cam_inertia, transmission_ratio
 
 
 def load_force_x(mech: Mechanism, program: CamProgram, phi1, phi2, Fu: float):

@@ -20,7 +20,7 @@ import dataclasses
 
 import numpy as np
 
-from models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism
 
 
 def _rot(angle):

@@ -1,7 +1,7 @@
 """The one per-process memo of speed-independent tables (what depends on the mechanism and the cam
-program only): the elastic model's cam-angle grids and stroke spline (models.mechanism.cam_tables),
-the cam's sense of rotation (models.mechanism.cam_profile.cached_sense) and the rigid model's cam
-and follower tables (models.dynamics.rigid.build_model)."""
+program only): the elastic model's cam-angle grids and stroke spline (labtool.models.mechanism.cam_tables),
+the cam's sense of rotation (labtool.models.mechanism.cam_profile.cached_sense) and the rigid model's cam
+and follower tables (labtool.models.dynamics.rigid.build_model)."""
 from __future__ import annotations
 
 import collections

@@ -16,8 +16,8 @@ from typing import Callable
 
 import numpy as np
 
-from common.errors import InputError
-from common.names import shown
+from labtool.common.errors import InputError
+from labtool.common.names import shown
 
 TWO_PI = 2.0 * math.pi
 
@@ -171,7 +171,7 @@ class CamProgram:
     segments: tuple[Segment, ...]
 
     def __hash__(self) -> int:
-        # the dataclass hash, made once: a program keys the per-process tables (models.mechanism.memo)
+        # the dataclass hash, made once: a program keys the per-process tables (labtool.models.mechanism.memo)
         # and hashing its segments and laws field by field cost ~5 us a lookup
         h = self.__dict__.get("_hash")
         if h is None:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism
 
 
 def transmission_ratio(mech: Mechanism, omega1_nominal: float) -> float:

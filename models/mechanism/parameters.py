@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import InputError
-from common.names import shown
-from common.schema import Number, String, Table, parse_toml, read_toml_bytes
-from common.units import DEG, MM, RPM
+from labtool.common.errors import InputError
+from labtool.common.names import shown
+from labtool.common.schema import Number, String, Table, parse_toml, read_toml_bytes
+from labtool.common.units import DEG, MM, RPM
 
 _UNIT_SCALE = {"_mm": MM, "_deg": DEG, "_rpm": RPM}
 
@@ -154,7 +154,7 @@ class Mechanism:
     # --- derived -------------------------------------------------------------
     @functools.cached_property
     def cache_key(self) -> str:
-        """Every parameter as text: the key of the per-process tables (models.mechanism.memo) that
+        """Every parameter as text: the key of the per-process tables (labtool.models.mechanism.memo) that
         depend on the mechanism (a dataclass with a dict field is not hashable; its repr is, and
         costs 80 us, so it is made once)."""
         return repr(self)
@@ -213,12 +213,12 @@ class Mechanism:
     @classmethod
     def default(cls) -> "Mechanism":
         """The paper's mechanism (sec. 2, 2.2)."""
-        text = resources.files("models.data").joinpath("stb216.toml").read_text()
+        text = resources.files("labtool.models.data").joinpath("stb216.toml").read_text()
         return cls.from_toml_text(text, source="built-in STB-216 (models/data/stb216.toml)")
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Mechanism":
-        """A user's mechanism file (common.schema: types, bounds and unknown keys checked)."""
+        """A user's mechanism file (labtool.common.schema: types, bounds and unknown keys checked)."""
         raw = read_toml_bytes(path, what="mechanism file")      # read once: what is parsed is what is hashed
         doc = parse_toml(raw, f"mechanism file {shown(Path(path))}")
         return cls.from_dict(doc, source=str(path), sha256=hashlib.sha256(raw).hexdigest())

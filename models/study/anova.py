@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError
 
 # response columns labtool knows (DESIGN.md --json indicator keys; Tables 2 and 3) with units
 RESPONSE_UNITS = {

@@ -5,7 +5,7 @@ A design is a list of :class:`Factor` (letter name ``A``, ``B``, ...; symbol ``F
 order: run 1 has every factor at level 1 and the last factor changes fastest (Table 2's order).
 
 Factor values are kept in the units of the factor file (the table edge: N, mm, rpm, ...); they are
-converted to the SI fields of :class:`models.dynamics.scene.Scene` once, in :func:`scene_for_run`, through
+converted to the SI fields of :class:`labtool.models.dynamics.scene.Scene` once, in :func:`scene_for_run`, through
 the table :data:`SCENE_FACTORS` (symbol -> Scene field, accepted units and their scale to the
 field's unit).
 
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError
 
 # symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
 SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
@@ -87,7 +87,7 @@ class Factor:
 def table1_factors() -> list[Factor]:
     """The paper's Table 1: A = Fu [N], B = j [mm], C = n1 [rpm], D = Jt [factor of nominal]."""
     from importlib import resources
-    text = resources.files("models.data").joinpath("table1_factors.csv").read_text(encoding="utf-8")
+    text = resources.files("labtool.models.data").joinpath("table1_factors.csv").read_text(encoding="utf-8")
     return _factors_from_csv(text, "table1_factors.csv")
 
 
@@ -290,8 +290,8 @@ def simulate_run(scene, model: str) -> dict:
     """
     import time
 
-    from common.errors import LabtoolError
-    from models.dynamics.simulate import indicators
+    from labtool.common.errors import LabtoolError
+    from labtool.models.dynamics.simulate import indicators
     t0 = time.perf_counter()
     try:
         found = indicators(scene, model)          # the Dataset-free path: only the indicators are kept
@@ -323,7 +323,7 @@ class Design:
     """
 
     factors: tuple[Factor, ...]
-    base: object                 # models.dynamics.scene.Scene
+    base: object                 # labtool.models.dynamics.scene.Scene
     model: str
 
     def __post_init__(self):
@@ -392,7 +392,7 @@ class Design:
         """What identifies the design's results (a resumed run must match it exactly): the model,
         the factors, the base scene and the code that computes them (an upgrade between a kill and
         the resume would otherwise mix two versions' results in one table)."""
-        from models.dynamics.provenance import labtool_version, models_source_sha256
+        from labtool.models.dynamics.provenance import labtool_version, models_source_sha256
         return {"model": self.model,
                 "factors": [dataclasses.asdict(f) for f in self.factors],
                 "base_scene": repr(self.base) + f" mechanism={self.base.mechanism!r}",

@@ -10,8 +10,8 @@ from importlib import resources
 
 import pandas as pd
 
-from models.dynamics.scene import Scene
-from models.dynamics.simulate import indicators
+from labtool.models.dynamics.scene import Scene
+from labtool.models.dynamics.simulate import indicators
 
 FACTOR_LEVELS = {  # Table 1, in the units of the table
     "Fu_N": (0.0, 65.0),
@@ -23,7 +23,7 @@ FACTOR_LEVELS = {  # Table 1, in the units of the table
 
 def read_reference(name: str) -> pd.DataFrame:
     """One of table1_factors, table2_rigid, table3_elastic, effects_eq20_28."""
-    with resources.files("models.data").joinpath(f"{name}.csv").open() as fh:
+    with resources.files("labtool.models.data").joinpath(f"{name}.csv").open() as fh:
         return pd.read_csv(fh)
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common.errors import FileFormatError, InputError
-from common.names import shown
-from processing.readers.base import Event, Recording
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown
+from labtool.processing.readers.base import Event, Recording
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 TDMS_SIGNATURE = b"TDSm"
@@ -60,16 +60,16 @@ def open_recording(path, sample_rate_hz: float | None = None, group: str | None 
     """
     kind = sniff(path)
     if kind == "hdf5":
-        from processing.readers.hdf5_v1 import open_hdf5_v1
+        from labtool.processing.readers.hdf5_v1 import open_hdf5_v1
         rec = open_hdf5_v1(path)
     elif kind == "tdms":
-        from processing.readers.tdms import open_tdms
+        from labtool.processing.readers.tdms import open_tdms
         rec = open_tdms(path, sample_rate_hz, group)
     elif kind == "lvm":
-        from processing.readers.lvm import open_lvm
+        from labtool.processing.readers.lvm import open_lvm
         rec = open_lvm(path, sample_rate_hz, time_unit_s)
     else:
-        from processing.readers.csv import open_csv
+        from labtool.processing.readers.csv import open_csv
         rec = open_csv(path, sample_rate_hz, delimiter, decimal, time_unit_s)
     if rec.n_samples == 0:
         rec.close()

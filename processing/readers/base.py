@@ -13,8 +13,8 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from common.errors import FileFormatError, InputError
-from common.names import shown
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown
 
 EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
 # events that mean the samples before and after the index are not contiguous in time

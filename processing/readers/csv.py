@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import re
 
-from common.errors import FileFormatError, InputError
-from processing.readers.text import Layout, find_time_column, open_table
+from labtool.common.errors import FileFormatError, InputError
+from labtool.processing.readers.text import Layout, find_time_column, open_table
 
 DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
 RATE_KEYS = {"sample_rate_hz": 1, "sample rate": 1, "samplerate": 1, "sampling rate": 1, "sample_rate": 1, "fs": 1,

@@ -13,9 +13,9 @@ import math
 import h5py
 import numpy as np
 
-from common.errors import FileFormatError, InputError
-from common.hdf5 import open_file
-from processing.readers.base import Event, Recording, as_text, check_finite, check_sample_rate
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.hdf5 import open_file
+from labtool.processing.readers.base import Event, Recording, as_text, check_finite, check_sample_rate
 
 FORMAT = "labtool.recording"
 VERSION = 1

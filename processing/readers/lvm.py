@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import math
 
-from common.errors import FileFormatError, InputError
-from common.names import shown
-from processing.readers.csv import read_head
-from processing.readers.text import Layout, open_table
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown
+from labtool.processing.readers.csv import read_head
+from labtool.processing.readers.text import Layout, open_table
 
 END = "***End_of_Header***"
 SEPARATORS = {"tab": "\t", "comma": ",", "semicolon": ";", "space": " "}

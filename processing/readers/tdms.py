@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from common.errors import FileFormatError, InputError
-from processing.readers.base import Recording, as_text, check_finite, check_sample_rate
-from processing.readers.units import signal_unit
+from labtool.common.errors import FileFormatError, InputError
+from labtool.processing.readers.base import Recording, as_text, check_finite, check_sample_rate
+from labtool.processing.readers.units import signal_unit
 
 RATE_KEYS = ("sample_rate_hz", "sample rate", "samplerate", "sample_rate", "wf_samplerate", "rate")
 UNIT_KEYS = ("unit_string", "NI_UnitDescription", "unit")

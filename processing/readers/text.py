@@ -14,10 +14,10 @@ import math
 
 import numpy as np
 
-from common.errors import FileFormatError, InputError
-from common.names import shown
-from processing.readers.base import Recording, check_finite, check_sample_rate
-from processing.readers.units import signal_unit, split_name_unit, time_unit
+from labtool.common.errors import FileFormatError, InputError
+from labtool.common.names import shown
+from labtool.processing.readers.base import Recording, check_finite, check_sample_rate
+from labtool.processing.readers.units import signal_unit, split_name_unit, time_unit
 
 BLOCK = 65536          # rows between two stored offsets
 MIN_PLAUSIBLE_FS = 500.0  # Hz: below it 100 harmonics of a 20 rpm cam do not fit; a time unit is wrong

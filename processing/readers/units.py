@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 
-from common.errors import InputError
+from labtool.common.errors import InputError
 
 G0 = 9.80665  # m/s^2 per g (standard gravity, as DAQmx's g unit)
 

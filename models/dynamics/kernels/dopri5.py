@@ -2,7 +2,7 @@
 
 The method, step-size controller, first step and dense output (4th order, Shampine's
 coefficients) are scipy ``RK45``'s, so the compiled loop and a scipy run of the same equations
-differ only in the language; the independent reference is scipy's DOP853 (models.dynamics.reference).
+differ only in the language; the independent reference is scipy's DOP853 (labtool.models.dynamics.reference).
 
 A model is a ``namedtuple`` of its tables and parameters (the *model struct*) plus six hooks,
 registered once with ``register(ModelClass, ...)`` (numba overloads dispatched on the struct's
@@ -16,7 +16,7 @@ type, so this driver imports no model and every model shares it):
     transition(model, ph, which, t, y, ev, nev) -> (code, nev)
                                               what the event does: writes its rows of the event
                                               record into ``ev`` (EV_WIDTH columns,
-                                              models.dynamics.events layout), updates ``ph`` and the
+                                              labtool.models.dynamics.events layout), updates ``ph`` and the
                                               state ``y`` in place; code END ends the run
 
 ``ph`` is the phase: a float array of PHASE_WIDTH numbers whose layout the model defines (entry 0
@@ -47,7 +47,7 @@ import numpy as np
 from numba import types
 from numba.extending import overload as _overload
 
-from models.dynamics.jit import jit, kernel
+from labtool.models.dynamics.jit import jit, kernel
 
 A = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0],
@@ -74,7 +74,7 @@ ERROR_EXPONENT = -1.0 / 5.0
 TIE = 8.9e-16          # events closer than TIE * (1 + |t|) s are simultaneous: the lower index wins
 
 PHASE_WIDTH = 6        # numbers describing a phase (the model's layout; [0] = mode)
-EV_WIDTH = 20          # columns of an event row (models.dynamics.events: 8 shared, up to 12 the model's own)
+EV_WIDTH = 20          # columns of an event row (labtool.models.dynamics.events: 8 shared, up to 12 the model's own)
 MAX_EVENTS_PER_PHASE = 4
 CONTINUE, END = 0, 1   # transition codes
 
@@ -107,7 +107,7 @@ Controls = namedtuple("Controls", [
 # ------------------------------------------------------------------ the model hooks (overloaded)
 
 def rhs(model, ph, t, y, out):
-    raise NotImplementedError("a model registers its hooks with models.dynamics.kernels.dopri5.register")
+    raise NotImplementedError("a model registers its hooks with labtool.models.dynamics.kernels.dopri5.register")
 
 
 def event(model, ph, which, t, y):
@@ -153,7 +153,7 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
         return isinstance(model, types.BaseNamedTuple) and model.instance_class is model_class
 
     # the hooks called at every step allocate nothing: compiled without reference counting
-    # (models.dynamics.jit.kernel); a transition (once an event) may
+    # (labtool.models.dynamics.jit.kernel); a transition (once an event) may
     overload = functools.partial(_overload, jit_options={"_nrt": False})
 
     @overload(rhs)

@@ -1,10 +1,10 @@
 """The elastic-contact model's equations (paper eqs 12-19), compiled: written once, run by the
-shared Dormand-Prince driver (models.dynamics.kernels.dopri5.run) and by the scipy reference loop
-(models.dynamics.reference.run) alike. Read the physics and sign conventions in models.dynamics.elastic.
+shared Dormand-Prince driver (labtool.models.dynamics.kernels.dopri5.run) and by the scipy reference loop
+(labtool.models.dynamics.reference.run) alike. Read the physics and sign conventions in labtool.models.dynamics.elastic.
 
     M(t) x'' = F(x, x') - drive(t)        x (m) relative displacement along the normal (+ exterior)
     interior flank (phase 0): F = +N(-x, -x'), exterior (phase 2): F = -N(x - j, x'),
-    flight (phase 1): F = 0; N the contact law (models.dynamics.contact.normal_force); drive and M
+    flight (phase 1): F = 0; N the contact law (labtool.models.dynamics.contact.normal_force); drive and M
     linear in t on the tables' grid.
 
 Events: the boundary of the phase's flank (x = 0 interior, x = j exterior); after one the state
@@ -18,10 +18,10 @@ from collections import namedtuple
 
 import numpy as np
 
-from models.dynamics import events as ev_layout
-from models.dynamics.contact import normal_force, penetration_under
-from models.dynamics.jit import jit, kernel
-from models.dynamics.kernels import dopri5 as dp
+from labtool.models.dynamics import events as ev_layout
+from labtool.models.dynamics.contact import normal_force, penetration_under
+from labtool.models.dynamics.jit import jit, kernel
+from labtool.models.dynamics.kernels import dopri5 as dp
 
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
 NUDGE = 1e-13          # m, how far inside the new phase a restart begins (<< any deformation)
@@ -76,9 +76,9 @@ def interp_rows(t, tab, row_a, row_b, rate):
 @kernel
 def flank_force(phase, x, v, kc, gap, damping):
     """Groove-on-follower normal force along +x (N) in ``phase`` at the normal offset x (m) from the
-    interior flank, moving at v (m/s): the contact law (models.dynamics.contact.normal_force) on the
+    interior flank, moving at v (m/s): the contact law (labtool.models.dynamics.contact.normal_force) on the
     flank in contact, + from the interior one, - from the exterior one at x = gap. The twin
-    (models.dynamics.kernels.twin_nb) applies the same."""
+    (labtool.models.dynamics.kernels.twin_nb) applies the same."""
     if phase == INTERIOR:
         return normal_force(-x, -v, kc, damping)
     if phase == EXTERIOR:
@@ -165,7 +165,7 @@ def restart_position(m, at_zero, new_phase):
 def transition(model, ph, which, t, y, ev, nev):
     """A contact ends (a separation row) or a flight ends on a flank (a contact row); the impact
     columns of a landing (domega2, percussion, persistent) are completed from the run afterwards
-    (models.dynamics.elastic). With j = 0 a change of flank is a separation only: no flight ends."""
+    (labtool.models.dynamics.elastic). With j = 0 a change of flank is a separation only: no flight ends."""
     phase = int(ph[0])
     new = next_phase(model, phase, which)
     at_zero = _on_zero(phase, which)

@@ -1,7 +1,7 @@
 """The rigid-element model's equations (paper eqs 1-11), compiled: written once, run by the shared
-Dormand-Prince driver (models.dynamics.kernels.dopri5.run) and by the scipy reference loop
-(models.dynamics.reference.run) alike. The model, its assumptions and sign conventions are in
-models.dynamics.rigid's docstring.
+Dormand-Prince driver (labtool.models.dynamics.kernels.dopri5.run) and by the scipy reference loop
+(labtool.models.dynamics.reference.run) alike. The model, its assumptions and sign conventions are in
+labtool.models.dynamics.rigid's docstring.
 
 contact (mode 0; state phi1 rad, omega1 rad/s): the roller rides the inner (+1) or outer (-1)
     flank; eps1 from eq. (1) with the reduced inertia of eq. (2); events: the end of the cam angle,
@@ -10,7 +10,7 @@ free (mode 1; state phi1, omega1, q rad, omega2 rad/s): eqs (4)-(7); events: the
     angle, the gap g = A2 q closing on the inner flank (g = 0) or the outer one (g = j); on the
     flank just left the function is divided by (t - t0), which removes its trivial root at the start
     without an offset (an offset would feed energy into accumulating impacts).
-impact: Newton's k on the normal velocity of the roller centre (eqs 8-11, models.dynamics.impact). The settle
+impact: Newton's k on the normal velocity of the roller centre (eqs 8-11, labtool.models.dynamics.impact). The settle
     rule: a rebound whose flight would rise less above the flank than the contact deformation
     under the flank's force (Palmgren, the scene's contact law) is below what a model of rigid
     elements resolves: the impact is made plastic and the follower stays on the flank, provided
@@ -25,21 +25,21 @@ from collections import namedtuple
 
 import numpy as np
 
-from models.dynamics import events as ev_layout
-from models.dynamics.contact import penetration_under
-from models.dynamics.impact import impact, kinetic_energy
-from models.dynamics.jit import jit, kernel
-from models.dynamics.kernels import dopri5 as dp
+from labtool.models.dynamics import events as ev_layout
+from labtool.models.dynamics.contact import penetration_under
+from labtool.models.dynamics.impact import impact, kinetic_energy
+from labtool.models.dynamics.jit import jit, kernel
+from labtool.models.dynamics.kernels import dopri5 as dp
 
 INNER, OUTER, FREE = 1, -1, 0
 CONTACT_MODE, FREE_MODE = 0, 1
 ANGLE_TIE = 1e-12      # rad: an event this close to the end of the simulated angle is the end
-# the model's own event columns (after the shared ones of models.dynamics.events)
+# the model's own event columns (after the shared ones of labtool.models.dynamics.events)
 (COL_OMEGA1_BEFORE, COL_OMEGA1_AFTER, COL_OMEGA2_BEFORE, COL_OMEGA2_AFTER, COL_ENERGY_BEFORE,
  COL_ENERGY_AFTER, COL_V_BEFORE, COL_V_AFTER, COL_PHI2) = range(ev_layout.N_SHARED, ev_layout.N_SHARED + 9)
 
 RigidModel = namedtuple("RigidModel", [
-    "cam",              # cam-angle table (rad), 8 columns (models.dynamics.rigid_tables.Table.packed)
+    "cam",              # cam-angle table (rad), 8 columns (labtool.models.dynamics.rigid_tables.Table.packed)
     "fol",              # follower-angle table (rad), 4 columns per unit inertia factor
     "phi20",            # rad, follower angle at psi = 0 (phiD + psi0)
     "jt",               # inertia factor of elements 2-5

@@ -1,6 +1,6 @@
-"""Compiled integration of the stand's twin (``models.dynamics.twin``): state, steps, events, samples.
+"""Compiled integration of the stand's twin (``labtool.models.dynamics.twin``): state, steps, events, samples.
 
-The equations (read the physics, the sign conventions and the parameters in ``models.dynamics.twin``):
+The equations (read the physics, the sign conventions and the parameters in ``labtool.models.dynamics.twin``):
 
     state y = (phi1, omega1, q, omega2, u, du, I)
     phi1 (rad, wrapped to [0, 2 pi) with a revolution counter), omega1 (rad/s): cam + motor;
@@ -12,7 +12,7 @@ The equations (read the physics, the sign conventions and the parameters in ``mo
                                         flank at g = 0, the exterior one at g = j)
     g' = A2 omega2 - G1 omega1,  G1 = A2 psi' - A2' q
     N = hunt_crossley(g, g')            along the normal, > 0 = the interior flank pushes
-                                        (models.dynamics.kernels.elastic_nb.flank_force: the one law)
+                                        (labtool.models.dynamics.kernels.elastic_nb.flank_force: the one law)
     J' omega1' = M1(omega1, phi1) + Mc(phi1) - N G1       (drive "motor"; "input": omega1 imposed)
     J_r omega2' + 1/2 J_r' omega2^2 = Mg + ML + N A2 + Mf + DE (k_b u + c_b du)
     m_b (DE omega2' + du') = -(k_b u + c_b du)
@@ -22,7 +22,7 @@ characteristic (slope s, no-load speed W0, drive ripple r), Mf = -(T_f + r_f |N|
 the pivot friction. Every phi1 and phi2 function is read from the rigid model's Hermite tables
 (value and derivative of the same cubic, so the contact forces derive exactly from a potential).
 
-The integrator is Dormand-Prince 5(4) (``models.dynamics.kernels.dopri5``: the stages, scipy's
+The integrator is Dormand-Prince 5(4) (``labtool.models.dynamics.kernels.dopri5``: the stages, scipy's
 controller, the dense output), with absolute tolerances per component (phi1 and omega1 carry no
 relative tolerance: the gap depends on phi1's absolute error). Contact phases change at events
 (g = 0, g = j) located by bisection on the dense output read at NSUB points of each step, then the
@@ -38,10 +38,10 @@ import math
 
 import numpy as np
 
-from models.dynamics import events as ev_layout
-from models.dynamics.jit import jit
-from models.dynamics.kernels import dopri5 as dp
-from models.dynamics.kernels.elastic_nb import flank_force as contact_force
+from labtool.models.dynamics import events as ev_layout
+from labtool.models.dynamics.jit import jit
+from labtool.models.dynamics.kernels import dopri5 as dp
+from labtool.models.dynamics.kernels.elastic_nb import flank_force as contact_force
 
 INTERIOR, FLIGHT, EXTERIOR = 0, 1, 2
 NY = 7           # state size; the last component (impulse) is not error-controlled
@@ -60,7 +60,7 @@ NS = 20
 # event columns
 E_T, E_PHI1, E_KIND, E_SIDE, E_VREL, E_DW2, E_P, E_PERS = range(8)
 NE = 8
-# the event record's codes (models.dynamics.events), as the row's floats
+# the event record's codes (labtool.models.dynamics.events), as the row's floats
 KIND_SEPARATION, KIND_CONTACT = float(ev_layout.KIND_SEPARATION), float(ev_layout.KIND_CONTACT)
 SIDE_INTERIOR, SIDE_EXTERIOR = float(ev_layout.SIDE_INTERIOR), float(ev_layout.SIDE_EXTERIOR)
 # sample columns
@@ -388,7 +388,7 @@ def take_step(cn, ch, cc, fn, fh, fc, p, atol, rtol, S, Y, K0, Y0, Q, ev, K, Qs,
             S[S_CT0] = t_end
             S[S_CQD0] = qd
             tmp[6] = 0.0
-        # restart a hair inside the new phase (models.dynamics.elastic._restart_position)
+        # restart a hair inside the new phase (labtool.models.dynamics.elastic._restart_position)
         eps = p[P_NUDGE] if gap == 0.0 else min(p[P_NUDGE], 0.25 * gap)
         if new_phase == INTERIOR:
             inward = -1.0

@@ -45,8 +45,8 @@ def make_recording() -> None:
 def make_references() -> None:
     sys.path.insert(0, str(HERE.parents[1]))
     from measured_compare import store_reference
-    from processing.pipeline import ProcessOptions, process_recording
-    from processing.readers import open_recording
+    from labtool.processing.pipeline import ProcessOptions, process_recording
+    from labtool.processing.readers import open_recording
 
     for name, opts in CASES.items():
         with tempfile.TemporaryDirectory() as tmp, open_recording(RECORDING) as rec:
