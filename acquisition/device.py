@@ -23,7 +23,7 @@ EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
 class Event:
     """Something that happened at sample ``index`` (0-based, run sample count).
 
-    kind: one of EVENT_KINDS (DESIGN.md recording format v1); detail: free text for a human.
+    kind: one of EVENT_KINDS (docs/architecture.md recording format v1); detail: free text for a human.
     """
 
     index: int

@@ -1,4 +1,4 @@
-"""The recorder: writes DESIGN.md's recording format v1 (HDF5) while acquiring, losing nothing.
+"""The recorder: writes recording format v1 (HDF5; docs/architecture.md) while acquiring, losing nothing.
 
 Layout written (format_version 1):
 

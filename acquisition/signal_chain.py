@@ -25,7 +25,7 @@ The chain:
 
 Every function here is pure (state in, state out), so a run is deterministic for a seed and the
 same code serves blocks of any size. Sign conventions: aE_t positive along increasing psi,
-aE_n positive towards D (DESIGN.md); time t in s from the run's first sample; phi1 = 0 at the
+aE_n positive towards D (docs/architecture.md); time t in s from the run's first sample; phi1 = 0 at the
 start of the rise at t = 0.
 """
 from __future__ import annotations
@@ -382,7 +382,7 @@ _MODEL_TABLES: dict = {}
 def model_table(scene: StandScene) -> dict:
     """The dynamic model's run behind a rigid/elastic truth (labtool.models.dynamics.simulate, omega1
     constant, ``model_revolutions`` turns): time (s), phi1, omega1, phi2, omega2, epsilon2, the
-    event record (EVENTS.md names, times in s of the run), ``period`` (s), and ``periodic``: the
+    event record (labtool.models.dynamics.events names, times in s of the run), ``period`` (s), and ``periodic``: the
     last two turns have the same events (to PERIODIC_EVENT_TOL rad) and omega2 away from them (to
     PERIODIC_OMEGA2_TOL of its maximum). Cached per scene: the model runs once per process and
     scene. Points at repeated times (impacts of the rigid model) keep the later state.
@@ -489,7 +489,7 @@ def boxcar_epsilon2(scene: StandScene, t, dt: float):
 
 
 def truth_events(scene: StandScene, duration: float) -> dict:
-    """The truth's event record (EVENTS.md arrays) over [0, duration] s of a recording: the twin
+    """The truth's event record (labtool.models.dynamics.events arrays) over [0, duration] s of a recording: the twin
     integrated again from its attributes, or a model truth's events (its steady turn repeated).
     The kinematic truth has none."""
     from labtool.models.dynamics import events

@@ -2,7 +2,7 @@
 
 Run: ``.venv/bin/python benchmarks/bench_acquire.py [--fast-seconds 60] [--realtime-seconds 60]``.
 Prints ratios (data seconds per wall second), no assertion (speed is measured here, never in tests).
-Goal (issue 7): --fast >= 50x real time; --realtime 60 s with zero overruns on this 2-core machine.
+Goal: --fast >= 50x real time; --realtime 60 s with zero overruns on this 2-core machine.
 """
 from __future__ import annotations
 

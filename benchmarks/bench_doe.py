@@ -1,9 +1,9 @@
-"""Sweeps at scale: per-run cost of ``labtool doe run`` and its Dask scaling (issue 17).
+"""Sweeps at scale: per-run cost of ``labtool doe run`` and its Dask scaling.
 
 On a 4096-run design (Fu 16 levels x n1 16 x j 4 x Jt 4, sine law, omega1 variable, standard):
 
 * ``direct``: ``labtool.models.dynamics.simulate.indicators(scene, model)`` (the Dataset-free path that
-  ``doe run`` calls, issue 17) in a plain loop in this process (warm), per run: the floor that the
+  ``doe run`` calls) in a plain loop in this process (warm), per run: the floor that the
   runner's overhead is measured against; ``direct_dataset``: ``simulate(scene, model)`` on the same
   runs, interleaved (what a run cost before the indicator path);
 * ``doe run --workers 1``: the whole command (a new process: imports, the runs, the CSV and

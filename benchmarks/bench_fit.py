@@ -1,7 +1,7 @@
 """Benchmark of ``labtool fit``: a fit of two parameters at ``--accuracy fast`` and ``standard`` on one
 core, beside the unit it is made of, one model run of the same scene through the report's path
 (labtool.reports.pipeline.run_simulation: the simulation, resampled, filtered and conditioned like the
-measurement) measured in the same run. Issue 16's goals: the whole fit under 60 s, under 10 s at
+measurement) measured in the same run. The goals: the whole fit under 60 s, under 10 s at
 fast. Prints, no asserts.
 
     .venv/bin/python benchmarks/bench_fit.py [--quick]

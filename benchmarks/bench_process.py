@@ -312,7 +312,7 @@ def main() -> None:
                   f"wall {wall['main'] / wall['labtool']:.2f}x; main / plain CPU {cpu['plain'] / cpu['main']:.2f}x")
         for name, peer, root in peers:
             print(f"peak RSS {name}: {_peak_rss_mb(peer, src, out, root):.0f} MB")
-        print("goal (issue 17): >= 2x the plain chain, peak RSS <= 300 MB; "
+        print("goal: >= 2x the plain chain, peak RSS <= 300 MB; "
               f"load average now {os.getloadavg()[0]:.1f}")
         if args.main is not None:
             _compare(kept["main"], kept["labtool"])

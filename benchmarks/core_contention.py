@@ -1,4 +1,4 @@
-"""What a second busy core costs a run on this machine (issue 17's Dask goal).
+"""What a second busy core costs a run on this machine (the Dask goal).
 
 Two Dask workers on a 2-core machine can give at most 2 / (1 + c) times one worker's throughput,
 c being how much slower a run gets while the other core computes too. This script measures c for

@@ -1,4 +1,4 @@
-"""The edge cases of issue 14 at every preset: each must end finite and plausible, or in one line.
+"""The models' edge cases at every preset: each must end finite and plausible, or in one line.
 
     .venv/bin/python benchmarks/edge_cases.py [--presets fast,standard,reference] [--cases NAME,...]
 

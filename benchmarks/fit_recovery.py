@@ -1,4 +1,4 @@
-"""Recovery of known parameters by ``labtool fit`` on recordings of the simulated stand (issue 16).
+"""Recovery of known parameters by ``labtool fit`` on recordings of the simulated stand.
 
 Each case records the stand with a model truth whose parameters the fit is not told
 (``labtool acquire --device sim --truth rigid|elastic --backlash-mm J --restitution K |

@@ -65,7 +65,7 @@ def labtool_call(scene, model):
 
 
 def labtool_indicators_call(scene, model):
-    """labtool's Dataset-free indicator path (``labtool.models.dynamics.simulate.indicators``, issue 17) at
+    """labtool's Dataset-free indicator path (``labtool.models.dynamics.simulate.indicators``) at
     the standard preset: the same loop as ``labtool_call``, hence its accuracy; (indicators, loop_s,
     wall_s)."""
     from labtool.models.dynamics.simulate import indicators

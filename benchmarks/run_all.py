@@ -1,4 +1,4 @@
-"""``make bench``: every benchmark of the repository, then the speed figures of issue 5.
+"""``make bench``: every benchmark of the repository, then the headline speed figures.
 
 1. compile time of the numba kernels with an empty cache (a fresh NUMBA_CACHE_DIR), and the time
    to load them from that cache in a new process (cache=True: compiled once, reused by every run);

@@ -1,6 +1,6 @@
 """Snapshot of every indicator of Table 1's 16 runs, both models, every preset, and their errors.
 
-A before/after check for changes that must not move the physics (issue 14): run it on two
+A before/after check for changes that must not move the physics: run it on two
 commits and compare the JSON files.
 
     .venv/bin/python benchmarks/table1_snapshot.py -o before.json [--errors]
@@ -32,7 +32,7 @@ COUNTS = ("jumps", "impacts", "liftoffs", "settles", "separations", "n_events")
 
 
 def _event_times(ds):
-    try:                                             # the one event record (issue 14)
+    try:                                             # the one event record
         from labtool.models.dynamics import events
         return [float(t) for t in events.read(ds)["event_time"].values]
     except ImportError:                              # before it: two formats

@@ -1,4 +1,4 @@
-"""The verdict checked against a known truth (issue 15's "Must show"), on the simulated stand:
+"""The verdict checked against a known truth, on the simulated stand:
 
 * ``events``: measured vs true impacts (first impact angle, visible impacts per revolution) at 180,
   300 and 500 rpm, on the twin's default recordings and on model truths (rigid with k = 0.2 and
@@ -50,7 +50,7 @@ def record(d: Path, truth: str, rpm: float, seconds: float) -> tuple[Path, Path]
 
 
 def truth_record(rec: Path, duration: float) -> dict:
-    """The recording's true events (EVENTS.md arrays). The elastic model's record carries no
+    """The recording's true events (labtool.models.dynamics.events arrays). The elastic model's record carries no
     event_domega2 until labtool.models.dynamics.events lands on main: then its contacts' steps are taken
     as the report takes them from a model (labtool.reports.events.model_events: omega2 less the law's
     over the impact), from the truth's own simulation, its steady turn repeated as the stand does."""

@@ -1,6 +1,6 @@
 """How fast can labtool's elastic whole call be against the best compiled peer? A bound, measured.
 
-issue 17 asks the elastic whole call (scene -> Dataset) to be >= 3x the best compiled peer
+a goal asked the elastic whole call (scene -> Dataset) to be >= 3x the best compiled peer
 (numbalsoda DOP853 or LSODA, ``benchmarks/peers/``) at equal achieved accuracy. The peer's whole
 call is its loop plus the problem's tables and omega2, MR13D, x_el at the uniform output instants
 (``peers.elastic_problem.outputs``); labtool's is its loop plus a 24-variable Dataset on the

@@ -1,7 +1,7 @@
 """One xarray Dataset from numpy columns, assembled once.
 
 ``xr.Dataset(data_vars=..., coords=...)`` merges and aligns its arguments variable by variable:
-for a model's 20-30 columns on one time axis that is ~1 ms a run (issue 17: more than the elastic
+for a model's 20-30 columns on one time axis that is ~1 ms a run (more than the elastic
 model's whole integration loop). The models' columns need none of it: each is a numpy array on
 dimensions whose sizes are known, and the only index is the dimension coordinate. ``dataset``
 checks exactly that (one size per dimension, numpy data, 1-D dimension coordinates) and then

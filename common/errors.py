@@ -24,7 +24,7 @@ class FileFormatError(LabtoolError, ValueError):
 
 class OutputError(LabtoolError):
     """An output that could not be written (full disk, read-only file system, permission); the
-    message says what was kept (DESIGN.md: nothing is left half-written without saying so).
+    message says what was kept (docs/architecture.md: nothing is left half-written without saying so).
     ``errno``: ENOSPC, EDQUOT, EFBIG or EROFS when the disk was the cause, else None."""
 
     def __init__(self, message: str, errno: int | None = None):

@@ -1,4 +1,4 @@
-"""Names of the recording attributes that describe a run (DESIGN.md, recording format v1).
+"""Names of the recording attributes that describe a run (docs/architecture.md, recording format v1).
 
 acquisition writes them (root attributes of the HDF5 recording, for every device); processing
 carries them into measured.nc; reports show them with where each value came from. One list, so

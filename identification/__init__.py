@@ -1,4 +1,4 @@
-"""Model identification from a measurement (``labtool fit``, issue 16; docs/identification.md).
+"""Model identification from a measurement (``labtool fit``; docs/identification.md).
 
 The parameters nobody reads off a drawing (the groove's backlash j, the impacts' restitution k, the
 contact damping and length, the chain's true Ka and delay) are found by least squares of a model's

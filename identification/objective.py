@@ -19,7 +19,7 @@ cam frequency (the conditioning's, or fewer for the search's first, smoothed sta
   (1 % of the signal's rms; a damped model's last two revolutions differ by 0.1-2 %).
 * where the measurement shows impacts: the first impact angle (deg) over FIRST_IMPACT_TOL_DEG and
   the visible impacts per revolution over max(COUNT_TOL * measured, 1): the detector's stated
-  tolerances (issue 15: 1 deg, 25 %; the angle's doubled). A model that predicts no visible impact
+  tolerances (1 deg, 25 %; the angle's doubled). A model that predicts no visible impact
   adds 0 to the angle's term and its count's shortfall to the count's.
 """
 from __future__ import annotations

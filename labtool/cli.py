@@ -1,7 +1,7 @@
 """The ``labtool`` command line: wires the layers, holds no physics.
 
 Every user error ends with one line ``labtool: error: ...`` on stderr and exit code 2
-(DESIGN.md, Conventions). Exit 1 means "ran fine, a check failed".
+(docs/architecture.md, Conventions). Exit 1 means "ran fine, a check failed".
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The cam angle phi1 (rad) of every sample: from a tacho, or by correlation with the kinematics.
 
-phi1 = 0 at the start of the rise (DESIGN.md); the tacho gives one pulse per revolution there.
+phi1 = 0 at the start of the rise (docs/architecture.md); the tacho gives one pulse per revolution there.
 Between two revolution marks phi1 grows linearly (the cam speed is taken constant within one
 revolution, which follows the motor's slow speed variation revolution by revolution).
 Without a tacho the revolution marks come from a matched filter: the measured aE_t correlated

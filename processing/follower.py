@@ -1,6 +1,6 @@
 """From the accelerations at E to the follower's epsilon2 and omega2 (pure functions).
 
-Sign conventions (DESIGN.md): aE_t positive along increasing psi (rise), aE_n positive towards D,
+Sign conventions (docs/architecture.md): aE_t positive along increasing psi (rise), aE_n positive towards D,
 epsilon2 = aE_t / DE (rad/s^2), omega2 positive in the rise.
 
 Gravity: an accelerometer reads the specific force a - g. With y up, g = (0, -g) and the follower

@@ -22,7 +22,7 @@ KEYS = ("impacts_per_rev", "jumps_per_rev", "first_impact_deg", "impact_angles_d
 
 @dataclasses.dataclass
 class EventRecord:
-    """A simulation's contact events in the layout of EVENTS.md (SI): time (s), phi1 (rad,
+    """A simulation's contact events in the layout of labtool.models.dynamics.events (SI): time (s), phi1 (rad,
     unwrapped), kind ("separation" | "contact"), d_omega2 (rad/s, change of omega2 caused by the
     contact; NaN for separations)."""
 
@@ -38,7 +38,7 @@ class EventRecord:
 
 def model_events(sim: xr.Dataset) -> EventRecord | None:
     """The one place the report reads a model's events: the dataset's event record
-    (labtool.models.dynamics.events, the same for every model; EVENTS.md). None for a simulation without
+    (labtool.models.dynamics.events, the same for every model). None for a simulation without
     one (the kinematic level)."""
     from labtool.common.errors import FileFormatError
     from labtool.models.dynamics import events
@@ -145,7 +145,7 @@ def _mean_speed(t, phi1) -> float:
 
 
 def truth_statistics(record: dict, cycles, det: impacts.Detector, threshold: float, program=None) -> dict:
-    """A known truth's events (the arrays of EVENTS.md, e.g. the simulated stand's
+    """A known truth's events (the arrays of labtool.models.dynamics.events, e.g. the simulated stand's
     ``labtool.acquisition.signal_chain.truth_events``; times from the recording's first sample) over the
     measured whole revolutions of ``cycles`` (by time), with the same visibility as the measured and
     predicted ones: what the detector should find. ``program`` as for ``predicted``."""

@@ -1,8 +1,8 @@
-"""Helpers of the hostile-input suite (tests/test_hostile_*.py, issue 20).
+"""Helpers of the hostile-input suite (tests/test_hostile_*.py).
 
 ``cli`` runs labtool in this process (fast; a traceback fails the test), ``run`` in a real child
 process (a segfault, a hang, a signal or a second process are real there). Both return the exit
-code and stderr; ``one_error_line`` asserts DESIGN.md's contract for user errors: exit 2 and exactly
+code and stderr; ``one_error_line`` asserts docs/architecture.md's contract for user errors: exit 2 and exactly
 one line ``labtool: error: ...`` on stderr.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Count the hostile-input suite per kind (issue 20), and with ``--run`` run it and count outcomes.
+"""Count the hostile-input suite per kind, and with ``--run`` run it and count outcomes.
 
     python tests/hostile_counts.py            # tests per kind (collection only, seconds)
     python tests/hostile_counts.py --run      # run them: passed / failed / skipped per kind

@@ -2,7 +2,7 @@
 
 ``stand_volts`` runs labtool.acquisition.sim_stand.SimStand with the kinematic truth (acquisition/signal_chain.py: gravity,
 resonance, noise, Ka, AC coupling, anti-alias, ADC) without the recorder; ``write_v1`` writes
-DESIGN.md's recording format v1 with plain h5py, so a test can damage or vary any part of it;
+recording format v1 (docs/architecture.md) with plain h5py, so a test can damage or vary any part of it;
 ``truth`` is the chain's own noise-free truth at the samples' times. Benchmarks use it too.
 """
 from __future__ import annotations
@@ -45,7 +45,7 @@ def truth(scene, n: int, fs: float) -> dict:
 def write_v1(path, volts: np.ndarray, names=("aE_t", "aE_n", "tacho"), fs: float = 10000.0, ka=None, events=(),
              complete: bool = True, cam_speed_rpm: float | None = 180.0, dtype="float32",
              start_time_utc: str = "2026-11-22T04:00:00Z", attrs: dict | None = None, libver=("v110", "latest")):
-    """Write DESIGN.md's recording format v1 (events: (index, kind, detail) tuples), with the file
+    """Write recording format v1 (docs/architecture.md) (events: (index, kind, detail) tuples), with the file
     format bounds the recorder uses (v110: SWMR-capable, superblock version 3)."""
     volts = np.asarray(volts)
     with h5py.File(path, "w", libver=libver) as f:

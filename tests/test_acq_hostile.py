@@ -1,4 +1,4 @@
-"""Issue 20, the acquisition side: bad options, a real full disk, a second writer, a live reader."""
+"""Hostile inputs, the acquisition side: bad options, a real full disk, a second writer, a live reader."""
 import os
 import subprocess
 import sys

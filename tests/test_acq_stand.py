@@ -246,7 +246,7 @@ def test_model_truth_is_the_models_steady_turn_repeated(rigid_scene):
     tr = sc.truth(rigid_scene, t - 2 * T + 7 * T)  # the eighth turn of a recording
     sel = (tab["time"] >= 2 * T) & (tab["time"] < 3 * T)
     # atol: in the dwell omega2 is 0 to rounding (1.2e-16 rad/s against an exact 0.0 with the rigid
-    # step cap of issue 17), where a relative tolerance alone cannot hold
+    # the models' step cap), where a relative tolerance alone cannot hold
     np.testing.assert_allclose(tr["omega2"], tab["omega2"][sel][::50], atol=1e-12)
     np.testing.assert_allclose(tr["aE_n"], tab["omega2"][sel][::50] ** 2 * rigid_scene.mechanism.DE, atol=1e-12)
     np.testing.assert_allclose(tr["phi1"], rigid_scene.omega1_nominal * (t - 2 * T + 7 * T))

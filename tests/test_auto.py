@@ -41,7 +41,7 @@ def test_auto_matches_the_full_rigid_model_on_table1_at_a_fraction_of_the_cost()
         assert 0 < n_auto <= stats["nfev"], run
         cost_auto += n_auto
         cost_full += stats["nfev"]
-    # measured 0.85 (docs/performance.md; 0.72 before the step cap of issue 17, rise/1000 -> rise/20, made
+    # measured 0.85 (docs/performance.md; 0.72 with a step cap of rise/1000 instead of rise/20, made
     # the full model 14x cheaper): the shared 1-DOF prefix is integrated once
     assert cost_auto / cost_full < 0.9
 

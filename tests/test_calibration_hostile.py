@@ -1,4 +1,4 @@
-"""Issue 20's calibration cases and issue 19's calibration asks, as hostile inputs.
+"""Calibration's hostile inputs and its checks.
 
 Each case failed on main (commit e271890): a clipped or integer reference was fitted (exit 0, Ka
 wrong by 9x or 1000x), a calibration file's ``true`` or ``1e300`` was used as a Ka, a channel

@@ -293,14 +293,14 @@ def test_doe_run_rigid_gives_table2(tmp_path):
 def test_doe_run_elastic_gives_table3(tmp_path):
     ours, paper = _paper_end_to_end("elastic", "table3_elastic", tmp_path)
     _common_issue_accuracy(ours, paper)
-    # issue 4: (MR13D)min within 10 % as well (exact jump and impact counts are tested in issue 4's
+    # (MR13D)min within 10 % as well (exact jump and impact counts are tested in the
     # own tests; docs/doe.md records this table's counts against Table 3)
     assert np.max(np.abs(ours.MR13D_min_Nm / paper.MR13D_min_Nm - 1)) < 0.10
 
 
 @pytest.mark.slow
 def test_doe_run_elastic_closed_gap_reproduces_table3_counts(tmp_path, capsys):
-    """Issue 4 end to end: with Table 3's convention (--elastic-gap closed, docs/models.md) the
+    """Table 3 end to end: with Table 3's convention (--elastic-gap closed, docs/models.md) the
     DOE's jumps and impacts equal Table 3 in all 16 runs and j has no effect on any response."""
     ours, paper = _paper_end_to_end("elastic", "table3_elastic", tmp_path, ("--elastic-gap", "closed"),
                                     elastic_gap="closed")

@@ -1,4 +1,4 @@
-"""Stability at the extremes (issue 5): both dynamic models over the corners of the operating range.
+"""Stability at the extremes: both dynamic models over the corners of the operating range.
 
 Ranges: backlash 1 um .. 1 mm, cam speed 60 .. 1000 rpm, Jt x0.25 .. x10, Fu 0 .. 500 N,
 restitution k 0 .. 1 (rigid), Kc x1e-2 .. x1e3 (elastic). Each factor at both ends (the others at

@@ -1,4 +1,4 @@
-"""labtool fit (issue 16): the identification's logic on a stand-in model with a known answer.
+"""labtool fit: the identification's logic on a stand-in model with a known answer.
 
 The stand-in (``stand_in``) replaces labtool.reports.pipeline.run_simulation by the kinematic cycle
 shifted in cam angle by 0.05 ln(j / 0.2 mm) rad and scaled by 1 + 0.8 (k - 0.5): a smooth model

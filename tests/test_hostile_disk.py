@@ -1,4 +1,4 @@
-"""Hostile disks (issue 20): a real full tmpfs and a read-only mount, labtool in a child process
+"""Hostile disks: a real full tmpfs and a read-only mount, labtool in a child process
 (HDF5 used to segfault there). Each command ends with one line saying what was kept, and leaves
 no output, no truncated file under a final name and no temporary behind."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Truncated and damaged HDF5 files end with one line and exit 2, promptly (issue 20: main hung for
+"""Truncated and damaged HDF5 files end with one line and exit 2, promptly (main hung for
 ever in h5py after the SWMR-mode open of a file cut to its first 100..4096 bytes)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Hostile processes (issue 20): requests that ran for minutes, signals in the middle of a write,
+"""Hostile processes: requests that ran for minutes, signals in the middle of a write,
 and two labtool processes on one file. All in real child processes."""
 from __future__ import annotations
 

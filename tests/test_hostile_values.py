@@ -1,4 +1,4 @@
-"""Hostile values found after issue 20: recording attributes of the wrong type, option values at
+"""Hostile values: recording attributes of the wrong type, option values at
 the edge of a float, factor files and measured files that were taken at face value. Each ends
 with one line and exit 2 (tests/hostile.py ``one_error_line``)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The Dataset-free indicator path (issue 17): ``labtool.models.dynamics.simulate.indicators(scene, model)``
+"""The Dataset-free indicator path: ``labtool.models.dynamics.simulate.indicators(scene, model)``
 gives the indicators of ``simulate(scene, model).indicators`` exactly (the same loops, the same
 output samples, the same arithmetic), raises what ``simulate`` raises, and is what ``doe run``
 uses."""

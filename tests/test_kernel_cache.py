@@ -1,4 +1,4 @@
-"""The numba disk cache of the compiled loops cannot go stale (issue 14, labtool.models.dynamics.jit).
+"""The numba disk cache of the compiled loops cannot go stale (labtool.models.dynamics.jit).
 
 A copy of the package runs in fresh processes that share one NUMBA_CACHE_DIR: a second run loads
 the loop from the cache; after a constant of the Dormand-Prince driver (a file the loop inlines,

@@ -1,4 +1,4 @@
-"""The import direction of DESIGN.md, checked on the source (every import, lazy ones included).
+"""The import direction of docs/architecture.md, checked on the source (every import, lazy ones included).
 
 labtool -> campaign, identification -> reports -> processing, acquisition -> models -> common; inside models:
 study -> dynamics -> mechanism. A module may import its own package and the layers below it, never
@@ -35,7 +35,7 @@ RANK = {
 # the folders installed as labtool's sub-packages (labtool.models lives in models/, ...)
 SUBPACKAGES = {"common", "models", "acquisition", "processing", "execution", "reports", "campaign", "identification"}
 
-# Known wrong-way imports and cycles, to be removed, never added to (issue 14).
+# Known wrong-way imports and cycles, to be removed, never added to.
 KNOWN_UPWARD: set[tuple[str, str]] = set()
 KNOWN_CYCLES: list[set[str]] = []
 
@@ -104,7 +104,7 @@ def _graph():
 
 def test_every_first_party_package_has_a_layer():
     unknown = {_layer(m) for m in _modules()} - set(RANK)
-    assert not unknown, f"give these packages a rank in RANK (DESIGN.md layers): {sorted(unknown)}"
+    assert not unknown, f"give these packages a rank in RANK (docs/architecture.md layers): {sorted(unknown)}"
 
 
 @pytest.mark.slow
@@ -117,7 +117,7 @@ def test_imports_point_down_the_layers():
                 continue
             if RANK[b] >= RANK[a] and not (src, dst) in KNOWN_UPWARD:
                 wrong.add((src, dst))
-    assert not wrong, "imports against the layer direction (DESIGN.md):\n" + "\n".join(
+    assert not wrong, "imports against the layer direction (docs/architecture.md):\n" + "\n".join(
         f"  {s} -> {d}" for s, d in sorted(wrong))
 
 

@@ -1,4 +1,4 @@
-"""Real-world files (issue 20): TDMS as DAQmx and LabVIEW write it, LVM, CSV dialects.
+"""Real-world files: TDMS as DAQmx and LabVIEW write it, LVM, CSV dialects.
 
 Each file holds the same volts as one HDF5 original from the simulated stand, written with the real
 writer where one exists (npTDMS's TdmsWriter; pandas for CSV); each must give the original's omega2

@@ -1,4 +1,4 @@
-"""The report's comparison method (issue 15): steady cycle or cycle statistics, band statistics,
+"""The report's comparison method: steady cycle or cycle statistics, band statistics,
 bounded reading of a long recording, the robustness rows."""
 import math
 

@@ -1,4 +1,4 @@
-"""Each model checks its own validity (labtool.models.dynamics.validity): the edge cases of issue 14 end in a
+"""Each model checks its own validity (labtool.models.dynamics.validity): the edge cases end in a
 finite, plausible answer with a warning, or in one line, with the same verdict at every preset."""
 import json
 import math

@@ -1,4 +1,4 @@
-"""The prototype behind benchmarks/whole_call_bound.py (issue 17's bound on the elastic whole call):
+"""The prototype behind benchmarks/whole_call_bound.py (the bound on the elastic whole call):
 its "peer outputs" call must make the same numbers as ``simulate`` at the uniform output instants,
 or the bound it measures would be the cost of something else."""
 from __future__ import annotations

@@ -116,7 +116,7 @@ def acquire(
                                        "[s] (0 = none)"),
     force: bool = typer.Option(False, help="overwrite an existing output file (never one being recorded)"),
 ) -> None:
-    """Record aE_t, aE_n (volts) and the tacho from the stand into DESIGN.md's recording format v1."""
+    """Record aE_t, aE_n (volts) and the tacho from the stand into recording format v1 (docs/architecture.md)."""
     from labtool.acquisition.device import parse_device
 
     given = {k: v for k, v in dict(rpm=rpm, duration=duration, rate=rate, seed=seed, law=law, fu=fu,

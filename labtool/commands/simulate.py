@@ -1,7 +1,7 @@
 """``labtool simulate``: one scene through any model level (kinematic, rigid, elastic, auto).
 
 Dispatches through ``labtool.models.dynamics.simulate.simulate(scene, model)``; prints the paper's indicators as a
-table, or with ``--json`` one JSON object (DESIGN.md: the indicator keys of Tables 2-3, then
+table, or with ``--json`` one JSON object (docs/architecture.md: the indicator keys of Tables 2-3, then
 ``model``, ``accuracy``, ``wall_s``); prints the model's validity warnings on stderr
 (``labtool: warning: ...``); writes the time series as NetCDF with ``-o``, with the whole scene,
 the mechanism's source and labtool's version among its attributes (labtool.models.dynamics.provenance) and

@@ -53,7 +53,7 @@ REFERENCE_METHOD = "DOP853"
 # tests fail when a model's preset changes, so that the figures are measured again.
 MEASURED: dict = {
     "rigid": {
-        # step caps relaxed (issue 17; 2026-12-02, accuracy.compare over Table 1, docs/performance.md):
+        # step caps relaxed (2026-12-02, accuracy.compare over Table 1, docs/performance.md):
         # fast rise/250 -> rise/50 (was 3.8e-6, 5.9e-13, 2.6e-11 s), standard rise/1000 -> rise/20
         # (was 1.5e-8, 4.4e-13, 6.0e-11 s); the indicators' error is the output sampling, unchanged
         "fast": dict(tolerances=dict(method="RK45", rtol=1e-6, max_step=1 / 50, samples=1000),
@@ -66,14 +66,14 @@ MEASURED: dict = {
                           err_omega2=5e-10, err_MR13D=1e-12, err_event_time=2e-11, d_events=0, err_indicators=1e-6),
     },
     "elastic": {
-        # flights no longer capped at the contact's step (issue 17; 2026-12-02, accuracy.compare over
+        # flights no longer capped at the contact's step (2026-12-02, accuracy.compare over
         # Table 1, docs/performance.md): 12 % fewer steps; fast was 2.2e-3, 9.0e-2, 5.1e-5 s, 7.9e-4,
         # standard 2.6e-5, 5.2e-4, 4.0e-7 s, 1.0e-4 (the same run, flights capped)
         "fast": dict(tolerances=dict(rtol=1e-6, atol=1e-5, steps_per_period=4.0, cap_flight=False),
                      err_omega2=2.3e-3, err_MR13D=9.0e-2, err_event_time=5.1e-5, d_events=0, err_indicators=7.9e-4),
         "standard": dict(tolerances=dict(rtol=1e-8, atol=1e-7, steps_per_period=8.0, cap_flight=False),
                          err_omega2=2.6e-5, err_MR13D=5.2e-4, err_event_time=3.7e-7, d_events=0, err_indicators=1.0e-4),
-        # DOP853 since issue 14 (RK45 before: 2.7e-6 in omega2, 2.6e-8 s in event times)
+        # DOP853 (RK45 gave 2.7e-6 in omega2, 2.6e-8 s in event times)
         "reference": dict(tolerances=dict(rtol=1e-10, atol=1e-9, steps_per_period=16.0, cap_flight=True,
                                           method="DOP853"),
                           err_omega2=6.9e-7, err_MR13D=2.7e-5, err_event_time=8.5e-9, d_events=0, err_indicators=1.3e-4),

@@ -1,6 +1,6 @@
 """``--model auto``: run only as much of the fidelity ladder as the scene needs, and say why.
 
-The ladder (DESIGN.md): kinematic -> rigid (1 DOF, the motor's speed variation) -> rigid + backlash
+The ladder (docs/architecture.md): kinematic -> rigid (1 DOF, the motor's speed variation) -> rigid + backlash
 (jumps and impacts) -> elastic (contact deformation). ``simulate_auto`` climbs it:
 
 1. Contact outputs requested (x_el, contact force, deformation): the elastic model, the only

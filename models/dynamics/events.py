@@ -34,7 +34,7 @@ report alike (each a boolean mask over the rows, the count its sum):
 - ``lift_offs``: separations from persistent contact (not rebounds);
 - ``settles``: contacts that start persistent contact.
 
-The paper's indicator keys (DESIGN.md, --json contract) are these counts over the rise:
+The paper's indicator keys (docs/architecture.md, --json contract) are these counts over the rise:
 rigid ``jumps`` = flights (Table 2: every flight, by lift-off or by rebound), elastic ``jumps`` =
 flights from the interior flank (Table 3: "the relative displacement becomes zero", x leaving the
 interior flank), ``impacts`` = impacts in both models.

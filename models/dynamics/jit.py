@@ -3,7 +3,7 @@
 numba keys a cached function on the source of its own file only. A compiled loop inlines the
 functions it calls from other files (the Dormand-Prince driver, the contact law, a model's
 equations), so an edit there, or an upgrade of labtool, would leave the loop running the old code
-from the cache (issue 14: SAFETY in the driver changed from 0.9 to 0.5 and the elastic loop kept
+from the cache (SAFETY in the driver changed from 0.9 to 0.5 and the elastic loop kept
 the old controller). Here every cached function of labtool's models is stamped with one hash of
 the source of every module that compiled code can reach: the modules that import this one and,
 transitively, the first-party modules they import (``KERNEL_SOURCES``), plus the versions of
@@ -149,7 +149,7 @@ def kernel(fn=None, **options):
     (no array created, none returned): every array they touch is borrowed from a caller that keeps
     it alive for the call. With reference counting each call of such a function costs an atomic
     increment and decrement per array argument and per array read from a struct: perf put 52 % of
-    the elastic loop's time in them (issue 17); a right-hand side called from a loop costs 25 ns
+    the elastic loop's time in them; a right-hand side called from a loop costs 25 ns
     without them against 75 ns with. The compiler refuses a body that would need them."""
     options.setdefault("_nrt", False)
     return jit(fn, **options)

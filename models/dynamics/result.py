@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
-# indicator keys of the paper's Tables 2 and 3 (DESIGN.md, --json contract)
+# indicator keys of the paper's Tables 2 and 3 (docs/architecture.md, --json contract)
 INDICATORS = (
     "MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s",
     "percussion_max_Ns", "jumps", "impacts", "xel_max_mm", "xel_min_mm",

@@ -65,7 +65,7 @@ CONTACT, FREE_MODE = eq.CONTACT_MODE, eq.FREE_MODE
 # solver presets: relative tolerance, max step (fraction of the rise's duration), output samples
 # per rise, event cap. Their error and cost against the reference solution are measured in
 # labtool.models.dynamics.accuracy (benchmarks/work_precision.py). The step caps are what the stated
-# accuracy needs (issue 17, measured over Table 1): standard at rise/1000 made 204 000 RHS
+# accuracy needs (measured over Table 1): standard at rise/1000 made 204 000 RHS
 # evaluations for 1.5e-8 in omega2, at rise/20 14 700 for 1.9e-8 (stated 1e-7); fast at rise/250
 # 52 300 for 3.8e-6, at rise/50 12 300 for 6.1e-6 (stated 1e-5); no event lost or added.
 PRESETS = {
@@ -76,7 +76,7 @@ PRESETS = {
 SOLVERS = {"fast": "compiled", "standard": "compiled", "reference": "scipy"}
 MAX_STEPS = 2_000_000
 EVENT_SUBSTEPS = 4                    # event sign checks per step (its dense output), not its ends only:
-# with the step caps of issue 17 (rise/20) a grazing flight can begin and end inside one step
+# with the step caps above (rise/20) a grazing flight can begin and end inside one step
 ZENO_PHASES, ZENO_DT = 101, 1e-13     # this many consecutive phases shorter than ZENO_DT s: stalled
 TIME_BOUND_FACTOR = 4.0               # the cam must reach the end within 4x its nominal time + 1 s
 EXTRA_COLUMNS = {

@@ -1,6 +1,6 @@
 """One entry point for every model level: ``simulate(scene, model) -> SimulationResult``.
 
-Levels (DESIGN.md, fidelity ladder): ``kinematic`` (cam as input), ``rigid`` (eqs 1-11),
+Levels (docs/architecture.md, fidelity ladder): ``kinematic`` (cam as input), ``rigid`` (eqs 1-11),
 ``elastic`` (eqs 12-19), and ``auto`` (the cheapest level the scene needs, labtool.models.dynamics.auto).
 ``LEVELS`` is the registry: a level's module is imported when a run needs it (the compiled models
 load numba; a kinematic run does not), always downwards: no level imports this module.
@@ -9,7 +9,7 @@ that ran, and why.
 
 ``indicators(scene, model)`` is the path for sweeps and fits that need the paper's indicators
 only: the same loops and the same values as ``simulate(...).indicators`` (tests/test_indicators.py),
-without building a Dataset (issue 17: the Dataset and its output kinematics cost 2-5x the loop).
+without building a Dataset (the Dataset and its output kinematics cost 2-5x the loop).
 """
 from __future__ import annotations
 

@@ -36,7 +36,7 @@ block of times, so a 1-hour recording is produced block by block with carried st
 starts ``warmup_revolutions`` turns before t = 0 (phi1 = 0 at the start of a rise, t = 0), so a
 recording begins on a stand that has been running.
 
-Events follow EVENTS.md (the one event record): a contact phase ending is a ``separation``, one
+Events follow the one event record (labtool.models.dynamics.events): a contact phase ending is a ``separation``, one
 beginning a ``contact``; ``event_domega2`` is the change of the follower's speed relative to the
 flank (q' = omega2 - psi' omega1) and ``event_percussion`` the integral of the contact force, over
 the contact or its first ``persistence_s`` if it lasts longer (then it is ``persistent``, and so

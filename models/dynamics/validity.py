@@ -1,4 +1,4 @@
-"""Each dynamic model checks its own validity and says so (issue 14).
+"""Each dynamic model checks its own validity and says so.
 
 Where an answer is doubtful the model returns it with a warning (one sentence, printed by
 ``labtool simulate`` and stored in the dataset's ``validity_warnings`` attribute as a JSON list);

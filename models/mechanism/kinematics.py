@@ -6,7 +6,7 @@ reads (aE_t, aE_n); the inertia reduced to the follower and to the cam; the pres
 kinetostatic moment MR13D about D of the cam-on-follower reaction, for a load Fu and an inertia
 factor Jt (sec. 2.1.1, 2.2).
 
-Sign conventions (DESIGN.md): psi, omega2, epsilon2 and MR13D are positive in the rise direction
+Sign conventions (docs/architecture.md): psi, omega2, epsilon2 and MR13D are positive in the rise direction
 (counter-clockwise); aE_t positive along increasing psi; aE_n positive towards D.
 """
 from __future__ import annotations

@@ -164,7 +164,7 @@ class Segment:
 class CamProgram:
     """The follower stroke psi (rad, rise positive) as a function of the cam angle phi1 (rad).
 
-    phi1 = 0 at the start of the rise (DESIGN.md); the program repeats every 2*pi.
+    phi1 = 0 at the start of the rise (docs/architecture.md); the program repeats every 2*pi.
     """
 
     stroke: float

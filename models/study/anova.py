@@ -36,7 +36,7 @@ import pandas as pd
 
 from labtool.common.errors import FileFormatError, InputError
 
-# response columns labtool knows (DESIGN.md --json indicator keys; Tables 2 and 3) with units
+# response columns labtool knows (docs/architecture.md --json indicator keys; Tables 2 and 3) with units
 RESPONSE_UNITS = {
     "MR13D_max_Nm": "N m", "MR13D_min_Nm": "N m", "dphi2_max_deg": "deg",
     "domega2_max_rad_s": "rad/s", "domega1_max_rad_s": "rad/s", "percussion_max_Ns": "N s",
@@ -408,7 +408,7 @@ def matrix_form(result: ResponseAnova, digits: int = 7) -> str:
 
 
 def to_json(results: dict[str, ResponseAnova]) -> dict:
-    """response -> term -> {coefficient, F, p, significant, df, ...} (DESIGN.md CLI contract).
+    """response -> term -> {coefficient, F, p, significant, df, ...} (docs/architecture.md CLI contract).
 
     ``mean`` carries the grand mean; pooled terms carry ``pooled: true`` and null F/p; ``error``
     describes the error term. Terms with more than two levels also list every level's effect.

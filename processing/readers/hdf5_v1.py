@@ -1,4 +1,4 @@
-"""Reader of the labtool recording format version 1 (HDF5, DESIGN.md "Recording format").
+"""Reader of the labtool recording format version 1 (HDF5, docs/architecture.md "Recording format").
 
 Root attributes format="labtool.recording", format_version=1, sample_rate_hz, start_time_utc,
 complete, optional cam_speed_rpm; dataset ``signals`` (n_samples, n_channels) float32/64 volts

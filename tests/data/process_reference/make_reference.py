@@ -3,7 +3,7 @@
     # the recording (once; it is kept, so later changes of the simulated stand do not move it)
     .venv/bin/python tests/data/process_reference/make_reference.py --recording
     # the references, with the version to freeze first on the path (here: main at 93b2959,
-    # before issue 17's processing speed work: git archive 93b2959 | tar -x -C /tmp/base)
+    # before the processing speed work: git archive 93b2959 | tar -x -C /tmp/base)
     PYTHONPATH=/tmp/base .venv/bin/python tests/data/process_reference/make_reference.py
 
 The recording: 3 s of the simulated stand at 300 rpm (kinematic truth, the paper's x10 chain,
