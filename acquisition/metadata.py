@@ -10,21 +10,14 @@ import math
 
 from labtool.common import recording_attrs as names
 from labtool.common.errors import InputError
+from labtool.common.operating_point import BY_ATTR, FIELD, STATED
 from labtool.common.names import shown
 from labtool.models.mechanism.motion_laws import ALIASES, LAWS
 
 MAX_TEXT = 2000  # characters of a free-text attribute
 
-# option name of each operating-point value, for messages and sources
-OPTION = {"law": "--law", "cam_speed_rpm": "--rpm", "Fu_N": "--fu", "backlash_mm": "--backlash-mm",
-          "jt_factor": "--jt-factor", "motor_setting": "--motor-setting"}
-_NUMBERS = {  # name -> (test, what it must be)
-    "cam_speed_rpm": (lambda v: 0 < v <= 2000, "in (0, 2000] rpm"),
-    "Fu_N": (lambda v: v >= 0, ">= 0 N"),
-    "backlash_mm": (lambda v: 0 <= v <= 10, "in [0, 10] mm"),
-    "jt_factor": (lambda v: v > 0, "> 0"),
-    "conditioner_gain": (lambda v: v > 0, "> 0"),
-}
+# option name of each operating-point value, for messages and sources (the owner's, and the free text)
+OPTION = {**{FIELD[n].attr: FIELD[n].option for n in STATED}, "motor_setting": "--motor-setting"}
 
 
 def check_text(name: str, value) -> str:
@@ -41,15 +34,18 @@ def check_text(name: str, value) -> str:
 
 
 def check_number(name: str, value) -> float:
+    """An operating-point number (by its attribute name, edge units) against its owner's bounds, or
+    the conditioner's gain (> 0)."""
+    if name in BY_ATTR:
+        return BY_ATTR[name].edge_value(value)
     if isinstance(value, bool):
         raise InputError(f"{name} must be a number, got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise InputError(f"{name} must be a number, got {value!r}") from None
-    test, what = _NUMBERS[name]
-    if not (math.isfinite(v) and test(v)):
-        raise InputError(f"{name} must be {what}, got {value!r}")
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(f"{name} must be > 0, got {value!r}")
     return v
 
 
@@ -94,4 +90,4 @@ def run_metadata_attrs(values: dict) -> dict:
 
 def missing_operating_point(attrs: dict) -> list[str]:
     """Operating-point values a model comparison needs that the recording does not state."""
-    return [n for n in ("law", "cam_speed_rpm", "Fu_N", "backlash_mm", "jt_factor") if n not in attrs]
+    return [FIELD[n].attr for n in STATED if FIELD[n].attr not in attrs]

@@ -37,6 +37,8 @@ import numpy as np
 from scipy import signal
 
 from labtool.common.errors import InputError
+from labtool.common.operating_point import STATED, OperatingPoint
+from labtool.common.units import RPM
 from labtool.models.dynamics.twin import TwinPhysics
 from labtool.models.mechanism.kinematics import check_load_and_inertia, follower_motion
 from labtool.models.mechanism import Mechanism
@@ -50,7 +52,6 @@ ACCEL_CHANNELS = ("aE_t", "aE_n")
 CHANNELS = ("aE_t", "aE_n", "tacho")
 TRUTH_MODELS = ("twin", "kinematic", "rigid", "elastic")
 MODEL_TRUTHS = ("rigid", "elastic")
-TRUTH_ACCURACIES = ("fast", "standard", "reference")
 MODEL_TRUTH_REVOLUTIONS = 8      # turns a model truth simulates by default (the last one repeats)
 MAX_MODEL_REVOLUTIONS = 200
 PERIODIC_EVENT_TOL = 1e-2        # rad: the last two turns' events at the same cam angles (the
@@ -59,49 +60,43 @@ PERIODIC_OMEGA2_TOL = 5e-3       # of max |omega2|, away from events: the last t
 
 
 @dataclasses.dataclass(frozen=True)
-class StandScene:
-    """What the simulated stand does (SI except cam_speed_rpm, as in labtool.models.dynamics.scene.Scene).
+class StandScene(OperatingPoint):
+    """What the simulated stand does: an operating point (OperatingPoint's fields, SI; its model
+    options are the truth's energy loss and contact) and the stand's own settings.
 
     mode            "run": the cam drives the follower; "calibration": the sensor sits on a
                     shaker (B&K 4291) giving cal_accel (m/s^2 peak) at cal_freq (Hz) along
                     channel cal_channel, the cam stands still.
-    law, cam_speed_rpm, Fu (N), backlash (m), jt_factor: the operating point (paper's factors);
-                    they do not change the kinematic truth (then they are only stored).
+    law, cam_speed, Fu, backlash, jt_factor: the operating point (the paper's factors); they do
+                    not change the kinematic truth (then they are only stored).
+    restitution     Newton's k of the rigid truth's impacts
+    contact_damping, contact_length, kc_factor: the twin's and the elastic truth's contact
+    accuracy        solver preset of the twin and the model truths (default fast: the chain's
+                    noise is far above its error, docs/twin.md)
+    omega1_mode, elastic_gap: the truths turn the cam at constant speed (plus ``ripple``) across
+                    the physical gap; only const and physical are taken
     ripple          relative amplitude of the drive's speed ripple, once per cam turn (kinematic:
                     omega1 = Omega (1 + ripple sin(Omega t)); twin: on the motor's no-load speed)
     truth_model     twin | kinematic | rigid | elastic (module doc)
     truth_revolutions  rigid/elastic truth: cam turns simulated (0 = MODEL_TRUTH_REVOLUTIONS); the
                     last one repeats when the model has reached its periodic steady state
-    restitution     Newton's k of the rigid truth's impacts
-    contact_damping Hunt-Crossley coefficient (s/m) of the twin's and the elastic truth's contact
-    contact_length  roller-groove contact length lw (m) of the twin's and the elastic truth's contact
-    kc_factor       multiplier of their contact stiffness Kc
-    truth_accuracy  solver preset of the twin and the model truths (fast | standard | reference)
     twin            the twin's other physics (labtool.models.dynamics.twin.TwinPhysics; its ripple is
                     this scene's ``ripple``)
     """
 
+    accuracy: str = "fast"
     mode: str = "run"
-    law: str = "sine"
-    cam_speed_rpm: float = 180.0
-    Fu: float = 0.0
-    backlash: float = 0.128e-3
-    jt_factor: float = 1.0
     ripple: float = 0.005
     cal_accel: float = 9.81
     cal_freq: float = 79.6
     cal_channel: str = "aE_t"
     truth_model: str = "twin"
     truth_revolutions: int = 0
-    restitution: float = 0.2
-    contact_damping: float = 40.0
-    contact_length: float = 6e-3
-    kc_factor: float = 1.0
-    truth_accuracy: str = "fast"
     twin: TwinPhysics = dataclasses.field(default_factory=TwinPhysics)
     mechanism: Mechanism = dataclasses.field(default_factory=Mechanism.default, repr=False)
 
     def __post_init__(self):
+        super().__post_init__()
         model_truth = self.truth_model in MODEL_TRUTHS
         checks = [
             (self.truth_model in TRUTH_MODELS, f"truth model must be one of {', '.join(TRUTH_MODELS)}, got '{self.truth_model}'"),
@@ -109,16 +104,11 @@ class StandScene:
              f"truth revolutions must be an integer in [0, {MAX_MODEL_REVOLUTIONS}], got {self.truth_revolutions}"),
             (not model_truth or self.ripple == 0.0,
              f"the {self.truth_model} truth turns the cam at constant speed: set the speed ripple to 0"),
+            (self.omega1_mode == "const" and self.elastic_gap == "physical",
+             "the simulated stand turns its cam at constant speed (plus its ripple) across the physical gap: "
+             "omega1 mode 'const' and elastic gap 'physical' only"),
             (self.mode in ("run", "calibration"), f"stand mode must be 'run' or 'calibration', got '{self.mode}'"),
-            (math.isfinite(self.Fu) and self.Fu >= 0, f"load Fu must be >= 0 N, got {self.Fu}"),
-            (math.isfinite(self.backlash) and self.backlash >= 0, f"backlash must be >= 0 mm, got {self.backlash * 1e3:g}"),
-            (math.isfinite(self.jt_factor) and self.jt_factor > 0, f"inertia factor Jt must be > 0, got {self.jt_factor}"),
             (math.isfinite(self.ripple) and 0 <= self.ripple < 0.5, f"speed ripple must lie in [0, 0.5), got {self.ripple}"),
-            (math.isfinite(self.restitution) and 0 <= self.restitution <= 1, f"restitution k must lie in [0, 1], got {self.restitution}"),
-            (math.isfinite(self.contact_damping) and self.contact_damping >= 0, f"contact damping must be >= 0 s/m, got {self.contact_damping}"),
-            (math.isfinite(self.contact_length) and self.contact_length > 0, f"contact length must be > 0 mm, got {self.contact_length * 1e3:g}"),
-            (math.isfinite(self.kc_factor) and self.kc_factor > 0, f"contact stiffness factor must be > 0, got {self.kc_factor}"),
-            (self.truth_accuracy in TRUTH_ACCURACIES, f"truth accuracy must be one of {', '.join(TRUTH_ACCURACIES)}, got '{self.truth_accuracy}'"),
             (math.isfinite(self.cal_accel) and self.cal_accel > 0, f"calibration acceleration must be > 0 m/s^2, got {self.cal_accel}"),
             (math.isfinite(self.cal_freq) and self.cal_freq > 0, f"calibration frequency must be > 0 Hz, got {self.cal_freq}"),
             (self.cal_channel in ACCEL_CHANNELS, f"calibration channel must be one of {', '.join(ACCEL_CHANNELS)}, got '{self.cal_channel}'"),
@@ -133,11 +123,6 @@ class StandScene:
         self.program  # unknown law -> InputError now, not mid-run
 
     @property
-    def omega1_nominal(self) -> float:
-        """Nominal cam speed Omega (rad/s)."""
-        return self.cam_speed_rpm * TWO_PI / 60.0
-
-    @property
     def program(self) -> CamProgram:
         return CamProgram.for_mechanism(self.mechanism, law=self.law)
 
@@ -150,29 +135,27 @@ class StandScene:
         """The models' Scene of this operating point and truth parameters (omega1 constant, the
         whole cycle, the physical gap)."""
         from labtool.models.dynamics.scene import Scene
-        return Scene(law=self.law, cam_speed_rpm=self.cam_speed_rpm, Fu=self.Fu, backlash=self.backlash,
-                     jt_factor=self.jt_factor, omega1_mode="const", restitution=self.restitution,
-                     contact_length=self.contact_length, kc_factor=self.kc_factor,
-                     contact_damping=self.contact_damping, elastic_gap="physical", accuracy=self.truth_accuracy,
-                     revolutions=float(revolutions if revolutions is not None else self.model_revolutions),
-                     rise_only=False, mechanism=self.mechanism)
+        return Scene.at(self, revolutions=float(revolutions if revolutions is not None else self.model_revolutions),
+                        rise_only=False, mechanism=self.mechanism)
 
     def truth_description(self) -> str:
         if self.truth_model == "kinematic":
             return "kinematic (labtool.models.mechanism.kinematics.follower_motion)"
         if self.truth_model == "twin":
-            return f"twin (labtool.models.dynamics.twin, accuracy {self.truth_accuracy}, docs/twin.md)"
-        return (f"{self.truth_model} (labtool.models.dynamics.simulate, omega1 const, accuracy {self.truth_accuracy}, "
+            return f"twin (labtool.models.dynamics.twin, accuracy {self.accuracy}, docs/twin.md)"
+        return (f"{self.truth_model} (labtool.models.dynamics.simulate, omega1 const, accuracy {self.accuracy}, "
                 f"{self.model_revolutions} revolutions, the last repeated once periodic)")
 
-    def attrs(self) -> dict:
-        """Scene parameters as recording attributes (SI, plus rpm and mm where named so)."""
+    def attrs(self, names=None) -> dict:
+        """Scene parameters as recording attributes: the stated operating point (edge units, as
+        OperatingPoint.attrs), the truth's parameters (``truth_*``, SI unless named) and the
+        stand's. ``names``: OperatingPoint.attrs of those fields only."""
+        if names is not None:
+            return super().attrs(names)
         twin = self.twin.attrs()
         twin["truth_warmup_revolutions"] = int(twin["truth_warmup_revolutions"])
         return {
-            "stand_mode": self.mode, "law": self.law, "cam_speed_rpm": float(self.cam_speed_rpm),
-            "Fu_N": float(self.Fu), "backlash_mm": float(self.backlash * 1e3),
-            "jt_factor": float(self.jt_factor),
+            "stand_mode": self.mode, **super().attrs(STATED),
             "truth_model": self.truth_description(),
             "truth_revolutions": int(self.truth_revolutions),
             "truth_omega1_ripple": float(self.ripple),
@@ -184,7 +167,7 @@ class StandScene:
             "truth_contact_damping_s_per_m": float(self.contact_damping),
             "truth_contact_length_m": float(self.contact_length),
             "truth_kc_factor": float(self.kc_factor),
-            "truth_accuracy": self.truth_accuracy,
+            "truth_accuracy": self.accuracy,
             **twin,
             "chain_resonance_applies_to": "mechanical noise only (the twin truth carries the bending mode)"
             if self.truth_model == "twin" else "motion and mechanical noise",
@@ -524,7 +507,7 @@ def truth_events(scene: StandScene, duration: float) -> dict:
 
 # keys of a scene file's [truth] table -> (StandScene field or "twin.<TwinPhysics field>", scale to SI)
 TRUTH_TABLE_KEYS = {
-    "model": ("truth_model", None), "revolutions": ("truth_revolutions", None), "accuracy": ("truth_accuracy", None),
+    "model": ("truth_model", None), "revolutions": ("truth_revolutions", None), "accuracy": ("accuracy", None),
     "restitution": ("restitution", 1.0), "contact_damping_s_per_m": ("contact_damping", 1.0),
     "contact_length_mm": ("contact_length", 1e-3), "kc_factor": ("kc_factor", 1.0),
     "drive": ("twin.drive", None), "mode_hz": ("twin.mode_hz", 1.0), "mode_zeta": ("twin.mode_zeta", 1.0),
@@ -581,7 +564,7 @@ def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandSc
         raise InputError("this recording does not come from the simulated stand: it has no known truth")
     d = StandScene.__dataclass_fields__
     return StandScene(
-        mode=text(attrs["stand_mode"]), law=text(attrs["law"]), cam_speed_rpm=num("cam_speed_rpm", 180.0),
+        mode=text(attrs["stand_mode"]), law=text(attrs["law"]), cam_speed=(num("cam_speed_rpm", 180.0)) * RPM,
         Fu=float(attrs["Fu_N"]), backlash=float(attrs["backlash_mm"]) * 1e-3,
         jt_factor=float(attrs["jt_factor"]), ripple=float(attrs["truth_omega1_ripple"]),
         cal_accel=float(attrs["cal_accel_m_s2_peak"]), cal_freq=float(attrs["cal_freq_hz"]),
@@ -592,7 +575,7 @@ def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandSc
         contact_damping=num("truth_contact_damping_s_per_m", d["contact_damping"].default),
         contact_length=num("truth_contact_length_m", d["contact_length"].default),
         kc_factor=num("truth_kc_factor", d["kc_factor"].default),
-        truth_accuracy=text(attrs.get("truth_accuracy", d["truth_accuracy"].default)),
+        accuracy=text(attrs.get("truth_accuracy", d["accuracy"].default)),
         twin=TwinPhysics.from_attrs(attrs))
 
 

@@ -12,6 +12,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from labtool.common.units import RPM
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -29,7 +30,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         # generation alone (no file), then the whole chain to HDF5
-        dev = SimStand(sc.StandScene(cam_speed_rpm=args.rpm), seed=1, duration_s=args.fast_seconds, realtime=False)
+        dev = SimStand(sc.StandScene(cam_speed=args.rpm * RPM), seed=1, duration_s=args.fast_seconds, realtime=False)
         dev.configure(10000)
         dev.start()
         t0 = time.perf_counter()
@@ -38,13 +39,13 @@ def main() -> None:
         gen = time.perf_counter() - t0
         print(f"stand generation only : {args.fast_seconds:g} s of data in {gen:.2f} s wall -> {args.fast_seconds / gen:6.1f}x real time")
         for rpm in (180.0, 500.0):
-            dev = SimStand(sc.StandScene(cam_speed_rpm=rpm), seed=1, duration_s=args.fast_seconds, realtime=False)
+            dev = SimStand(sc.StandScene(cam_speed=rpm * RPM), seed=1, duration_s=args.fast_seconds, realtime=False)
             res = session.run(dev, Path(tmp) / f"fast{rpm:g}.h5", 10000, args.fast_seconds)
             size = os.path.getsize(Path(tmp) / f"fast{rpm:g}.h5") / 1e6
             print(f"--fast {rpm:3g} rpm to HDF5: {args.fast_seconds:g} s of data in {res.wall_s:.2f} s wall -> "
                   f"{args.fast_seconds / res.wall_s:6.1f}x real time (goal >= 50x), {size:.1f} MB, overruns {res.overruns}")
         if args.realtime_seconds > 0:
-            dev = SimStand(sc.StandScene(cam_speed_rpm=args.rpm), seed=1, duration_s=args.realtime_seconds, realtime=True)
+            dev = SimStand(sc.StandScene(cam_speed=args.rpm * RPM), seed=1, duration_s=args.realtime_seconds, realtime=True)
             cpu0 = time.process_time()
             res = session.run(dev, Path(tmp) / "rt.h5", 10000, args.realtime_seconds)
             cpu = time.process_time() - cpu0

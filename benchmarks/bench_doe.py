@@ -63,10 +63,10 @@ def doe_run(args: list[str], out: pathlib.Path) -> tuple[float, str]:
 def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[float, float]:
     """(indicator path, dataset path) seconds per run over a random sample of the design's runs,
     interleaved run by run."""
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.dynamics.simulate import indicators, simulate
     from labtool.models.study.doe import Design, read_factors
-    design = Design(tuple(read_factors(factors_csv)), Scene(), model)
+    design = Design(tuple(read_factors(factors_csv)), paper_scene(), model)
     # a random sample: every 16th run would always hit the same levels of the fastest factors
     import numpy as np
     idx = sorted(np.random.default_rng(0).choice(len(design), size=min(sample, len(design)), replace=False))
@@ -86,10 +86,10 @@ def direct_per_run(model: str, factors_csv: pathlib.Path, sample: int) -> tuple[
 def _warm(model: str) -> int:
     """Load in a worker what its runs will use: the model's compiled code, of the Dataset path and of
     the indicator path that ``doe run`` calls."""
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.dynamics.simulate import indicators, simulate
-    simulate(Scene(), model)
-    indicators(Scene(), model)
+    simulate(paper_scene(), model)
+    indicators(paper_scene(), model)
     return os.getpid()
 
 

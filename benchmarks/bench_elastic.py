@@ -12,15 +12,16 @@ import numpy as np
 
 from labtool.models.study.paper import compare_table3
 from labtool.models.study.paper import read_reference, table1_runs
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
+from labtool.common.units import RPM
 
 
 def _runs(accuracy, backlash=None, **kw):
     out = []
     for r in table1_runs().itertuples():
         j = r.j_mm * 1e-3 if backlash is None else backlash
-        s = Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=j, jt_factor=r.Jt_factor, accuracy=accuracy, **kw)
+        s = paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=j, jt_factor=r.Jt_factor, accuracy=accuracy, **kw)
         t0 = time.perf_counter()
         res = simulate(s, "elastic")
         out.append((time.perf_counter() - t0, res.indicators, res.dataset.sizes["time"]))
@@ -93,7 +94,7 @@ def figure9(path="docs/figures/elastic_fig9_run1.png"):
     fig, ax = plt.subplots(2, 2, figsize=(10, 5.5), sharex=True)
     for col, gap in enumerate(("physical", "closed")):
         j = 0.016e-3 if gap == "physical" else 0.0
-        ds = simulate(Scene(backlash=0.016e-3, elastic_gap=gap), "elastic").dataset
+        ds = simulate(paper_scene(backlash=0.016e-3, elastic_gap=gap), "elastic").dataset
         t = ds.time.values * 1e3
         ax[0, col].plot(t, ds["MR13D"], lw=0.8, label="contact force moment")
         ax[0, col].plot(t, ds["MR13D_static"], lw=1.2, ls="--", label="static reaction R31 moment")

@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from labtool.common.units import RPM
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -76,14 +77,14 @@ def main() -> None:
     print(f"default twin stand, {args.seconds:g} s per recording, 10 kHz, Ka = {sc.DEFAULT_KA:g} m/s^2/V (gain x1), range +-10 V")
     with tempfile.TemporaryDirectory() as tmp:
         for rpm in args.rpm:
-            scene = sc.StandScene(cam_speed_rpm=rpm)
+            scene = sc.StandScene(cam_speed=rpm * RPM)
             T = 60.0 / rpm
             c0, w0 = time.process_time(), time.perf_counter()
             ev = sc.truth_events(scene, args.seconds)
             twin_wall, twin_cpu = time.perf_counter() - w0, time.process_time() - c0
             f = event_figures(ev, T, args.seconds)
             wall, cpu, peak, clips = record(scene, args.seconds, Path(tmp) / f"twin{rpm:g}.h5")
-            kin_wall, kin_cpu, kin_peak, _ = record(sc.StandScene(cam_speed_rpm=rpm, truth_model="kinematic"),
+            kin_wall, kin_cpu, kin_peak, _ = record(sc.StandScene(cam_speed=rpm * RPM, truth_model="kinematic"),
                                                     args.seconds, Path(tmp) / f"kin{rpm:g}.h5")
             print(f"\n{rpm:g} rpm ({args.seconds / T:.0f} revolutions)")
             print(f"  true events per revolution: {f['contacts']:.1f} contacts, {f['visible']:.1f} visible impacts "

@@ -13,26 +13,27 @@ import math
 import pathlib
 import sys
 import time
+from labtool.common.units import RPM
+from labtool.models.study.paper import paper_scene
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 
 def cases():
     from labtool.models.mechanism import Mechanism
-    from labtool.models.dynamics.scene import Scene
-
+    
     steep = Mechanism.default().replace(program={"law": "sine", "rise_deg": 5.0})
     return {
-        "rise 5 deg": ("rigid", Scene(mechanism=steep)),
-        "random point k=1": ("rigid", Scene(omega1_mode="var", Fu=83.08451831611706, backlash=0.16261007916261438e-3,
-                                            cam_speed_rpm=263.4775377785051, jt_factor=1.3244428636474361,
+        "rise 5 deg": ("rigid", paper_scene(mechanism=steep)),
+        "random point k=1": ("rigid", paper_scene(omega1_mode="var", Fu=83.08451831611706, backlash=0.16261007916261438e-3,
+                                            cam_speed=263.4775377785051 * RPM, jt_factor=1.3244428636474361,
                                             restitution=1.0)),
-        "cosine law": ("elastic", Scene(law="cosine")),
-        "Kc x1e-6": ("elastic", Scene(kc_factor=1e-6)),
-        "Fu 1e5 N rigid": ("rigid", Scene(Fu=1e5)),
-        "Fu 1e5 N elastic": ("elastic", Scene(Fu=1e5)),
-        "j 5 mm rigid": ("rigid", Scene(backlash=5e-3)),
-        "j 5 mm elastic": ("elastic", Scene(backlash=5e-3)),
+        "cosine law": ("elastic", paper_scene(law="cosine")),
+        "Kc x1e-6": ("elastic", paper_scene(kc_factor=1e-6)),
+        "Fu 1e5 N rigid": ("rigid", paper_scene(Fu=1e5)),
+        "Fu 1e5 N elastic": ("elastic", paper_scene(Fu=1e5)),
+        "j 5 mm rigid": ("rigid", paper_scene(backlash=5e-3)),
+        "j 5 mm elastic": ("elastic", paper_scene(backlash=5e-3)),
     }
 
 

@@ -19,13 +19,13 @@ sys.path.insert(0, str(ROOT / "tests"))
 def main():
     from labtool.models.dynamics import accuracy
     from labtool.common.errors import LabtoolError
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from test_extremes import BASE, ELASTIC_CASES, RIGID_CASES
 
     rows = []
     for model, cases in (("rigid", RIGID_CASES), ("elastic", ELASTIC_CASES)):
         for kw in cases:
-            scene = Scene(**{**BASE, **kw})
+            scene = paper_scene(**{**BASE, **kw})
             stats = {}
             t0 = time.perf_counter()
             try:

@@ -30,12 +30,13 @@ _WARM = """
 import time, warnings
 warnings.simplefilter('ignore')
 t0 = time.perf_counter()
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
 from labtool.models.dynamics import accuracy
+from labtool.common.units import RPM
 t1 = time.perf_counter()
 for model in ('rigid', 'elastic'):
-    accuracy.run_model(Scene(accuracy='standard'), model)
+    accuracy.run_model(paper_scene(accuracy='standard'), model)
 print(t1 - t0, time.perf_counter() - t1)
 """
 
@@ -76,9 +77,9 @@ def table1_timing(repeat: int = 3) -> dict:
     sys.path.insert(0, str(ROOT))
     from labtool.models.mechanism import memo
     from labtool.models.study.paper import table1_runs
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.dynamics.simulate import simulate
-    scenes = [Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
+    scenes = [paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
                     omega1_mode="var", accuracy="standard") for r in table1_runs().itertuples()]
     for model in ("rigid", "elastic"):            # load the compiled kernels from the cache
         simulate(scenes[0], model)

@@ -23,6 +23,8 @@ import math
 import pathlib
 import sys
 import time
+from labtool.common.units import RPM
+from labtool.models.study.paper import paper_scene
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
@@ -41,8 +43,7 @@ def _event_times(ds):
 
 
 def _scene(run, gap, preset):
-    from labtool.models.dynamics.scene import Scene
-    return Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
+        return paper_scene(cam_speed=run.n1_rpm * RPM, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
                  omega1_mode="var", accuracy=preset, elastic_gap=gap)
 
 

@@ -18,6 +18,8 @@ if "PYTHONPATH" not in __import__("os").environ:     # else: the tree PYTHONPATH
 from labtool.models.dynamics.scene import Scene  # noqa: E402
 from labtool.models.dynamics.simulate import simulate  # noqa: E402
 from labtool.models.study.paper import table1_runs  # noqa: E402
+from labtool.common.units import RPM
+from labtool.models.study.paper import paper_scene
 
 
 def best(fn, repeat):
@@ -30,12 +32,12 @@ def best(fn, repeat):
 
 
 def main(name: str) -> None:
-    s = Scene()
+    s = paper_scene()
     warm = {}
     for m in ("rigid", "elastic"):
         simulate(s, m)
         warm[m] = best(lambda: simulate(s, m), 30) * 1e3
-    scenes = [Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor)
+    scenes = [paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor)
               for r in table1_runs().itertuples()]
 
     def table1():

@@ -30,6 +30,7 @@ import warnings
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
+from labtool.common.units import RPM
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results"
 LADDER = {
@@ -56,12 +57,12 @@ def pin_one_core():
 
 def scenes(run_ids):
     from labtool.models.study.paper import table1_runs
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     out = []
     for r in table1_runs().itertuples():
         if run_ids and int(r.run) not in run_ids:
             continue
-        out.append((int(r.run), Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3,
+        out.append((int(r.run), paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3,
                                       jt_factor=r.Jt_factor, omega1_mode="var")))
     return out
 

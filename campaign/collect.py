@@ -49,7 +49,7 @@ class PointRecord:
     def group(self) -> tuple:
         """The operating point without the speed: points of one group form a curve against rpm."""
         op = self.op
-        return (str(op.get("law", "")), _num(op.get("Fu")), _num(op.get("backlash_mm")), _num(op.get("jt_factor")))
+        return (str(op.get("law", "")), _num(op.get("Fu_N")), _num(op.get("backlash_mm")), _num(op.get("jt_factor")))
 
     def group_label(self) -> str:
         law, fu, j, jt = self.group()
@@ -147,7 +147,7 @@ def table(records: list[PointRecord]) -> pd.DataFrame:
             ev = events.get(h.get("label"), {})
             row = {
                 "point": r.name, "rpm": r.rpm, "rpm_measured": m.get("cam_speed_rpm_measured"),
-                "law": op.get("law"), "Fu_N": op.get("Fu"), "backlash_mm": op.get("backlash_mm"),
+                "law": op.get("law"), "Fu_N": op.get("Fu_N"), "backlash_mm": op.get("backlash_mm"),
                 "jt_factor": op.get("jt_factor"), "whole_revolutions": m.get("whole_revolutions"),
                 "model": h.get("requested_model"), "level_used": h.get("model"), "omega1": h.get("omega1"),
                 "label": h.get("label"),

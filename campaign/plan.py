@@ -31,7 +31,7 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     files = ["../calibration.toml"]      # applied by processing; paths relative to the plan
 
     [defaults]                           # every point's values unless the point says otherwise
-    law = "sine"
+    law = "sine"                         # (default: labtool's, labtool.common.operating_point)
     Fu_N = 0.0
     backlash_mm = 0.128                  # j
     jt_factor = 1.0                      # Jt / Jt nominal
@@ -53,9 +53,10 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     accuracy = "fast"                    # fast | standard | reference
     revolutions = 6                      # simulated revolutions (default: labtool report's, 6)
     thresholds = "limits.toml"           # optional: labtool.reports.thresholds file (exit 1 if one fails)
-    restitution = 1.0                    # optional model options (labtool report's)
-    contact_damping = 0.0
+    restitution = 0.2                    # optional model options, as labtool report's options
+    contact_damping_s_per_m = 40.0       # (default: labtool's, labtool.common.operating_point)
     contact_length_mm = 6.0
+    kc_factor = 1.0
     elastic_gap = "physical"
 
 Unknown keys, wrong types and values out of range are refused with one line naming the key.
@@ -74,11 +75,17 @@ from pathlib import Path
 
 from labtool.common.errors import InputError
 from labtool.common.names import shown
+from labtool.common.operating_point import FIELD, OperatingPoint, schema_field
 from labtool.common.schema import Bool, Integer, ListOf, Number, SchemaError, String, Table, load_toml
+from labtool.common.units import MM
 
 MAX_POINTS = 500
-MAX_RPM = 2000.0      # the schema's bound; expand_points then holds each point to the models' own range
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")     # a point's folder name
+# a point's operating point: the owner's fields and bounds (labtool.common.operating_point), in its
+# edge units; a plan names the cam speed ``rpm``
+POINT_KEYS = {"rpm": "cam_speed", "law": "law", "Fu_N": "Fu", "backlash_mm": "backlash", "jt_factor": "jt_factor"}
+# the model options a plan's [compare] may set, by their owner's names (the rest are the owner's defaults)
+COMPARE_OPTIONS = ("restitution", "contact_damping", "contact_length", "kc_factor", "elastic_gap")
 
 
 def _opt(field):
@@ -88,11 +95,7 @@ def _opt(field):
 
 POINT_FIELDS = {
     "name": _opt(String(max_len=60)),
-    "rpm": _opt(Number(gt=0, le=MAX_RPM, unit="rpm")),
-    "law": _opt(String(max_len=40)),
-    "Fu_N": _opt(Number(ge=0, le=1e4, unit="N")),
-    "backlash_mm": _opt(Number(ge=0, le=10, unit="mm")),
-    "jt_factor": _opt(Number(gt=0, le=100)),
+    **{key: schema_field(name) for key, name in POINT_KEYS.items()},
     "revolutions": _opt(Number(ge=2, le=10000, whole=True)),       # whole revolutions: 8.5 is refused
     "duration_s": _opt(Number(gt=0, le=3600, unit="s")),
     "seed": _opt(Integer(ge=0, le=2**32 - 1)),
@@ -122,21 +125,15 @@ PLAN = Table({
     "calibration": Table({"files": ListOf(String(max_len=4096), max_len=20, default=[])}, default={}),
     "defaults": Table(POINT_FIELDS, default={}),
     "points": ListOf(Table(POINT_FIELDS), max_len=MAX_POINTS, default=[]),
-    "grid": Table({"rpm": _opt(ListOf(Number(gt=0, le=MAX_RPM, unit="rpm"), max_len=MAX_POINTS)),
-                   "law": _opt(ListOf(String(max_len=40), max_len=20)),
-                   "Fu_N": _opt(ListOf(Number(ge=0, le=1e4, unit="N"), max_len=100)),
-                   "backlash_mm": _opt(ListOf(Number(ge=0, le=10, unit="mm"), max_len=100)),
-                   "jt_factor": _opt(ListOf(Number(gt=0, le=100), max_len=100))}, required=False),
+    "grid": Table({key: _opt(ListOf(schema_field(name, required=True), max_len=MAX_POINTS))
+                   for key, name in POINT_KEYS.items()}, required=False),
     "compare": Table({
         "models": ListOf(String(choices=MODELS), min_len=1, default=["rigid", "elastic"]),
         "omega1": ListOf(String(choices=MODES), min_len=1, default=["const", "var"]),
         "accuracy": String(choices=("fast", "standard", "reference"), default="fast"),
         "revolutions": _opt(Number(ge=1.0, le=50.0)),      # default: labtool report's
         "thresholds": _opt(String(max_len=4096)),
-        "restitution": _opt(Number(ge=0, le=1)),
-        "contact_damping": _opt(Number(ge=0, le=1e4, unit="s/m")),
-        "contact_length_mm": _opt(Number(gt=0, le=100, unit="mm")),
-        "elastic_gap": _opt(String(choices=("physical", "closed"))),
+        **{FIELD[n].attr: schema_field(n) for n in COMPARE_OPTIONS},
     }, default={}),
 })
 COMPARE = PLAN.fields["compare"]
@@ -191,22 +188,40 @@ def check_plan(data: dict, where: str):
     return types.SimpleNamespace(**sections)
 
 
-# the paper's experiment (sec. 2.4): what a point is when neither it nor [defaults] says
-PAPER_POINT = {"law": "sine", "Fu_N": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0, "revolutions": 10.0}
+# what a point is when neither it nor [defaults] says: labtool's defaults, 10 revolutions
+BASE_POINT = {key: FIELD[name].default_edge for key, name in POINT_KEYS.items() if key != "rpm"}
+BASE_POINT["revolutions"] = 10.0
 
 
 @dataclasses.dataclass(frozen=True)
 class Point:
-    """One operating point, complete (edge units: rpm, N, mm)."""
+    """One operating point of the plan, complete: ``point`` holds what the recording states (law,
+    speed, load, backlash, inertia; the other fields are the owner's defaults)."""
     index: int
     name: str
-    rpm: float
-    law: str
-    Fu_N: float
-    backlash_mm: float
-    jt_factor: float
+    point: OperatingPoint
     duration_s: float        # seconds to record
     seed: int
+
+    @property
+    def rpm(self) -> float:
+        return self.point.cam_speed_rpm
+
+    @property
+    def law(self) -> str:
+        return self.point.law
+
+    @property
+    def Fu_N(self) -> float:
+        return self.point.Fu
+
+    @property
+    def backlash_mm(self) -> float:
+        return self.point.backlash / MM
+
+    @property
+    def jt_factor(self) -> float:
+        return self.point.jt_factor
 
     def spec(self) -> dict:
         """What defines the point's acquisition (its identity for resuming)."""
@@ -251,7 +266,7 @@ def _duration(v: dict, rpm: float) -> float:
 def expand_points(doc) -> list[Point]:
     """The plan's points: the [[points]] list, then the [grid]'s combinations, each completed from
     [defaults] and the paper's experiment; InputError for none, too many, or a missing rpm."""
-    base = dict(PAPER_POINT)
+    base = dict(BASE_POINT)
     if doc.defaults.get("name") is not None or doc.defaults.get("seed") is not None:
         raise InputError("defaults: 'name' and 'seed' belong to a point, not to [defaults]")
     base.update(doc.defaults)
@@ -269,9 +284,6 @@ def expand_points(doc) -> list[Point]:
                 raw.append(dict(zip(keys, combo)))
     if not raw:
         raise InputError("the plan has no operating points: add [[points]] with an rpm, or a [grid]")
-    from labtool.models.mechanism import Mechanism
-
-    mech = Mechanism.default()                     # the mechanism the campaign's scenes use
     out, names = [], set()
     for i, p in enumerate(raw):
         given = {k: v for k, v in p.items() if v is not None}
@@ -284,24 +296,28 @@ def expand_points(doc) -> list[Point]:
         where = f"point {i + 1}" if i < len(doc.points) else f"grid point {i + 1 - len(doc.points)}"
         if v.get("rpm") is None:
             raise InputError(f"{where}: no rpm (give it in the point, the grid or [defaults])")
-        for key, test, what in (("rpm", lambda x: 0 < x <= MAX_RPM, f"in (0, {MAX_RPM:g}]"),
-                                ("Fu_N", lambda x: 0 <= x <= 1e4, "in [0, 1e4] N"),
-                                ("backlash_mm", lambda x: 0 <= x <= 10, "in [0, 10] mm"),
-                                ("jt_factor", lambda x: 0 < x <= 100, "in (0, 100]")):
-            if not (math.isfinite(float(v[key])) and test(float(v[key]))):
-                raise InputError(f"{where}: {key} = {v[key]!r} must be {what}")
-        rpm = float(v["rpm"])
-        try:                                       # every point is compared with the models: their range
-            mech.check_cam_speed(rpm)
-        except InputError as exc:
-            raise InputError(f"{where}: {exc}") from None
-        name = v.get("name") or _auto_name(i, rpm, v, raw)
+        point = checked_point({name: v[key] for key, name in POINT_KEYS.items()}, where)
+        name = v.get("name") or _auto_name(i, point.cam_speed_rpm, v, raw)
         if name in names:
             raise InputError(f"{where}: two points are named {name}; give each a different 'name'")
         names.add(name)
-        out.append(Point(i, name, rpm, str(v["law"]), float(v["Fu_N"]), float(v["backlash_mm"]),
-                         float(v["jt_factor"]), _duration(v, rpm), int(v.get("seed", doc.device.seed + i))))
+        out.append(Point(i, name, point, _duration(v, point.cam_speed_rpm), int(v.get("seed", doc.device.seed + i))))
     return out
+
+
+def checked_point(edge: dict, where: str) -> OperatingPoint:
+    """A plan point's operating point (edge values by field name), checked completely before anything
+    runs: each value against the owner's bounds, then as the models take it (the cam speed the motor
+    can drive, the law, the groove the backlash leaves: labtool.models.dynamics.validity)."""
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.validity import check_scene
+
+    try:
+        point = OperatingPoint(**{name: FIELD[name].check_edge(value) for name, value in edge.items()})
+        check_scene(Scene.at(point, rise_only=False))
+    except InputError as exc:
+        raise InputError(f"{where}: {exc}") from None
+    return point
 
 
 def _auto_name(i: int, rpm: float, v: dict, raw: list) -> str:
@@ -326,10 +342,6 @@ def load_plan(path, check_files: bool = True) -> Plan:
         points = expand_points(doc)
     except InputError as exc:
         raise InputError(f"plan {shown(path)}: {exc}") from None
-    from labtool.models.mechanism.motion_laws import ALIASES, LAWS
-    for p in points:
-        if p.law not in LAWS and p.law not in ALIASES:
-            raise InputError(f"plan {shown(path)}: point {p.name}: unknown motion law {shown(p.law)!r}; known: {', '.join(sorted(LAWS))}")
     if not check_files:
         return Plan(path, doc, tuple(points), (), None, None)
     base = path.resolve().parent

@@ -66,7 +66,7 @@ def _inputs(plan: Plan, point, state: PointState, step: str) -> str:
                             "law": point.law, "rpm": point.rpm})
     return sha256_json({"measured": state.output_digest("process", "measured.nc"), "compare": plan.digest("compare"),
                         "thresholds": sha256_file(plan.thresholds) if plan.thresholds else None,
-                        "overrides": steps.overrides(plan, point)})
+                        "overrides": steps.overrides(plan)})
 
 
 def _check_existing(plan: Plan, point, state: PointState, redo: set) -> None:
@@ -169,7 +169,7 @@ def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter) -> dict:
         if step == "process":
             return steps.process(plan, point, folder / "recording.h5", folder / "measured.nc",
                                  warn=lambda m: rep.warn(f"point {point.name}: {m}"))
-        report = steps.build(folder / "measured.nc", plan.doc.compare, plan.thresholds, steps.overrides(plan, point),
+        report = steps.build(folder / "measured.nc", plan.doc.compare, plan.thresholds, steps.overrides(plan),
                              say=lambda m: rep.step(point, "compare", "running", m))
         steps.write_point_outputs(report, folder, {"html": "report.html", "summary": "summary.json",
                                                    "cycles": "cycles.nc"})

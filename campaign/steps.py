@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from labtool.common.operating_point import FIELD, SOURCE_SUFFIX, STATED
+from labtool.campaign.plan import COMPARE_OPTIONS
 from labtool.common.errors import InputError
 from labtool.common.names import shown
 
@@ -32,8 +34,7 @@ def _sim_device(plan, point, duration_s: float):
     kw = {} if dev.truth is None else {"truth_model": dev.truth}
     if dev.truth in sc.MODEL_TRUTHS:
         kw["ripple"] = 0.0    # a model truth's cam runs at constant speed, as 'labtool acquire' does
-    scene = sc.StandScene(mode="run", law=point.law, cam_speed_rpm=point.rpm, Fu=point.Fu_N,
-                          backlash=point.backlash_mm * 1e-3, jt_factor=point.jt_factor, **kw)
+    scene = sc.StandScene(mode="run", **{n: getattr(point.point, n) for n in STATED}, **kw)
     if dev.truth in sc.MODEL_TRUTHS and sc.model_truth_span(scene) < duration_s:
         raise InputError(f"the {dev.truth} truth does not reach a periodic steady state, so it cannot cover "
                          f"{duration_s:g} s of point {point.name}; record fewer revolutions or use the twin truth")
@@ -74,9 +75,8 @@ def point_attrs(plan, point) -> dict:
     """Root attributes every recording of the campaign carries: the operating point as the plan
     states it, the test metadata, and where the point sits in the campaign."""
     t = plan.doc.test
-    return {"law": point.law, "cam_speed_rpm": float(point.rpm), "Fu_N": float(point.Fu_N),
-            "backlash_mm": float(point.backlash_mm), "jt_factor": float(point.jt_factor),
-            "operating_point_source": f"campaign plan {plan.path.name}",
+    stated = point.point.attrs(STATED)
+    return {**stated, **{name + SOURCE_SUFFIX: f"campaign plan {plan.path.name}, point {point.name}" for name in stated},
             "test_id": t.test_id, "operator": t.operator, "notes": t.notes,
             "campaign": plan.doc.campaign.name, "campaign_point": point.name,
             "campaign_point_index": int(point.index), "seed": int(point.seed)}
@@ -150,16 +150,14 @@ def process(plan, point, recording: Path, measured: Path, warn=None) -> dict:
 # --------------------------------------------------------------------------- compare
 
 
-def overrides(plan, point=None) -> dict:
-    """labtool report's overrides: the point's operating point (None: the file's) and the model options."""
+def overrides(plan) -> dict:
+    """labtool report's options from the plan's [compare]: its model options (SI, by field name); the
+    operating point is the recording's own, as the plan stated it."""
     c = plan.doc.compare if plan is not None else None
-    out = {}
-    if point is not None:
-        out.update({"cam_speed_rpm": point.rpm, "law": point.law, "Fu": point.Fu_N,
-                    "backlash_mm": point.backlash_mm, "jt_factor": point.jt_factor})
-    if c is not None:
-        out.update({k: getattr(c, k) for k in ("restitution", "contact_damping", "contact_length_mm", "elastic_gap")})
-    return out
+    if c is None:
+        return {}
+    return {n: FIELD[n].check_edge(getattr(c, FIELD[n].attr)) for n in COMPARE_OPTIONS
+            if getattr(c, FIELD[n].attr) is not None}
 
 
 def build(measured: Path, compare, thresholds_path: Path | None, overrides_: dict, say=None):

@@ -18,8 +18,11 @@ Headroom: ``headroom_summary`` (root, one line). Per channel on the ``signals`` 
 """
 from __future__ import annotations
 
-OPERATING_POINT = ("law", "cam_speed_rpm", "Fu_N", "backlash_mm", "jt_factor", "motor_setting")
-SOURCE_SUFFIX = "_source"
+from labtool.common.operating_point import FIELD, SOURCE_SUFFIX, STATED
+
+# the stated operating point (its owner's attribute names, labtool.common.operating_point) and the
+# operator's free-text motor setting
+OPERATING_POINT = tuple(FIELD[n].attr for n in STATED) + ("motor_setting",)
 RUN_METADATA = ("test_id", "operator", "sensor_model", "sensor_serial", "conditioner_model",
                 "conditioner_gain", "notes")
 HEADROOM_ROOT = ("headroom_summary",)

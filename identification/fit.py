@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labtool.common.operating_point import BY_ATTR, FIELD, STATED
 from labtool.common.errors import InputError, SolverError
 from labtool.common.names import shown
 from labtool.identification import search, uncertainty
@@ -47,7 +48,7 @@ class FitRequest:
     """What to fit. ``free``: the --free text; ``bounds``/``start`` in edge units by parameter name
     (``start``: "scan" (default), "scene", or {name: value}: a given start is searched from first,
     beside the scan's best points unless ``scan`` is False); ``overrides``: the operating point as
-    ``labtool report`` takes it (rpm, law, Fu, backlash_mm, ..., elastic_gap); ``chain``: fixed
+    ``labtool report`` takes it (SI values by operating-point field); ``chain``: fixed
     values of the chain parameters that are not free (ka_gain, delay_ms)."""
 
     measured: Path
@@ -394,18 +395,15 @@ def load_fit(path: Path) -> dict:
     op = doc.get("fitted_operating_point")
     if doc.get("model") not in ("rigid", "elastic") or doc.get("omega1") not in OMEGA1_MODES or not isinstance(op, dict):
         raise InputError(f"{path}: incomplete fit result (model, omega1 or fitted_operating_point missing)")
-    for key in ("cam_speed_rpm", "law", "Fu", "backlash_mm", "jt_factor"):
-        if key not in op:
-            raise InputError(f"{path}: fitted_operating_point has no {key}")
+    for name in STATED:
+        if FIELD[name].attr not in op:
+            raise InputError(f"{path}: fitted_operating_point has no {FIELD[name].attr}")
     # a hand-edited file: a value of the wrong type was an internal error (TypeError, KeyError, ...)
-    numbers = ("cam_speed_rpm", "Fu", "backlash_mm", "jt_factor", "omega1_var_n1_rpm", "restitution",
-               "contact_damping", "contact_length_mm", "ka_gain", "delay_ms")
-    for key in numbers:
-        if key in op and not _is_number(op[key]):
-            raise InputError(f"{path}: fitted_operating_point {key} = {shown(json.dumps(op[key]))} is not a number")
-    for key in ("law", "elastic_gap"):
-        if key in op and not isinstance(op[key], str):
-            raise InputError(f"{path}: fitted_operating_point {key} = {shown(json.dumps(op[key]))} is not a name")
+    for key, value in op.items():
+        if key in BY_ATTR:
+            BY_ATTR[key].check_edge(value, f"{path}: fitted_operating_point")
+        elif key in ("omega1_var_n1_rpm", "ka_gain", "delay_ms") and not _is_number(value):
+            raise InputError(f"{path}: fitted_operating_point {key} = {shown(json.dumps(value))} is not a number")
     params = doc.get("parameters", {})
     if not (isinstance(params, dict) and all(
             isinstance(v, dict) and _is_number(v.get("value"))

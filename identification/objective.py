@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labtool.common.operating_point import SOURCE_SUFFIX
 from labtool.common.errors import LabtoolError
 from labtool.identification.parameters import Space
 from labtool.reports import align, events, pipeline
@@ -200,7 +201,9 @@ class Evaluator:
         return out
 
     def _scene_key(self, vals: dict, preset: str) -> tuple:
-        keys = sorted(k for k in vals if k not in pipeline.CHAIN_KEYS + ("cam_speed_source",))
+        # what the model run depends on: every value but the chain's and the texts saying where a value came from
+        keys = sorted(k for k in vals if k not in pipeline.CHAIN_KEYS and not k.endswith(SOURCE_SUFFIX)
+                      and k not in ("assumed", "source_notes"))
         return (preset,) + tuple((k, _hashable(vals[k])) for k in keys)
 
     def _model_run(self, vals: dict, preset: str):

@@ -29,7 +29,8 @@ class FreeParameter:
     si_per_unit  SI value of one edge unit (1e-3 for mm, ms)
     models    the models it exists in
     kind      "scene" (a Scene field, needs a model run) or "chain" (applied to the simulated cycle)
-    op_key    its key in the report's operating point (labtool.reports.pipeline.operating_point, edge units)
+    op_key    its key in the report's operating point (labtool.reports.pipeline.operating_point: the
+              owner's attribute name, edge units)
     bounds    default search bounds (edge units)
     limits    physically possible values (edge units, inclusive): user bounds must lie inside
     log       search on a log scale
@@ -66,7 +67,7 @@ CATALOGUE = {p.name: p for p in (
                   (0.01, 0.6), (0.0, 5.0), True, 0.128, "groove backlash j (the gap the follower crosses)"),
     FreeParameter("restitution", "restitution", "-", 1.0, ("rigid",), "scene", "restitution",
                   (0.0, 1.0), (0.0, 1.0), False, 0.5, "Newton's restitution k of the rigid model's impacts"),
-    FreeParameter("contact_damping", "contact_damping_s_per_m", "s/m", 1.0, ("elastic",), "scene", "contact_damping",
+    FreeParameter("contact_damping", "contact_damping_s_per_m", "s/m", 1.0, ("elastic",), "scene", "contact_damping_s_per_m",
                   (0.0, 400.0), (0.0, 1e5), False, 40.0, "Hunt-Crossley damping of the elastic contact"),
     FreeParameter("contact_length", "contact_length_mm", "mm", 1e-3, ("elastic",), "scene", "contact_length_mm",
                   (1.0, 30.0), (1e-3, 1e3), True, 6.0, "roller-groove contact length lw behind Kc = 8.05e4 lw^(8/9)"),

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import typer
 
+from labtool.invocation import running
+
 try:  # typer >= 0.29 vendors click; older typer uses the click package
     from typer._click import exceptions as click_exc
 except ImportError:  # pragma: no cover
@@ -187,7 +189,7 @@ def _invoke(argv):
     args = sys.argv[1:] if argv is None else list(argv)
     _register_for(args)
     command = typer.main.get_command(_app)
-    with command.make_context("labtool", args) as ctx:
+    with running(args), command.make_context("labtool", args) as ctx:
         return command.invoke(ctx)
 
 

@@ -16,6 +16,18 @@ def phi1_grid(n: int = 720) -> np.ndarray:
     return 2.0 * math.pi * np.arange(n) / n
 
 
+def resample_revolution(frac_pos: np.ndarray, values: np.ndarray, grid: np.ndarray, outside: float | None = None):
+    """``values`` (n_names, n_samples) at the cam angles ``frac_pos`` (rad, increasing) linearly
+    interpolated at ``grid`` (rad): an array (n_names, n_grid). Grid points past the samples take
+    the nearest sample's value, or ``outside`` (e.g. NaN) when given."""
+    j = np.clip(np.searchsorted(frac_pos, grid, side="right") - 1, 0, len(frac_pos) - 2)
+    w = np.clip((grid - frac_pos[j]) / (frac_pos[j + 1] - frac_pos[j]), 0.0, 1.0)
+    v = values[:, j] * (1.0 - w) + values[:, j + 1] * w
+    if outside is not None:
+        v[:, (grid < frac_pos[0]) | (grid > frac_pos[-1])] = outside
+    return v
+
+
 class CycleAccumulator:
     def __init__(self, names: list[str], n_grid: int = 720):
         self.grid = phi1_grid(n_grid)
@@ -34,10 +46,7 @@ class CycleAccumulator:
         if not np.isfinite(vals).all():
             self.rejected += 1
             return False
-        # one search for all variables: linear interpolation weights of the grid in frac_pos
-        j = np.clip(np.searchsorted(frac_pos, self.grid, side="right") - 1, 0, len(frac_pos) - 2)
-        w = np.clip((self.grid - frac_pos[j]) / (frac_pos[j + 1] - frac_pos[j]), 0.0, 1.0)
-        v = vals[:, j] * (1.0 - w) + vals[:, j + 1] * w
+        v = resample_revolution(frac_pos, vals, self.grid)     # one search for all variables
         for i, k in enumerate(self.names):
             self.sum[k] += v[i]
             self.sumsq[k] += v[i] * v[i]

@@ -86,6 +86,34 @@ def process_recording(rec: Recording, output: Path, options: ProcessOptions | No
     return summary
 
 
+def process_file(recording: Path, output: Path, calibration_files=(), channels: dict | None = None,
+                 options: ProcessOptions | None = None, progress: Callable[[int], None] | None = None,
+                 warn: Callable[[str], None] | None = None, on_open: Callable | None = None,
+                 **reader_options) -> dict:
+    """A recording file -> ``output`` (measured.nc, written atomically); returns the summary dict.
+
+    ``calibration_files``: calibration TOML files (labtool calibrate), merged; ``channels``: the
+    file's channel for each of aE_t, aE_n, tacho (``{"aE_t": "ai0"}``); ``options``: processing
+    parameters (their calibration is replaced by the files'); ``reader_options``: what the reader
+    of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, ...);
+    ``on_open(recording)`` is called once the file is open (a progress bar sized on it)."""
+    from labtool.processing.calibration_file import read_calibrations
+    from labtool.processing.readers import open_recording
+
+    opts = options or ProcessOptions()
+    if calibration_files:
+        opts = dataclasses.replace(opts, calibration=read_calibrations(list(calibration_files)),
+                                   calibration_source="; ".join(str(c) for c in calibration_files))
+    rec = open_recording(recording, **reader_options)
+    try:
+        rec.rename_channels(channels or {})
+        if on_open is not None:
+            on_open(rec)
+        return process_recording(rec, output, opts, progress=progress, warn=warn)
+    finally:
+        rec.close()
+
+
 @dataclasses.dataclass
 class Chain:
     """Everything the per-window chain needs, fixed before pass 2 (each part also in the history)."""
@@ -299,10 +327,10 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
     if st.spikes.seen > st.spikes.stored:
         warn(f"{st.spikes.seen} spikes found; only the first {st.spikes.stored} are stored")
     _write_small(out, rec, st, marks["by_segment"], program, cam.rpm, segs)
-    return _global_attrs(rec, marks["method"], cam, chain, st, program, cal, hist, len(segs))
+    return _global_attrs(rec, marks["method"], cam, chain, st, program, cal, hist, len(segs), law, opts)
 
 
-def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> dict:
+def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, opts) -> dict:
     """Numbers as numbers; an unknown value is left out, never written as text."""
     lp = hist.find(H.Lowpass)
     # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
@@ -311,8 +339,7 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> di
                             history=f"labtool process {shown(rec.source)}")
     values = {
         "source_file": shown(rec.source), "source_format": rec.format, "start_time_utc": rec.start_time_utc,
-        "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm": cam.rpm,
-        "cam_speed_rpm_stated": float(rec.cam_speed_rpm), "law": program.segments[0].law.name,
+        "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm_measured": cam.rpm,
         "phi1_method": method, "lowpass_hz": lp.cutoff_hz, "DE_m": chain.DE,
         "omega2_normal_check_rel_rms": st.normal.value, "n_revolutions_averaged": st.cycles.count,
         "n_clipped_samples": st.clip.flagged, "n_segments": n_segs, "n_spikes": st.spikes.seen,
@@ -322,8 +349,18 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs) -> di
         values[f"ka_{name}_m_s2_per_v"] = cal[name]["ka_m_s2_per_v"]
         values[f"ka_{name}_uncertainty_m_s2_per_v"] = cal[name]["uncertainty_m_s2_per_v"]
         values[f"ka_source_{name}"] = cal[name]["source"]
-    # the run's operating point (with its sources), metadata and headroom, as the recording states them
+    # the run's operating point (with its sources), metadata and headroom, as the recording states them;
+    # the nominal speed and the law as processing took them (a stated 0 or NaN speed is no speed)
     values.update({k: rec.attrs[k] for k in recording_attrs.carried() if k in rec.attrs and k not in values})
+    if math.isfinite(rec.cam_speed_rpm) and rec.cam_speed_rpm > 0:
+        values["cam_speed_rpm"] = float(rec.cam_speed_rpm)
+    else:
+        values.pop("cam_speed_rpm", None)
+        values.pop("cam_speed_rpm_source", None)
+    if law is not None:
+        values["law"] = program.segments[0].law.name
+        values["law_source"] = ("option --law of labtool process" if law == opts.law else
+                                rec.attrs.get("law_source", "the recording"))
     for k, v in values.items():
         if v is None or v == "" or (isinstance(v, float) and not math.isfinite(v)):
             continue

@@ -16,7 +16,7 @@ import numpy as np
 
 from labtool.reports.figures import all_figures, render
 from labtool.reports.align import PERIODIC_TOL
-from labtool.reports.pipeline import Report, closest, headline, robust_verdict
+from labtool.reports.pipeline import Report, closest, headline, point_rows, robust_verdict
 from labtool.reports.summary import build_summary
 
 TEMPLATES = Path(__file__).with_name("templates")
@@ -71,7 +71,7 @@ def render_html(report: Report, rendered=None, dpi: int = 100) -> str:
     rows = report.threshold_rows
     context = {
         "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "measured": summary["measured"], "op": report.scene, "notes": report.notes,
+        "measured": summary["measured"], "op": report.scene, "op_rows": point_rows(report.scene), "notes": report.notes,
         "headline": headline(report), "closest": closest(report), "comparisons": report.comparisons,
         "metric_columns": METRIC_COLUMNS, "per_rev_columns": PER_REV_COLUMNS, "periodic_tol": PERIODIC_TOL,
         "metrics_by_signal": [(s, [c for c in report.comparisons if c["signal"] == s]) for s in ("omega2", "epsilon2")],

@@ -18,8 +18,8 @@ def _dash(v, spec=".2f") -> str:
 
 def _summary_lines(report: Report) -> list[str]:
     lines = [f"labtool report: {report.measured_path}",
-             f"cam speed simulated {report.scene['cam_speed_rpm']:.2f} rpm ({report.scene['cam_speed_source']}), "
-             f"law {report.scene['law']}, Fu {report.scene['Fu']:g} N, j {report.scene['backlash_mm']:g} mm, "
+             f"cam speed simulated {report.scene['cam_speed_rpm']:.2f} rpm ({report.scene['cam_speed_rpm_source']}), "
+             f"law {report.scene['law']}, Fu {report.scene['Fu_N']:g} N, j {report.scene['backlash_mm']:g} mm, "
              f"{len(report.cycles.revolutions)} whole revolution(s) used", ""]
     if report.threshold_rows:
         nfail = sum(not r["passed"] for r in report.threshold_rows)

@@ -17,20 +17,19 @@ from labtool.common.cf import in_seconds, udunits
 from labtool.common.names import shown
 from labtool.common.errors import FileFormatError, InputError, LabtoolError
 from labtool.processing import impacts
-from labtool.processing.readers.base import as_text, stated_number
+from labtool.common.operating_point import (FIELD, FIELDS, SOURCE_SUFFIX, OperatingPoint, Sourced, from_attrs,
+                                             resolve)
+from labtool.common.units import RPM
+from labtool.processing.readers.base import as_text
 from labtool.reports import align, events, metrics
 from labtool.reports.thresholds import Thresholds, evaluate
+from labtool.common.units import RPM
 
 SIGNALS = ("omega2", "epsilon2")
 # the units (UDUNITS spelling) the comparison reads the measured file in; another stated unit is refused
 MEASURED_UNITS = {"omega2": "rad s-1", "epsilon2": "rad s-2", "phi1": "rad"}
 MODELS = ("rigid", "elastic")
 MODES = ("const", "var")
-# the paper's experiment (sec. 2.4, 3.3): sine law, no load, j = 0.128 mm, nominal inertia
-EXPERIMENT = {"law": "sine", "Fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0}
-# model options (not properties of the recording): the paper's idealisations unless the user sets
-# them (k = 1, no contact damping, lw = 6 mm, the follower crosses the backlash)
-MODEL_OPTIONS = {"restitution": 1.0, "contact_damping": 0.0, "contact_length_mm": 6.0, "elastic_gap": "physical"}
 # the robustness check: the verdict again at the other preset and at half the simulated length
 OTHER_PRESET = {"fast": "standard", "standard": "fast", "reference": "standard"}
 DEFAULT_REVOLUTIONS = 6      # simulated cam revolutions: transient, then steady state or statistics
@@ -130,26 +129,6 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
                              f"(SI, as 'labtool process' writes it); convert {name} to {unit}")
 
 
-def _attr_float(ds, *names):
-    for n in names:
-        if n in ds.attrs:
-            try:
-                v = float(np.asarray(ds.attrs[n]).ravel()[0])
-            except (TypeError, ValueError, IndexError):
-                continue
-            return v
-    return None
-
-
-OPTIONS = {"Fu": "--fu", "backlash_mm": "--backlash-mm", "jt_factor": "--jt-factor"}
-
-
-def _stated_number(ds, name: str, option: str) -> float | None:
-    """The measured file's operating-point attribute ``name`` (``stated_number``): a value that is
-    not one number is refused, not replaced by the paper's."""
-    return stated_number(ds.attrs, name, ds.encoding.get("source", "the measured file"), option)
-
-
 def no_load_factor() -> float:
     """No-load over nominal cam speed of the models' drive with omega1 variable (n_sync / n_nominal)."""
     from labtool.models.mechanism import Mechanism
@@ -163,81 +142,63 @@ def max_cam_speed_rpm() -> float:
     return Mechanism.default().max_cam_speed_rpm
 
 
-def stated_cam_speed(ds: xr.Dataset) -> tuple[float | None, str | None]:
-    """The nominal cam speed the file states (rpm) and the attribute that states it."""
-    # labtool process keeps the recording's nominal speed as cam_speed_rpm_stated
-    for name in ("cam_speed_rpm_stated", "cam_speed_rpm", "n1_rpm"):
-        rpm = _attr_float(ds, name)
-        if rpm is not None:
-            return rpm, name
-    return None, None
+CONTRADICTION = 0.10    # a stated or given cam speed this far from the measured one contradicts it
 
 
 def operating_point(ds: xr.Dataset, measured_rpm: float, overrides: dict) -> dict:
-    """Scene parameters (edge units) for the simulations: CLI overrides, else the file's attributes,
-    else the paper's experiment.
+    """The operating point the models simulate, as a dict of the owner's attributes (edge units,
+    labtool.common.operating_point), each ``<attr>_source`` beside it, plus ``cam_speed_rpm_stated``
+    (the nominal speed the file states, or None), ``omega1_var_n1_rpm`` and ``assumed`` (the
+    stated fields that no option and no file gave: a default stood in).
 
-    The cam speed is ``--rpm``, else the **measured** mean speed of the whole revolutions, not the
-    nominal one the file states: a stand's drive slips under load and its speed setting is not
-    the paper's (the twin's variator gives the nominal speed at no load; the paper's models
-    with omega1 variable turn 1.087 x n1 at no load, docs/mechanism.md), so only the measured speed
-    puts a model's cycle on the measured one. omega1 const runs at that speed; omega1 var has its
-    drive set so that its no-load speed is that speed (nominal n1 = speed x n_nominal / n_sync,
-    ``omega1_var_n1_rpm``), as the stand's operator sets the variator."""
-    rpm = overrides.get("cam_speed_rpm")
-    src = "option --rpm"
-    if rpm is None:
-        rpm, src = measured_rpm, "measured: mean over the whole revolutions"
+    ``overrides``: SI values by field name (options). Each field is the option, else the measured
+    file's attribute, else the owner's default. The cam speed is ``cam_speed`` if given, else the
+    **measured** mean speed of the whole revolutions, not the nominal one the file states: a stand's
+    drive slips under load and its speed setting is not the paper's, so only the measured speed puts
+    a model's cycle on the measured one. omega1 const runs at that speed; omega1 var has its drive
+    set so that its no-load speed is that speed (nominal n1 = speed x n_nominal / n_sync,
+    ``omega1_var_n1_rpm``), as the stand's operator sets the variator. A given speed that
+    contradicts the measured one by more than CONTRADICTION is refused, before any simulation."""
+    where = shown(ds.encoding.get("source", "the measured file"))
+    sourced = resolve(overrides, ds.attrs, where=where)
+    stated = sourced.point.cam_speed_rpm if sourced.sources["cam_speed"].startswith("file attribute") else None
+    given = overrides.get("cam_speed")
+    rpm, src = ((given / RPM, sourced.sources["cam_speed"]) if given is not None else
+                (measured_rpm, "measured: mean over the whole revolutions"))
     limit = max_cam_speed_rpm()
     if not (math.isfinite(rpm) and 0 < rpm <= limit):
         raise InputError(f"cam speed {rpm:g} rpm ({src}) is outside what the models can simulate: "
                          f"0 < n1 <= {limit:g} rpm (the drive motor's synchronous speed)")
-    stated, stated_name = stated_cam_speed(ds)
-    out = {"cam_speed_rpm": float(rpm), "cam_speed_source": src, "cam_speed_rpm_stated": stated,
-           "cam_speed_stated_by": stated_name, "omega1_var_n1_rpm": float(rpm) / no_load_factor()}
-    for key, attr_names in (("law", ("law",)), ("Fu", ("Fu_N", "Fu")), ("backlash_mm", ("backlash_mm",)),
-                            ("jt_factor", ("jt_factor",))):
-        if overrides.get(key) is not None:
-            out[key], out[f"{key}_source"] = overrides[key], "option"
-            continue
-        if key == "law":
-            v, name = (str(ds.attrs["law"]), "law") if "law" in ds.attrs else (None, "")
-        else:
-            v, name = None, ""
-            for n in attr_names:
-                v = _stated_number(ds, n, OPTIONS[key])
-                if v is not None:
-                    name = n
-                    break
-            if v is None and key == "backlash_mm":
-                metres = _stated_number(ds, "backlash_m", OPTIONS[key])
-                if metres is not None:
-                    v, name = metres * 1e3, "backlash_m"
-        if v is None:  # not in the file: the paper's experiment, said so (and noted on the page)
-            out[key], out[f"{key}_source"] = EXPERIMENT[key], "not in the file: the paper's experiment"
-            out.setdefault("assumed", []).append(key)
-        else:
-            stated = ds.attrs.get(f"{name}_source")
-            out[key] = v
-            out[f"{key}_source"] = f"file attribute {name}" + (f", {stated}" if stated else "")
-    for key, default in MODEL_OPTIONS.items():
-        out[key] = default if overrides.get(key) is None else overrides[key]
+    if given is not None and math.isfinite(measured_rpm) and abs(rpm / measured_rpm - 1.0) > CONTRADICTION:
+        raise InputError(f"--rpm {rpm:g} contradicts the measured cam speed {measured_rpm:.1f} rpm (the mean over "
+                         f"the whole revolutions of {where}): the models would not run where the stand did; "
+                         "drop --rpm to simulate at the measured speed")
+    point = sourced.point.replace(cam_speed=rpm * RPM)
+    out = {**point.attrs(), **Sourced(point, {**sourced.sources, "cam_speed": src}).source_attrs()}
+    out.update(cam_speed_rpm_stated=stated, omega1_var_n1_rpm=float(rpm) / no_load_factor(),
+               assumed=sourced.assumed(), source_notes=list(sourced.notes))
     return out
 
 
-# --------------------------------------------------------------------------- simulations
+def point_rows(op: dict) -> list[tuple[str, str, str]]:
+    """(what, value with its unit, where it came from) for every operating-point field of ``op``."""
+    point = point_of(op)
+    return [(f.named, f.shown(getattr(point, f.name)), op.get(f.attr + SOURCE_SUFFIX, "")) for f in FIELDS]
+
+
+def point_of(op: dict) -> OperatingPoint:
+    """The OperatingPoint of a report's operating-point dict (``operating_point``'s)."""
+    return from_attrs(op, where="the report's operating point")
+
 
 def model_scene(op: dict, mode: str, accuracy: str, revolutions: float):
-    """The models' Scene for the operating point ``op`` (edge units) over whole revolutions; with
-    omega1 var the drive's nominal n1 is ``omega1_var_n1_rpm`` (its no-load speed is the op's)."""
+    """The models' Scene for the operating point ``op`` (``operating_point``'s dict) over whole
+    revolutions; with omega1 var the drive's nominal n1 is ``omega1_var_n1_rpm`` (its no-load speed
+    is the op's)."""
     from labtool.models.dynamics.scene import Scene
     rpm = op["cam_speed_rpm"] if mode == "const" else op.get("omega1_var_n1_rpm", op["cam_speed_rpm"])
-    return Scene(law=op["law"], cam_speed_rpm=rpm, Fu=op["Fu"], backlash=op["backlash_mm"] * 1e-3,
-                 jt_factor=op["jt_factor"], omega1_mode=mode, accuracy=accuracy, revolutions=revolutions,
-                 rise_only=False, restitution=op.get("restitution", 1.0),
-                 contact_damping=op.get("contact_damping", 0.0),
-                 contact_length=op.get("contact_length_mm", 6.0) * 1e-3,
-                 elastic_gap=op.get("elastic_gap", "physical"))
+    return Scene.at(point_of(op), cam_speed=rpm * RPM, omega1_mode=mode, accuracy=accuracy,
+                    revolutions=revolutions, rise_only=False)
 
 
 def run_simulation(op: dict, requested: str, mode: str, accuracy: str, revolutions: float,
@@ -431,13 +392,10 @@ def fitted_run(fit: dict, accuracy: str, revolutions: float, cond, time_filter) 
 
 def assumed_note(op: dict) -> str:
     """The note naming the operating-point values the measured file does not state (``op["assumed"]``)."""
-    names = {"Fu": ("load Fu", "N", "--fu"), "backlash_mm": ("backlash j", "mm", "--backlash-mm"),
-             "jt_factor": ("inertia factor Jt", "", "--jt-factor"), "law": ("motion law", "", "--law")}
-    said = ", ".join(f"{names[k][0]} = {op[k] if isinstance(op[k], str) else format(op[k], 'g')}"
-                     f"{(' ' + names[k][1]) if names[k][1] else ''}" for k in op["assumed"])
-    return (f"the measured file does not state {', '.join(names[k][0] for k in op['assumed'])}: the models use "
-            f"the paper's experiment ({said}); give {', '.join(names[k][2] for k in op['assumed'])} if the "
-            "stand ran otherwise")
+    fields = [FIELD[n] for n in op["assumed"]]
+    said = ", ".join(f"{f.named} = {f.shown(f.from_edge(op[f.attr]))}" for f in fields)
+    return (f"the measured file does not state {', '.join(f.named for f in fields)}: the models use labtool's "
+            f"defaults ({said}); give {', '.join(f.option for f in fields)} if the stand ran otherwise")
 
 
 def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
@@ -447,17 +405,17 @@ def _measured_notes(ds, cycles, op, time_filter) -> list[str]:
                      "the simulations see only the common harmonic low-pass, and no impacts are detected")
     if ds.attrs.get("source") == "synthetic":
         notes.append("the measured file is SYNTHETIC (kinematics + noise, labtool.reports.synthetic), not a recording")
-    dev = cycles.cam_speed_rpm / op["cam_speed_rpm"] - 1.0
-    if abs(dev) > 0.10:
-        notes.append(f"the measured cam speed {cycles.cam_speed_rpm:.1f} rpm differs by {100 * dev:+.0f} % from the "
-                     f"simulated {op['cam_speed_rpm']:g} rpm ({op['cam_speed_source']}); check the file or give --rpm")
+    notes.extend(op.get("source_notes", ()))
     if op.get("assumed"):
         notes.append(assumed_note(op))
     stated = op.get("cam_speed_rpm_stated")
-    if stated and abs(cycles.cam_speed_rpm / stated - 1.0) > 0.002:
-        notes.append(f"the file states {stated:g} rpm ({op['cam_speed_stated_by']}), the cam turned at "
-                     f"{cycles.cam_speed_rpm:.2f} rpm: the models run at {op['cam_speed_rpm']:.2f} rpm "
-                     f"({op['cam_speed_source']})")
+    if stated and abs(cycles.cam_speed_rpm / stated - 1.0) > CONTRADICTION:
+        notes.append(f"the file states {stated:g} rpm, but the cam turned at {cycles.cam_speed_rpm:.2f} rpm: the "
+                     f"stated speed is wrong or belongs to another run; the models run at {op['cam_speed_rpm']:.2f} "
+                     f"rpm ({op['cam_speed_rpm_source']})")
+    elif stated and abs(cycles.cam_speed_rpm / stated - 1.0) > 0.002:
+        notes.append(f"the file states {stated:g} rpm, the cam turned at {cycles.cam_speed_rpm:.2f} rpm: the models "
+                     f"run at {op['cam_speed_rpm']:.2f} rpm ({op['cam_speed_rpm_source']})")
     if cycles.partial:
         notes.append(f"{cycles.partial} partial revolution(s) of the recording left out (ends or gaps)")
     if cycles.in_file is not None:

@@ -77,7 +77,7 @@ def measured_info(report: Report) -> dict:
     return {
         "file": report.measured_path,
         "source": a.get("source", "recording"),
-        "cam_speed_rpm_nominal": a.get("cam_speed_rpm_stated", a.get("cam_speed_rpm")),
+        "cam_speed_rpm_nominal": report.scene.get("cam_speed_rpm_stated"),
         "cam_speed_rpm_measured": report.cycles.cam_speed_rpm,
         "ka_m_s2_per_v": ka,
         "ka_source": ka_source,

@@ -14,6 +14,7 @@ import numpy as np
 
 from labtool.acquisition import signal_chain as sc
 from labtool.acquisition.sim_stand import SimStand
+from labtool.common.units import RPM
 
 
 def stand_volts(duration_s: float, rpm: float = 180.0, fs: float = 10000.0, seed: int = 1,
@@ -21,7 +22,7 @@ def stand_volts(duration_s: float, rpm: float = 180.0, fs: float = 10000.0, seed
     """(volts (n, 3) float32 of aE_t, aE_n, tacho; scene; chain params; the rate really used, Hz)."""
     # the kinematic truth (the cam as input, a speed ripple): smooth and known in closed form, what the
     # processing accuracy tests compare with; the stand's default twin truth is for the model checks
-    st = sc.StandScene(cam_speed_rpm=rpm, **{"truth_model": "kinematic", **(scene or {})})
+    st = sc.StandScene(cam_speed=rpm * RPM, **{"truth_model": "kinematic", **(scene or {})})
     # the paper's chain (480C02 at gain x10, Ka = 86.43 m/s^2/V), which the kinematic truth never clips
     pa = sc.ChainParams(**{"ka_m_s2_per_v": (sc.PAPER_KA, sc.PAPER_KA), **(params or {})})
     dev = SimStand(st, pa, seed=seed, duration_s=duration_s, realtime=False)

@@ -12,13 +12,14 @@ import xarray as xr
 from labtool.models.dynamics import accuracy, elastic, events, rigid
 from labtool.common.errors import InputError
 from labtool.models.study.paper import table1_runs
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import SimulationResult
+from labtool.common.units import RPM
 
 
 def _scene(run, **kw):
     r = table1_runs().iloc[run - 1]
-    return Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
+    return paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
 
 
 @pytest.mark.parametrize("model, mod", [("rigid", rigid), ("elastic", elastic)])

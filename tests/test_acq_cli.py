@@ -10,6 +10,7 @@ from scipy import signal
 from labtool.acquisition import signal_chain as sc
 from labtool.acquisition.recorder import read_recording
 from labtool.cli import main
+from labtool.common.units import RPM
 
 
 @pytest.mark.slow
@@ -153,7 +154,7 @@ def test_truth_from_a_recordings_attributes(tmp_path):
     scene = sc.scene_from_attrs(rec["attrs"])
     assert scene.cam_speed_rpm == 500 and scene.ripple == 0.01 and scene.backlash == pytest.approx(0.128e-3)
     t = np.arange(rec["signals"].shape[0]) / rec["attrs"]["sample_rate_hz"]
-    np.testing.assert_array_equal(sc.truth(scene, t)["omega2"], sc.truth(sc.StandScene(cam_speed_rpm=500, ripple=0.01), t)["omega2"])
+    np.testing.assert_array_equal(sc.truth(scene, t)["omega2"], sc.truth(sc.StandScene(cam_speed=500 * RPM, ripple=0.01), t)["omega2"])
     with pytest.raises(sc.InputError):
         sc.scene_from_attrs({"device": "nidaqmx"})
 

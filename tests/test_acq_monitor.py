@@ -13,6 +13,7 @@ from labtool.acquisition.device import Block
 from labtool.acquisition.monitor import Monitor
 from labtool.acquisition.sim_stand import SimStand
 from labtool import monitor_view
+from labtool.common.units import RPM
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CHAIN = sc.ChainParams(ka_m_s2_per_v=(86.43, 86.43))  # the paper's gain x10: aE_t at 96 % of +-10 V at 500 rpm
@@ -29,7 +30,7 @@ def blocks_of(dev, seconds):
 
 @pytest.mark.parametrize("rpm", [180.0, 500.0])
 def test_cam_speed_peak_rms_and_headroom_from_the_simulated_stand(rpm):
-    dev = SimStand(sc.StandScene(cam_speed_rpm=rpm, truth_model="kinematic"), PAPER_CHAIN, seed=2, duration_s=3.0,
+    dev = SimStand(sc.StandScene(cam_speed=rpm * RPM, truth_model="kinematic"), PAPER_CHAIN, seed=2, duration_s=3.0,
                    realtime=False)
     blocks = blocks_of(dev, 3.0)
     ka = [86.43, 86.43, np.nan]
@@ -132,7 +133,7 @@ def test_a_piped_realtime_run_reports_while_it_runs(tmp_path):
 def test_the_terminal_panel_shows_headroom_and_both_traces():
     from rich.console import Console
 
-    dev = SimStand(sc.StandScene(cam_speed_rpm=500.0, truth_model="kinematic"), PAPER_CHAIN, seed=2, duration_s=1.0,
+    dev = SimStand(sc.StandScene(cam_speed=500.0 * RPM, truth_model="kinematic"), PAPER_CHAIN, seed=2, duration_s=1.0,
                    realtime=False)
     mon = Monitor(dev.channel_names, 10000.0, [86.43, 86.43, np.nan], [10.0] * 3, duration_s=2.0)
     for b in blocks_of(dev, 1.0):

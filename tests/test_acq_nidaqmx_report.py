@@ -37,8 +37,8 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
                  "--json", str(js)]) in (0, 1)
     doc = json.loads(js.read_text())
     op = doc["operating_point"]
-    assert (op["Fu"], op["backlash_mm"], op["jt_factor"], op["law"]) == (5.0, 0.1, 1.2, "sine")
-    assert op["Fu_source"] == "file attribute Fu_N, stated by the operator (--fu)"
+    assert (op["Fu_N"], op["backlash_mm"], op["jt_factor"], op["law"]) == (5.0, 0.1, 1.2, "sine")
+    assert op["Fu_N_source"] == "file attribute Fu_N, stated by the operator (--fu)"
     assert op["backlash_mm_source"] == "file attribute backlash_mm, stated by the operator (--backlash-mm)"
     run = doc["measured"]["run"]
     assert run["test_id"] == "T-042" and run["operator"] == "M. Ionescu" and run["sensor_serial"] == "LW001"
@@ -49,12 +49,14 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
 
 
 @pytest.mark.hostile("silent_wrong")
-def test_a_value_not_in_the_file_is_said_to_be_the_papers():
+def test_a_value_not_in_the_file_is_said_to_be_a_default():
     import xarray as xr
 
     from labtool.reports.pipeline import operating_point
 
-    op = operating_point(xr.Dataset(attrs={"cam_speed_rpm_stated": 180.0, "Fu_N": 5.0}), 180.0, {})
-    assert op["Fu"] == 5.0 and op["Fu_source"] == "file attribute Fu_N"
-    assert op["backlash_mm"] == 0.128 and op["backlash_mm_source"] == "not in the file: the paper's experiment"
-    assert operating_point(xr.Dataset(attrs={"cam_speed_rpm_stated": 180.0}), 180.0, {"Fu": 2.0})["Fu_source"] == "option"
+    op = operating_point(xr.Dataset(attrs={"cam_speed_rpm": 180.0, "Fu_N": 5.0}), 180.0, {})
+    assert op["Fu_N"] == 5.0 and op["Fu_N_source"] == "file attribute Fu_N"
+    assert op["backlash_mm"] == 0.128 and op["backlash_mm_source"].startswith("default (")
+    assert op["assumed"] == ["law", "backlash", "jt_factor"]
+    given = operating_point(xr.Dataset(attrs={"cam_speed_rpm": 180.0}), 180.0, {"Fu": 2.0})
+    assert given["Fu_N_source"] == "option --fu"

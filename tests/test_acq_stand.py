@@ -13,6 +13,7 @@ from labtool.models.mechanism.kinematics import analyze
 from labtool.models.mechanism.linkage import linkage_state
 from labtool.models.mechanism import Mechanism
 from labtool.models.mechanism.motion_laws import CamProgram
+from labtool.common.units import RPM
 
 
 def record(scene=None, params=None, seed=1, duration=2.0, rate=10000.0, faults=()):
@@ -27,7 +28,7 @@ def record(scene=None, params=None, seed=1, duration=2.0, rate=10000.0, faults=(
 
 
 def test_truth_without_ripple_is_the_kinematic_analysis():
-    scene = sc.StandScene(cam_speed_rpm=300, ripple=0.0, truth_model="kinematic")
+    scene = sc.StandScene(cam_speed=300 * RPM, ripple=0.0, truth_model="kinematic")
     W = scene.omega1_nominal
     phi1 = np.linspace(0, 2 * math.pi, 721)[:-1]
     ds = analyze(scene.mechanism, scene.program, 300.0, phi1=phi1)
@@ -37,7 +38,7 @@ def test_truth_without_ripple_is_the_kinematic_analysis():
 
 
 def test_truth_with_ripple_is_consistent_by_finite_differences():
-    scene = sc.StandScene(cam_speed_rpm=180, ripple=0.02, truth_model="kinematic")
+    scene = sc.StandScene(cam_speed=180 * RPM, ripple=0.02, truth_model="kinematic")
     t = np.linspace(0.0, 0.4, 400001)
     tr = sc.truth(scene, t)
     dt = t[1] - t[0]
@@ -70,7 +71,7 @@ def test_gravity_component_matches_the_sensor_axes_from_the_linkage():
 @pytest.mark.slow
 @pytest.mark.parametrize("truth_model", ["kinematic", "twin"])
 def test_recorded_volts_times_ka_follow_the_truth_in_the_cam_band(truth_model):
-    scene = sc.StandScene(cam_speed_rpm=180, truth_model=truth_model)
+    scene = sc.StandScene(cam_speed=180 * RPM, truth_model=truth_model)
     dev, blocks = record(scene, duration=2.0)
     v = np.concatenate([b.data for b in blocks]).astype(float)
     t = np.arange(v.shape[0]) / dev.actual_rate_hz
@@ -88,7 +89,7 @@ def test_recorded_volts_times_ka_follow_the_truth_in_the_cam_band(truth_model):
 
 
 def test_tacho_rises_once_per_revolution_at_phi1_zero():
-    scene = sc.StandScene(cam_speed_rpm=300, truth_model="kinematic")
+    scene = sc.StandScene(cam_speed=300 * RPM, truth_model="kinematic")
     dev, blocks = record(scene, duration=1.0)
     tach = np.concatenate([b.data for b in blocks])[:, 2]
     rises = np.flatnonzero((tach[1:] > 2.5) & (tach[:-1] <= 2.5)) + 1
@@ -102,7 +103,7 @@ def test_tacho_rises_once_per_revolution_at_phi1_zero():
 
 def test_tacho_of_the_twin_rises_where_its_cam_completes_a_turn():
     """The twin's cam slips under load: the pulses follow its own phi1, not t = k T."""
-    scene = sc.StandScene(cam_speed_rpm=300)
+    scene = sc.StandScene(cam_speed=300 * RPM)
     dev, blocks = record(scene, duration=1.0)
     tach = np.concatenate([b.data for b in blocks])[:, 2]
     rises = np.flatnonzero((tach[1:] > 2.5) & (tach[:-1] <= 2.5)) + 1
@@ -223,7 +224,7 @@ def test_parse_device_and_faults_good():
         Event(0, "boom")
 
 
-@pytest.mark.parametrize("kw", [dict(mode="x"), dict(cam_speed_rpm=0), dict(Fu=-1), dict(backlash=-1e-3),
+@pytest.mark.parametrize("kw", [dict(mode="x"), dict(cam_speed=0 * RPM), dict(Fu=-1), dict(backlash=-1e-3),
                                 dict(law="nope"), dict(ripple=0.7), dict(cal_freq=0), dict(cal_channel="tacho")])
 def test_stand_scene_bad_input(kw):
     with pytest.raises(InputError):
@@ -232,7 +233,7 @@ def test_stand_scene_bad_input(kw):
 
 @pytest.fixture(scope="module")
 def rigid_scene():
-    return sc.StandScene(cam_speed_rpm=300, truth_model="rigid", truth_revolutions=3, ripple=0.0)
+    return sc.StandScene(cam_speed=300 * RPM, truth_model="rigid", truth_revolutions=3, ripple=0.0)
 
 
 @pytest.mark.slow
@@ -270,7 +271,7 @@ def test_boxcar_epsilon2_keeps_every_velocity_step(rigid_scene):
 
 
 def test_a_model_truth_that_never_settles_is_served_over_its_run_only():
-    scene = sc.StandScene(cam_speed_rpm=300, truth_model="rigid", restitution=1.0, truth_revolutions=3, ripple=0.0)
+    scene = sc.StandScene(cam_speed=300 * RPM, truth_model="rigid", restitution=1.0, truth_revolutions=3, ripple=0.0)
     tab = sc.model_table(scene)
     assert not tab["periodic"]                   # k = 1 keeps bouncing: no steady turn to repeat
     assert sc.model_truth_span(scene) < 0.6
@@ -292,12 +293,12 @@ def test_the_twins_bending_mode_is_not_applied_twice():
     """The twin carries the follower's mode as a degree of freedom: the chain's resonance filter
     then shapes the roughness noise only, so with that noise off the chain's resonance setting
     does not change a sample."""
-    scene = sc.StandScene(cam_speed_rpm=300)
+    scene = sc.StandScene(cam_speed=300 * RPM)
     quiet = dict(mech_noise_m_s2=0.0)
     a = np.concatenate([b.data for b in record(scene, sc.ChainParams(resonance_hz=1200.0, **quiet), duration=0.5)[1]])
     b = np.concatenate([b.data for b in record(scene, sc.ChainParams(resonance_hz=2500.0, resonance_zeta=0.2, **quiet), duration=0.5)[1]])
     np.testing.assert_array_equal(a, b)
-    kin = sc.StandScene(cam_speed_rpm=300, truth_model="kinematic")   # the kinematic truth has no mode of its own
+    kin = sc.StandScene(cam_speed=300 * RPM, truth_model="kinematic")   # the kinematic truth has no mode of its own
     c = np.concatenate([b.data for b in record(kin, sc.ChainParams(resonance_hz=1200.0, **quiet), duration=0.5)[1]])
     d = np.concatenate([b.data for b in record(kin, sc.ChainParams(resonance_hz=2500.0, resonance_zeta=0.2, **quiet), duration=0.5)[1]])
     assert not np.array_equal(c, d)
@@ -308,8 +309,8 @@ def test_every_truth_parameter_survives_the_recordings_attributes():
 
     physics = TwinPhysics(drive="input", mode_hz=1500.0, mode_zeta=0.03, mode_mass_share=0.2, friction_torque=0.01,
                           friction_radius=2e-5, friction_speed=2e-3, persistence_s=3e-3, warmup_revolutions=2)
-    scene = sc.StandScene(cam_speed_rpm=250, Fu=5.0, backlash=0.1e-3, jt_factor=1.5, ripple=0.01, restitution=0.4,
-                          contact_damping=25.0, contact_length=7e-3, kc_factor=1.2, truth_accuracy="standard", twin=physics)
+    scene = sc.StandScene(cam_speed=250 * RPM, Fu=5.0, backlash=0.1e-3, jt_factor=1.5, ripple=0.01, restitution=0.4,
+                          contact_damping=25.0, contact_length=7e-3, kc_factor=1.2, accuracy="standard", twin=physics)
     again = sc.scene_from_attrs({"device": "sim", **scene.attrs()})
     assert again == scene
     t = np.linspace(0.0, 0.3, 301)
@@ -319,7 +320,7 @@ def test_every_truth_parameter_survives_the_recordings_attributes():
 def test_the_recordings_truth_events_are_the_stands():
     """truth_events rebuilds the twin from the scene: the first impact after each lift-off is where
     the recorded aE_t, quiet during the flight before it, jumps."""
-    scene = sc.StandScene(cam_speed_rpm=300)
+    scene = sc.StandScene(cam_speed=300 * RPM)
     dev, blocks = record(scene, duration=1.0)
     v = np.concatenate([b.data for b in blocks]).astype(float)[:, 0] * dev.params.ka_m_s2_per_v[0]
     ev = sc.truth_events(scene, 1.0)
@@ -336,7 +337,7 @@ def test_the_recordings_truth_events_are_the_stands():
 
 @pytest.mark.parametrize("rpm", [180, 300, 500])
 def test_the_default_chain_has_room_for_the_twins_impacts(rpm):
-    dev, blocks = record(sc.StandScene(cam_speed_rpm=rpm), duration=1.0)
+    dev, blocks = record(sc.StandScene(cam_speed=rpm * RPM), duration=1.0)
     v = np.concatenate([b.data for b in blocks])
     assert not [e for b in blocks for e in b.events if e.kind == "clip"]
     assert 1.0 < np.abs(v[:, 0]).max() < 8.0            # used, with headroom below the 10 V rails
@@ -345,7 +346,7 @@ def test_the_default_chain_has_room_for_the_twins_impacts(rpm):
 @pytest.mark.hostile("silent_wrong")
 def test_a_sensitive_range_clips_and_says_so():
     """The paper's x10 chain (Ka = 86.43) cannot hold the twin's impacts at 300 rpm: clip events."""
-    dev, blocks = record(sc.StandScene(cam_speed_rpm=300), sc.ChainParams(ka_m_s2_per_v=(86.43, 86.43)), duration=1.0)
+    dev, blocks = record(sc.StandScene(cam_speed=300 * RPM), sc.ChainParams(ka_m_s2_per_v=(86.43, 86.43)), duration=1.0)
     clips = [e for b in blocks for e in b.events if e.kind == "clip"]
     assert clips and clips[0].detail.startswith("aE_t")
     assert dev.params.conditioner_gain == pytest.approx(10.0)

@@ -11,15 +11,16 @@ import pytest
 from labtool.models.dynamics import accuracy
 from labtool.models.dynamics.auto import CONTACT_OUTPUTS, choose_level, simulate_auto
 from labtool.models.study.paper import table1_runs
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
+from labtool.common.units import RPM
 
 KEYS = ("MR13D_max_Nm", "MR13D_min_Nm", "dphi2_max_deg", "domega2_max_rad_s", "domega1_max_rad_s",
         "percussion_max_Ns")
 
 
 def _table1_scenes(mode="var"):
-    return [(int(r.run), Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
+    return [(int(r.run), paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
                                omega1_mode=mode)) for r in table1_runs().itertuples()]
 
 
@@ -48,7 +49,7 @@ def test_auto_matches_the_full_rigid_model_on_table1_at_a_fraction_of_the_cost()
 
 def test_no_sign_change_at_constant_speed_runs_no_dynamic_model():
     # Table 1 run 9 (Fu = 65 N, 180 rpm): MR13D stays positive over the rise
-    scene = Scene(cam_speed_rpm=180.0, Fu=65.0, backlash=0.016e-3, omega1_mode="const")
+    scene = paper_scene(cam_speed=180.0 * RPM, Fu=65.0, backlash=0.016e-3, omega1_mode="const")
     level, reason = choose_level(scene)
     assert level == "kinematic" and "keeps its sign" in reason
     res = simulate(scene, "auto")
@@ -62,7 +63,7 @@ def test_no_sign_change_at_constant_speed_runs_no_dynamic_model():
 
 
 def test_no_backlash_at_constant_speed_is_kinematic_even_with_a_sign_change():
-    scene = Scene(cam_speed_rpm=180.0, Fu=0.0, backlash=0.0, omega1_mode="const")
+    scene = paper_scene(cam_speed=180.0 * RPM, Fu=0.0, backlash=0.0, omega1_mode="const")
     level, reason = choose_level(scene)
     assert level == "kinematic" and "no backlash" in reason
     full = simulate(scene, "rigid").indicators
@@ -73,7 +74,7 @@ def test_no_backlash_at_constant_speed_is_kinematic_even_with_a_sign_change():
 
 
 def test_variable_speed_without_contact_loss_runs_only_the_one_dof_model():
-    scene = Scene(cam_speed_rpm=180.0, Fu=65.0, backlash=0.016e-3, omega1_mode="var")
+    scene = paper_scene(cam_speed=180.0 * RPM, Fu=65.0, backlash=0.016e-3, omega1_mode="var")
     stats = {}
     full = accuracy.run_model(scene, "rigid", stats=stats)
     res = simulate(scene, "auto")
@@ -85,7 +86,7 @@ def test_variable_speed_without_contact_loss_runs_only_the_one_dof_model():
 
 
 def test_contact_outputs_escalate_to_the_elastic_model():
-    scene = Scene()
+    scene = paper_scene()
     assert choose_level(scene, needs_contact_outputs=True)[0] == "elastic"
     res = simulate_auto(scene, outputs={"xel_max_mm"})
     assert res.model == "elastic" and "contact outputs" in res.reason
@@ -94,20 +95,20 @@ def test_contact_outputs_escalate_to_the_elastic_model():
 
 
 def test_auto_reason_is_in_the_dataset():
-    res = simulate(Scene(), "auto")
+    res = simulate(paper_scene(), "auto")
     assert res.dataset.attrs["model"] == res.model == "rigid"
     assert res.dataset.attrs["model_reason"] == res.reason
     assert "MR13D changes sign" in res.reason and "2-DOF" in res.reason
 
 
 @pytest.mark.parametrize("kw", [
-    dict(cam_speed_rpm=1000.0, jt_factor=0.25, backlash=1e-6, restitution=1.0),
-    dict(cam_speed_rpm=60.0, jt_factor=10.0, backlash=1e-3, restitution=0.5),
-    dict(cam_speed_rpm=500.0, Fu=500.0, backlash=0.128e-3, restitution=0.0),
-    dict(cam_speed_rpm=300.0, backlash=0.016e-3, restitution=0.8, omega1_mode="const"),
+    dict(cam_speed=1000.0 * RPM, jt_factor=0.25, backlash=1e-6, restitution=1.0),
+    dict(cam_speed=60.0 * RPM, jt_factor=10.0, backlash=1e-3, restitution=0.5),
+    dict(cam_speed=500.0 * RPM, Fu=500.0, backlash=0.128e-3, restitution=0.0),
+    dict(cam_speed=300.0 * RPM, backlash=0.016e-3, restitution=0.8, omega1_mode="const"),
 ])
 def test_auto_matches_the_full_model_at_the_extremes(kw):
-    scene = Scene(**kw)
+    scene = paper_scene(**kw)
     full = accuracy.run_model(scene, "rigid").indicators
     auto = simulate(scene, "auto")
     if auto.model == "kinematic":       # exact only where the rigid model never leaves the flank
@@ -128,7 +129,7 @@ def test_the_decision_reads_the_same_moment_range_as_the_kinematic_analysis():
 
     for r in table1_runs().itertuples():
         for mode in ("const", "var"):
-            s = Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
+            s = paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor,
                       omega1_mode=mode)
             mn, mx = rise_moment_range(s)
             kin = _kinematic(s).indicators

@@ -10,8 +10,9 @@ from labtool.models.mechanism import cam_tables, memo
 from labtool.models.dynamics import elastic
 from labtool.models.mechanism.cam_profile import contact_geometry
 from labtool.models.mechanism.kinematics import follower_motion, kinetostatic_moment, load_force_x
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
+from labtool.common.units import RPM
 
 
 def _reference(scene, phi1, omega1):
@@ -26,7 +27,7 @@ def _reference(scene, phi1, omega1):
 @pytest.mark.parametrize("law", ["sine", "cosine", "modtrap"])
 @pytest.mark.parametrize("rpm,Fu,jt", [(180.0, 0.0, 1.0), (300.0, 65.0, 4.0), (60.0, 500.0, 0.25)])
 def test_terms_at_speed_equal_the_kinematic_analysis(law, rpm, Fu, jt):
-    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, jt_factor=jt)
+    scene = paper_scene(law=law, cam_speed=rpm * RPM, Fu=Fu, jt_factor=jt)
     phi1 = np.linspace(0.0, 2.0 * math.pi, 1441)            # rise, dwell, return, dwell
     omega1 = scene.omega1_nominal
     terms = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
@@ -47,7 +48,7 @@ def test_terms_at_speed_equal_the_kinematic_analysis(law, rpm, Fu, jt):
 def test_until_holds_the_rise_at_its_last_instant():
     """At phi1 = rise exactly the dwell begins; with ``until`` just below it the last instant keeps
     the rise's load and motion (the cosine law's acceleration does not vanish there)."""
-    scene = Scene(Fu=65.0, law="cosine")
+    scene = paper_scene(Fu=65.0, law="cosine")
     rise = scene.program.rise_angle
     phi1 = np.array([0.5 * rise, np.nextafter(rise, 0.0), rise, rise + 0.01])
     free = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
@@ -59,7 +60,7 @@ def test_until_holds_the_rise_at_its_last_instant():
 
 
 def test_stroke_spline_reproduces_the_exact_linkage():
-    scene = Scene(Fu=65.0, jt_factor=4.0)
+    scene = paper_scene(Fu=65.0, jt_factor=4.0)
     rng = np.random.default_rng(7)
     phi1 = np.sort(rng.uniform(0.0, 2.0 * math.pi, 4000))
     exact = cam_tables.angle_terms(scene.mechanism, scene.program, phi1)
@@ -73,9 +74,9 @@ def test_stroke_spline_reproduces_the_exact_linkage():
 
 
 def test_spline_falls_back_to_the_exact_linkage_outside_the_stroke():
-    mech = Scene().mechanism
+    mech = paper_scene().mechanism
     sp = cam_tables.stroke_spline(mech)
-    prog = Scene(law="sine").program.__class__.rise_dwell_return_dwell("sine", stroke=2.0 * mech.psi_a)
+    prog = paper_scene(law="sine").program.__class__.rise_dwell_return_dwell("sine", stroke=2.0 * mech.psi_a)
     phi1 = np.linspace(0.0, prog.rise_angle, 50)       # a stroke twice the tabulated one
     assert mech.phiD + mech.psi0 + prog(phi1)[0].max() > sp.x[-1]
     a = cam_tables.angle_terms(mech, prog, phi1)
@@ -85,7 +86,7 @@ def test_spline_falls_back_to_the_exact_linkage_outside_the_stroke():
 
 def test_one_cached_grid_serves_every_speed_load_and_inertia():
     memo.clear_cache()
-    runs = [Scene(cam_speed_rpm=n, Fu=f, jt_factor=j) for n, f, j in ((180, 0, 1), (300, 65, 4), (500, 0, 1))]
+    runs = [paper_scene(cam_speed=n * RPM, Fu=f, jt_factor=j) for n, f, j in ((180, 0, 1), (300, 65, 4), (500, 0, 1))]
     span = runs[0].program.rise_angle
     tabs = [elastic.grid_tables(s, span) for s in runs]
     key_terms = cam_tables.grid_terms(runs[0].mechanism, runs[0].program, span, elastic.GRID_POINTS,
@@ -103,7 +104,7 @@ def test_one_cached_grid_serves_every_speed_load_and_inertia():
 
 def test_cache_is_bounded():
     memo.clear_cache()
-    s = Scene()
+    s = paper_scene()
     for n in range(memo.CACHE_SIZE + 3):
         cam_tables.grid_terms(s.mechanism, s.program, s.program.rise_angle, 101 + n)
     assert len(memo._cache) == memo.CACHE_SIZE
@@ -113,7 +114,7 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     from labtool.models.dynamics.elastic import integrate
     from labtool.models.dynamics.kernels.dopri5 import evaluate_runs
 
-    s = Scene(backlash=0.016e-3, omega1_mode="var")           # run 1: several phases
+    s = paper_scene(backlash=0.016e-3, omega1_mode="var")           # run 1: several phases
     tab = elastic.build_tables(s, s.program.rise_angle / elastic.cam_speed(s))
     kc = 8.53e8
     segs, events = integrate(tab.t, tab.R31, tab.M, kc, s.backlash, rtol=1e-8, atol=(1e-13, 1e-9), max_step=5e-5)
@@ -148,7 +149,7 @@ def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
 
 
 def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
-    scene = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.016e-3, omega1_mode="var")
+    scene = paper_scene(cam_speed=300 * RPM, Fu=65.0, jt_factor=4.0, backlash=0.016e-3, omega1_mode="var")
     ds = simulate(scene, "elastic").dataset
     phi1 = ds["phi1"].values
     *_, MR13D, _ = _reference(scene, np.minimum(phi1, np.nextafter(scene.program.rise_angle, 0.0)),
@@ -159,8 +160,8 @@ def test_elastic_dataset_static_moment_is_the_kinetostatic_moment():
 def test_rigid_plant_tables_are_shared_and_a_warm_run_equals_a_cold_one():
     from labtool.models.dynamics import rigid
 
-    a = Scene(cam_speed_rpm=180, Fu=0.0, jt_factor=1.0, backlash=0.016e-3)
-    b = Scene(cam_speed_rpm=300, Fu=65.0, jt_factor=4.0, backlash=0.128e-3)
+    a = paper_scene(cam_speed=180 * RPM, Fu=0.0, jt_factor=1.0, backlash=0.016e-3)
+    b = paper_scene(cam_speed=300 * RPM, Fu=65.0, jt_factor=4.0, backlash=0.128e-3)
     memo.clear_cache()
     cold = simulate(b, "rigid").indicators
     pa, _ = rigid.build_model(a)
@@ -176,7 +177,7 @@ def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_
     # output_terms' compiled pass (the spline in scipy's order of operations, pitch_geometry
     # compiled) against cam_tables.angle_terms(linkage="spline") at the solver's step instants
     # and the cached grid at the others; the pressure angle through libm's atan2, not numpy's
-    s = Scene(law=law, backlash=0.016e-3, omega1_mode="var", rise_only=rise_only, revolutions=1)
+    s = paper_scene(law=law, backlash=0.016e-3, omega1_mode="var", rise_only=rise_only, revolutions=1)
     run = elastic._solve(s, "consistent", None, None, None, raw=True)
     t, _, _, _, grid_index = elastic._raw_outputs(run.tab, run.raw)
     steps = grid_index < 0
@@ -205,7 +206,7 @@ def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_
 
 
 def test_compiled_step_terms_refuse_a_stroke_beyond_the_spline():
-    s = Scene()
+    s = paper_scene()
     sp = cam_tables.stroke_spline(s.mechanism)
     phi2_0 = s.mechanism.phiD + s.mechanism.psi0
     psi = np.array([0.0, sp.x[-1] - phi2_0 + 1e-9])          # the second angle just past the last knot

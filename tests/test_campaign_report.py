@@ -71,7 +71,7 @@ def _record(name, rpm, ratings, fu=0.0):
     headline = [{"label": f"{m}, w1 = ct.", "requested_model": m, "model": m, "omega1": "const",
                  "omega2_iso_rating": r, "epsilon2_iso_rating": r} for m, r in ratings.items()]
     best = max(headline, key=lambda h: h["omega2_iso_rating"])["label"]
-    summary = {"operating_point": {"cam_speed_rpm": rpm, "law": "sine", "Fu": fu, "backlash_mm": 0.128, "jt_factor": 1.0},
+    summary = {"operating_point": {"cam_speed_rpm": rpm, "law": "sine", "Fu_N": fu, "backlash_mm": 0.128, "jt_factor": 1.0},
                "headline": headline, "closest": best, "events": [], "simulations": [], "measured": {}}
     return collect.PointRecord(name, name, summary, xr.Dataset())
 

@@ -16,6 +16,8 @@ from labtool.models.study import doe
 from labtool.common.errors import FileFormatError, InputError
 from labtool.models.study.paper import read_reference, table1_runs
 from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
+from labtool.common.units import RPM
 
 TOML_2x3 = """
 [[factor]]
@@ -44,10 +46,10 @@ def test_table1_full_factorial_is_the_papers_run_order():
 
 def test_scene_for_run_converts_edge_units_to_si_once():
     f = doe.table1_factors()
-    sc = doe.scene_for_run(Scene(), f, {"Fu": 65.0, "j": 0.128, "n1": 300.0, "Jt": 4.0})
+    sc = doe.scene_for_run(paper_scene(), f, {"Fu": 65.0, "j": 0.128, "n1": 300.0, "Jt": 4.0})
     assert (sc.Fu, sc.backlash, sc.cam_speed_rpm, sc.jt_factor) == pytest.approx((65.0, 0.128e-3, 300.0, 4.0))
     lw = doe.Factor("E", "lw", "mm", (5.0, 10.0))
-    assert doe.scene_for_run(Scene(), [lw], {"lw": 5.0}).contact_length == pytest.approx(5e-3)
+    assert doe.scene_for_run(paper_scene(), [lw], {"lw": 5.0}).contact_length == pytest.approx(5e-3)
 
 
 def test_factor_files_csv_and_toml_agree(tmp_path):
@@ -117,26 +119,26 @@ def test_factor_levels_accepted_iff_two_or_more_distinct(levels):
 
 
 def test_unknown_symbol_or_unit_is_refused_before_running():
-    base = Scene()
+    base = paper_scene()
     with pytest.raises(InputError, match="no simulation parameter 'colour'"):
         doe.Design([doe.Factor("A", "colour", "", (1.0, 2.0))], base, "kinematic").validate()
     with pytest.raises(InputError, match="unit 'km' not understood"):
         doe.Design([doe.Factor("A", "j", "km", (1.0, 2.0))], base, "kinematic").validate()
-    with pytest.raises(InputError, match="load Fu must be >= 0"):  # Scene's own validation, per level
+    with pytest.raises(InputError, match=r"load Fu must be in \[0, "):  # the owner's bounds, per level
         doe.Design([doe.Factor("A", "Fu", "N", (-5.0, 2.0))], base, "kinematic").validate()
 
 
 def test_lazy_design_rows_are_the_full_factorial():
     """Design (lazy, any size) gives the same run order, levels and scenes as full_factorial."""
     f = doe.table1_factors()
-    design, table = doe.Design(f, Scene(), "kinematic"), doe.full_factorial(f)
+    design, table = doe.Design(f, paper_scene(), "kinematic"), doe.full_factorial(f)
     assert len(design) == len(table) == 16
     for i in (0, 5, 15):
         assert design.level_indices(i) == tuple(table.loc[i, [x.column for x in f]])
-        assert design.scene(i) == doe.scene_for_run(Scene(), f, {x.symbol: table.loc[i, x.symbol] for x in f})
+        assert design.scene(i) == doe.scene_for_run(paper_scene(), f, {x.symbol: table.loc[i, x.symbol] for x in f})
     big = doe.Design([doe.Factor(chr(65 + k), s, u, tuple(range(1, 11)))
                       for k, (s, u) in enumerate([("Fu", "N"), ("n1", "rpm"), ("Jt", "-"), ("Kc", "-"),
-                                                  ("lw", "mm"), ("k", "-")])], Scene(), "elastic")
+                                                  ("lw", "mm"), ("k", "-")])], paper_scene(), "elastic")
     assert len(big) == 10**6 and big.level_indices(10**6 - 1) == (10,) * 6
     assert big.level_indices(123456) == (2, 3, 4, 5, 6, 7)
 
@@ -159,7 +161,7 @@ def test_doe_run_local_processes_writes_table_and_netcdf(kinematic_2x3, capsys):
     assert list(table.run) == [1, 2, 3, 4, 5, 6]
     # each row equals a direct simulation of that operating point (independent of the runner)
     from labtool.models.dynamics.simulate import simulate
-    direct = simulate(Scene(Fu=30.0, cam_speed_rpm=300.0), "kinematic").indicators
+    direct = simulate(paper_scene(Fu=30.0, cam_speed=300.0 * RPM), "kinematic").indicators
     row = table[(table.A_Fu_level == 2) & (table.B_n1_level == 2)].iloc[0]
     assert row.MR13D_max_Nm == pytest.approx(direct["MR13D_max_Nm"], rel=1e-9)
     ds = xr.open_dataset(d / "r.nc", engine="h5netcdf")
@@ -238,7 +240,7 @@ def test_failed_runs_are_reported_and_left_empty(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("argv,fragment", [
     (["--model", "quantum"], "doe run needs --model one of rigid, elastic, kinematic"),
     (["--model", "kinematic", "--law", "parabolic"], "unknown motion law 'parabolic'"),
-    (["--model", "kinematic", "--omega1", "fast"], "omega1 mode must be 'const' or 'var'"),
+    (["--model", "kinematic", "--omega1", "fast"], "omega1 mode must be one of const, var, got 'fast'"),
     (["--model", "kinematic", "--workers", "0"], "must be >= 1"),
     (["--model", "kinematic", "--factors", "nofile.toml"], "factor file nofile.toml does not exist"),
 ])
@@ -270,7 +272,7 @@ def _paper_end_to_end(model: str, table: str, tmp_path, extra=(), **scene_extra)
     assert (ours[paper.columns[:5]].to_numpy() == paper[paper.columns[:5]].to_numpy()).all()
     # the runner adds nothing: run 10 (Fu 65 N, j 0.016 mm, 180 rpm, Jt x4) equals a direct simulation
     from labtool.models.dynamics.simulate import simulate
-    direct = simulate(Scene(Fu=65.0, backlash=0.016e-3, cam_speed_rpm=180.0, jt_factor=4.0,
+    direct = simulate(paper_scene(Fu=65.0, backlash=0.016e-3, cam_speed=180.0 * RPM, jt_factor=4.0,
                             accuracy="fast", **scene_extra), model).indicators
     for col in paper.columns[5:]:
         assert ours[col][9] == pytest.approx(direct[col], rel=1e-6, abs=1e-9), col

@@ -14,7 +14,9 @@ from labtool.models.dynamics.contact import (MM_TO_SI, contact_force, contact_po
 from labtool.common.errors import InputError
 from labtool.models.study.paper import read_reference
 from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import INDICATORS, simulate
+from labtool.common.units import RPM
 
 KC = contact_stiffness(6e-3)
 
@@ -23,7 +25,7 @@ def _scene(run, **kw):
     """Table 1 run number -> Scene (omega1 variable, as Table 3)."""
     from labtool.models.study.paper import table1_runs
     r = table1_runs().iloc[run - 1]
-    return Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
+    return paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
 
 
 # ------------------------------------------------------------------ contact law (eq. 15)
@@ -60,7 +62,7 @@ def test_contact_power_is_libm_pow_to_a_few_ulps():
 # ------------------------------------------------------------------ eqs (16)-(18)
 
 def test_base_circles_match_paper_eq18_and_reduced_masses():
-    s = Scene()
+    s = paper_scene()
     mech, prog = s.mechanism, s.program
     phi1 = np.linspace(0.0, prog.rise_angle, 50)
     g = contact_geometry(mech, prog, phi1)
@@ -293,12 +295,12 @@ def test_elastic_gap_option_reaches_the_model_and_the_cli(tmp_path):
 
     s = _scene(1, accuracy="fast", elastic_gap="closed")
     res = simulate(s, "elastic")
-    assert res.dataset.attrs["elastic_gap_m"] == 0.0 and res.dataset.attrs["backlash_m"] == s.backlash
+    assert res.dataset.attrs["elastic_gap_m"] == 0.0 and res.dataset.attrs["backlash_mm"] == s.backlash / 1e-3
     assert res.dataset.attrs["elastic_gap"] == "closed"
     zero = simulate(_scene(1, accuracy="fast").replace(backlash=0.0), "elastic").indicators
     assert res.indicators["xel_max_mm"] == zero["xel_max_mm"]
     with pytest.raises(InputError):
-        Scene(elastic_gap="half-open")
+        paper_scene(elastic_gap="half-open")
     assert main(["simulate", "--model", "elastic", "--elastic-gap", "half-open", "--json"]) == 2
     assert main(["simulate", "--model", "elastic", "--elastic-gap", "closed", "--accuracy", "fast",
                  "-o", str(tmp_path / "s.nc")]) == 0
@@ -315,7 +317,7 @@ def test_literal_reading_is_selectable_and_differs():
 
 
 def test_whole_revolution_runs():
-    ind = simulate(Scene(rise_only=False, revolutions=1.0, accuracy="fast"), "elastic").indicators
+    ind = simulate(paper_scene(rise_only=False, revolutions=1.0, accuracy="fast"), "elastic").indicators
     assert ind["jumps"] >= 1 and math.isfinite(ind["xel_max_mm"])
 
 
@@ -325,7 +327,7 @@ def test_whole_revolution_runs():
                                 dict(kc_factor=0.0), dict(backlash=-1e-6), dict(contact_damping=-1.0)])
 def test_bad_scene_raises_input_error(kw):
     with pytest.raises(InputError):
-        Scene(**kw)
+        paper_scene(**kw)
 
 
 @settings(max_examples=25, deadline=None)
@@ -345,7 +347,7 @@ def test_endless_chatter_is_a_solver_error(monkeypatch):
     solver = "scipy"
     from labtool.common.errors import SolverError
     monkeypatch.setattr(E, "BOUNDARY_NUDGE", 0.0)
-    s = Scene(cam_speed_rpm=300, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
+    s = paper_scene(cam_speed=300 * RPM, backlash=0.016e-3, jt_factor=4, accuracy="fast", contact_length=3e-3)
     with pytest.raises(SolverError, match="chatter"):
         E.simulate(s, solver=solver)
     monkeypatch.undo()
@@ -373,7 +375,7 @@ def test_omega1_var_scales_inertial_moment_by_sync_over_nominal_squared():
 
 @pytest.mark.parametrize("law", ["cosine", "poly345"])
 def test_other_laws_run(law):
-    ind = simulate(Scene(law=law, accuracy="fast"), "elastic").indicators
+    ind = simulate(paper_scene(law=law, accuracy="fast"), "elastic").indicators
     assert ind["MR13D_max_Nm"] > 0 > ind["MR13D_min_Nm"] and ind["jumps"] >= 1
 
 
@@ -382,7 +384,7 @@ def test_other_laws_run(law):
        jt=st.floats(0.3, 6), lw=st.floats(1e-3, 30e-3), damping=st.sampled_from([0.0, 1.0, 100.0]),
        law=st.sampled_from(["sine", "cosine", "modtrap"]))
 def test_any_valid_scene_runs_to_finite_results(rpm, Fu, j, jt, lw, damping, law):
-    s = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, backlash=j, jt_factor=jt, contact_length=lw,
+    s = paper_scene(law=law, cam_speed=rpm * RPM, Fu=Fu, backlash=j, jt_factor=jt, contact_length=lw,
               contact_damping=damping, accuracy="fast")
     res = simulate(s, "elastic")
     for v in ("x_el", "dx_el", "contact_force", "omega2", "epsilon2", "MR13D"):
@@ -415,7 +417,7 @@ def test_stiff_contact_approaches_the_rigid_model():
     (labtool.models.dynamics.rigid, eqs 1-3) over the rise (the rise's closing instant, where the rigid model already
     drops the load of the dwell, is left out)."""
     pytest.importorskip("labtool.models.dynamics.rigid")
-    s = Scene(Fu=65.0, backlash=0.0, omega1_mode="const")
+    s = paper_scene(Fu=65.0, backlash=0.0, omega1_mode="const")
     rig = simulate(s, "rigid").dataset
     errs = []
     for f in (1.0, 30.0, 1000.0):
@@ -435,7 +437,7 @@ def test_a_micro_bounce_inside_one_step_is_an_event_in_both_loops():
     for ~80 us (0.13 um) and came back within one solver step; both loops read the event sign at
     the step ends only and kept it an 'exterior' phase with x < j. The sign is now read at
     EVENT_SUBSTEPS points of every step, in the compiled loop and the scipy loop alike."""
-    s = Scene(law="sine", cam_speed_rpm=408.0, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
+    s = paper_scene(law="sine", cam_speed=408.0 * RPM, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
               contact_length=0.009765625, contact_damping=1.0, accuracy="fast")
     out = []
     for solver in ("compiled", "scipy"):
@@ -482,7 +484,7 @@ def _numpy_energy_error(cols) -> float:
 
 
 def test_energy_error_is_the_numpy_expression_on_a_run():
-    ds = simulate(Scene(backlash=0.016e-3, omega1_mode="var"), "elastic").dataset
+    ds = simulate(paper_scene(backlash=0.016e-3, omega1_mode="var"), "elastic").dataset
     assert E.energy_error(ds, 1.0) == _numpy_energy_error(ds)
 
 

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from labtool.common.errors import FileFormatError
 from labtool.models.dynamics import events
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
 
 
@@ -73,7 +73,7 @@ def test_the_record_survives_a_netcdf_file_and_a_file_without_one_is_refused(tmp
 
 @pytest.mark.parametrize("model", ["rigid", "elastic"])
 def test_both_models_write_the_same_record_and_count_from_it(model):
-    res = simulate(Scene(backlash=0.128e-3, accuracy="fast"), model)
+    res = simulate(paper_scene(backlash=0.128e-3, accuracy="fast"), model)
     ds = res.dataset
     ev = events.read(ds)
     for name, (units, _) in events.VARIABLES.items():
@@ -110,7 +110,7 @@ def test_an_elastic_landing_percussion_is_the_contact_force_impulse():
     # contact force itself is integrated over each landing's window on the dense output
     from labtool.models.dynamics import elastic
     from labtool.models.dynamics.kernels import elastic_nb as eq
-    s = Scene(backlash=0.016e-3, omega1_mode="var")                     # Table 1 run 1: a dozen landings
+    s = paper_scene(backlash=0.016e-3, omega1_mode="var")                     # Table 1 run 1: a dozen landings
     run = elastic._solve(s, "consistent", None, None, None, raw=True)
     phases = elastic.phase_table(run.segments, run.raw)
     rows = elastic.complete_events(run.rows.copy(), phases, run.model, run.tab)

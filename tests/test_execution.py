@@ -272,9 +272,9 @@ def test_a_second_doe_run_into_the_same_output_is_refused(tmp_path):
 @pytest.mark.hostile("silent_wrong")
 def test_finished_chunks_of_another_design_are_not_mixed_in(tmp_path, capsys):
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
-    other = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="standard"), "kinematic")
+    other = Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="standard"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), other.fingerprint(), other.columns + ["wall_s", "error"])
     store.write(0, 2, pd.DataFrame([other.row(0), other.row(1)]))
     store.close()
@@ -290,9 +290,9 @@ def test_chunks_finished_by_other_code_are_not_mixed_in(tmp_path, capsys, monkey
     """A run killed, labtool upgraded (the models' source changed), the run resumed: refused."""
     (tmp_path / "f.csv").write_text(FACTORS_100)
     from labtool.models.dynamics import provenance
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
-    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="fast"), "kinematic")
     before = design.fingerprint()
     monkeypatch.setattr(provenance, "models_source_sha256", lambda: "0" * 64)
     after = design.fingerprint()
@@ -447,9 +447,9 @@ print(rc, "pandas" in sys.modules)
 @pytest.mark.slow
 def test_a_part_with_text_where_a_number_belongs_is_refused_in_one_line(tmp_path, capsys):
     (tmp_path / "f.csv").write_text(FACTORS_100)
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
-    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="fast"), "kinematic")
     rows = [design.row(i) for i in range(100)]
     rows[7][design.responses[0]] = "12.5 N m"                  # a hand-edited or damaged cell
     store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])

@@ -3,7 +3,7 @@
 Ranges: backlash 1 um .. 1 mm, cam speed 60 .. 1000 rpm, Jt x0.25 .. x10, Fu 0 .. 500 N,
 restitution k 0 .. 1 (rigid), Kc x1e-2 .. x1e3 (elastic). Each factor at both ends (the others at
 Table 1's level 1: 180 rpm, j 0.016 mm, Jt x1, Fu 0), plus six mixed corners, run through
-``labtool.models.dynamics.simulate.simulate(Scene(...), level)`` at the ``standard`` preset. Every case must end with
+``labtool.models.dynamics.simulate.simulate(paper_scene(...), level)`` at the ``standard`` preset. Every case must end with
 
 - finite time series and indicators (no NaN, no infinity),
 - a finite event count, within the model's event cap,
@@ -27,22 +27,23 @@ import pytest
 
 from labtool.models.dynamics import accuracy, events, rigid
 from labtool.common.errors import SolverError
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
+from labtool.common.units import RPM
 
 EXTREME_FACTOR = 10.0
-BASE = dict(cam_speed_rpm=180.0, Fu=0.0, backlash=0.016e-3, jt_factor=1.0, omega1_mode="var",
+BASE = dict(cam_speed=180.0 * RPM, Fu=0.0, backlash=0.016e-3, jt_factor=1.0, omega1_mode="var",
             accuracy="standard")
 
-ENDS = [("backlash", 1e-6), ("backlash", 1e-3), ("cam_speed_rpm", 60.0), ("cam_speed_rpm", 1000.0),
+ENDS = [("backlash", 1e-6), ("backlash", 1e-3), ("cam_speed", 60.0 * RPM), ("cam_speed", 1000.0 * RPM),
         ("jt_factor", 0.25), ("jt_factor", 10.0), ("Fu", 0.0), ("Fu", 500.0)]
 CORNERS = [
-    dict(cam_speed_rpm=1000.0, jt_factor=10.0, backlash=1e-3, restitution=1.0, kc_factor=1e3),
-    dict(cam_speed_rpm=1000.0, jt_factor=0.25, backlash=1e-6, restitution=1.0, kc_factor=1e-2),
-    dict(cam_speed_rpm=60.0, jt_factor=10.0, backlash=1e-6, restitution=0.0, kc_factor=1e3, Fu=500.0),
-    dict(cam_speed_rpm=60.0, jt_factor=0.25, backlash=1e-3, restitution=0.5, kc_factor=1e-2),
-    dict(cam_speed_rpm=1000.0, jt_factor=10.0, backlash=1e-6, Fu=500.0, restitution=0.0),
-    dict(cam_speed_rpm=1000.0, jt_factor=0.25, backlash=1e-3, restitution=1.0, omega1_mode="const"),
+    dict(cam_speed=1000.0 * RPM, jt_factor=10.0, backlash=1e-3, restitution=1.0, kc_factor=1e3),
+    dict(cam_speed=1000.0 * RPM, jt_factor=0.25, backlash=1e-6, restitution=1.0, kc_factor=1e-2),
+    dict(cam_speed=60.0 * RPM, jt_factor=10.0, backlash=1e-6, restitution=0.0, kc_factor=1e3, Fu=500.0),
+    dict(cam_speed=60.0 * RPM, jt_factor=0.25, backlash=1e-3, restitution=0.5, kc_factor=1e-2),
+    dict(cam_speed=1000.0 * RPM, jt_factor=10.0, backlash=1e-6, Fu=500.0, restitution=0.0),
+    dict(cam_speed=1000.0 * RPM, jt_factor=0.25, backlash=1e-3, restitution=1.0, omega1_mode="const"),
 ]
 RIGID_CASES = [dict([c]) for c in ENDS + [("restitution", 0.0), ("restitution", 0.5), ("restitution", 1.0)]] + CORNERS
 ELASTIC_CASES = [dict([c]) for c in ENDS + [("kc_factor", 1e-2), ("kc_factor", 1e3)]] + CORNERS
@@ -83,7 +84,7 @@ def _assert_same_when_step_halved(scene, result, model):
 
 @pytest.mark.parametrize("kw", _params(RIGID_CASES))
 def test_rigid_model_at_the_extremes(kw):
-    scene = Scene(**{**BASE, **kw})
+    scene = paper_scene(**{**BASE, **kw})
     res = simulate(scene, "rigid")
     assert res.model == "rigid"
     _assert_finite(res)
@@ -113,7 +114,7 @@ def test_rigid_model_at_the_extremes(kw):
 
 @pytest.mark.parametrize("kw", _params(ELASTIC_CASES))
 def test_elastic_model_at_the_extremes(kw):
-    scene = Scene(**{**BASE, **kw})
+    scene = paper_scene(**{**BASE, **kw})
     res = simulate(scene, "elastic")
     assert res.model == "elastic"
     _assert_finite(res)
@@ -152,21 +153,21 @@ def _elastic_energy_error(ds, scene):
 def test_restitution_is_ignored_by_the_elastic_model():
     # the elastic model has no Newton coefficient (its contact is undamped unless contact_damping
     # is set): k must not change its answer
-    a = simulate(Scene(**BASE, restitution=0.0), "elastic").indicators
-    b = simulate(Scene(**BASE, restitution=1.0), "elastic").indicators
+    a = simulate(paper_scene(**BASE, restitution=0.0), "elastic").indicators
+    b = simulate(paper_scene(**BASE, restitution=1.0), "elastic").indicators
     assert a["xel_max_mm"] == b["xel_max_mm"] and a["impacts"] == b["impacts"]
 
 
 # --- what the solver cannot do ends in a SolverError that names the limit ---------------------
 def test_rigid_event_cap_names_the_limit():
-    scene = Scene(**{**BASE, "backlash": 1e-6})
+    scene = paper_scene(**{**BASE, "backlash": 1e-6})
     preset = dict(rigid.PRESETS["standard"], max_events=10)
     with pytest.raises(SolverError, match="more than 10 contact events"):
         accuracy.run_model(scene, "rigid", preset=preset)
 
 
 def test_compiled_rigid_step_cap_names_the_limit():
-    scene = Scene(**BASE)
+    scene = paper_scene(**BASE)
     P, _ = rigid.build_model(scene)
     with pytest.raises(SolverError, match="step cap of 50 steps"):
         rigid.integrate(P, scene.omega1_nominal, rigid.PRESETS["standard"], 0.05, max_steps=50)
@@ -175,7 +176,7 @@ def test_compiled_rigid_step_cap_names_the_limit():
 def test_compiled_elastic_step_cap_names_the_limit():
     from labtool.models.dynamics import elastic
     from labtool.models.dynamics.contact import contact_stiffness
-    scene = Scene(**BASE)
+    scene = paper_scene(**BASE)
     tab = elastic.build_tables(scene, scene.program.rise_angle / elastic.cam_speed(scene))
     with pytest.raises(SolverError, match="50 steps"):
         elastic.integrate(tab.t, tab.R31, tab.M, contact_stiffness(scene.contact_length), scene.backlash,

@@ -267,7 +267,7 @@ def test_a_measurement_without_a_whole_revolution_is_refused(tmp_path):
     (["--start", "backlash"], "is not name=value"),
     (["--start", "restitution=0.5"], "not free"),
     (["--ka-gain", "0"], "--ka-gain must be > 0"),
-    (["--restitution", "nan"], "must be a finite number"),
+    (["--restitution", "nan"], "restitution k must be in [0, 1], got nan (--restitution)"),
 ])
 def test_bad_options_end_in_one_line_and_exit_2(measured, capsys, args, fragment):
     from labtool.cli import main
@@ -324,7 +324,7 @@ def test_a_fit_file_the_report_cannot_use_is_refused(tmp_path):
 
 
 GOOD_FIT = {"format": "labtool.fit", "format_version": 1, "model": "rigid", "omega1": "const",
-            "fitted_operating_point": {"cam_speed_rpm": 180.0, "law": "sine", "Fu": 0.0, "backlash_mm": 0.128,
+            "fitted_operating_point": {"cam_speed_rpm": 180.0, "law": "sine", "Fu_N": 0.0, "backlash_mm": 0.128,
                                        "jt_factor": 1.0, "restitution": 0.2},
             "parameters": {"backlash_mm": {"value": 0.128, "ci95": [0.1, 0.15]}}}
 
@@ -332,10 +332,10 @@ GOOD_FIT = {"format": "labtool.fit", "format_version": 1, "model": "rigid", "ome
 @pytest.mark.hostile("traceback")
 @pytest.mark.parametrize("change, fragment", [
     # report --fit: "internal error: TypeError: must be real number, not str"
-    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "Fu": "heavy"}}, 'Fu = "heavy" is not a number'),
-    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "cam_speed_rpm": None}}, "cam_speed_rpm = null"),
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "Fu_N": "heavy"}}, "load Fu must be a number [N], got 'heavy'"),
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "cam_speed_rpm": None}}, "cam speed n1 must be a number [rpm], got None"),
     # AttributeError: 'int' object has no attribute 'lower'
-    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "law": 5}}, "law = 5 is not a name"),
+    ({"fitted_operating_point": {**GOOD_FIT["fitted_operating_point"], "law": 5}}, "motion law must be text (a name), got 5"),
     # AttributeError: 'list' object has no attribute 'items'; KeyError: 'value'; IndexError; ValueError (format 'g')
     *[({"parameters": bad}, "parameters must map") for bad in
       ([1, 2], {"backlash_mm": {}}, {"backlash_mm": {"value": 0.1, "ci95": [1]}}, {"backlash_mm": {"value": "x"}})],
@@ -348,7 +348,7 @@ def test_a_hand_edited_fit_file_is_refused_not_a_crash(tmp_path, change, fragmen
     with pytest.raises(InputError, match=re.escape(fragment)):
         load_fit(path)
     path.write_text(json.dumps(GOOD_FIT))
-    assert load_fit(path)["operating_point"]["Fu"] == 0.0
+    assert load_fit(path)["operating_point"]["Fu_N"] == 0.0
 
 
 # --------------------------------------------------------------------------- pieces, against independent facts

@@ -28,10 +28,10 @@ def _refused(rc, err, *words) -> None:
 
 def _finished_design(tmp_path: Path) -> Path:
     """The parts folder of a 3 x 3 kinematic design with every run finished (made-up values)."""
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
-    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="fast"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
     rows = [{"run": i + 1, **dict(zip(design.level_columns, design.level_indices(i))),
              **{c: float(10 * i + k) for k, c in enumerate(design.responses)}, "wall_s": 0.01, "error": ""}
@@ -127,10 +127,10 @@ def test_a_point_folder_that_is_a_file_is_named_with_what_to_do(tmp_path, capsys
 
 def _doe_parts(tmp_path: Path) -> Path:
     """A 3 x 3 kinematic design with its first 3 runs finished (made-up values), not yet assembled."""
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
-    design = Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), "kinematic")
+    design = Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="fast"), "kinematic")
     store = PartStore(parts_folder(tmp_path / "r.csv"), design.fingerprint(), design.columns + ["wall_s", "error"])
     store.write(0, 3, [{"run": i + 1, **dict(zip(design.level_columns, design.level_indices(i))),
                         **{c: 1.0 for c in design.responses}, "wall_s": 0.01, "error": ""} for i in range(3)])

@@ -23,10 +23,10 @@ FACTORS_9 = "factor,symbol,unit,level_1,level_2,level_3\nA,Fu,N,0,5,10\nB,n1,rpm
 
 
 def _design(tmp_path: Path, model: str):
-    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.paper import paper_scene
     from labtool.models.study.doe import Design, read_factors
     (tmp_path / "f.csv").write_text(FACTORS_9)
-    return Design(tuple(read_factors(tmp_path / "f.csv")), Scene(accuracy="fast"), model)
+    return Design(tuple(read_factors(tmp_path / "f.csv")), paper_scene(accuracy="fast"), model)
 
 
 def _finished(tmp_path: Path, model: str = "rigid", ranges=((0, 3), (3, 6), (6, 9))) -> Path:

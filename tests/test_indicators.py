@@ -12,14 +12,16 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from labtool.common.errors import LabtoolError
 from labtool.models.dynamics.result import INDICATORS
 from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import indicators, simulate
 from labtool.models.study.paper import table1_runs
+from labtool.common.units import RPM
 
 RUNS = list(table1_runs().itertuples())
 
 
 def _scene(run, **kw) -> Scene:
-    return Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
+    return paper_scene(cam_speed=run.n1_rpm * RPM, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor,
                  omega1_mode="var", **kw)
 
 
@@ -72,7 +74,7 @@ def _outcome(fn, scene, model):
 @pytest.mark.slow
 def test_random_scenes_give_the_same_indicators_or_the_same_error(model, rpm, Fu, j, jt, mode, k, gap, kc, law,
                                                                     preset):
-    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=Fu, backlash=j, jt_factor=jt, omega1_mode=mode, restitution=k,
+    scene = paper_scene(law=law, cam_speed=rpm * RPM, Fu=Fu, backlash=j, jt_factor=jt, omega1_mode=mode, restitution=k,
                   elastic_gap=gap, kc_factor=kc, accuracy=preset)
     a, b = _outcome(simulate, scene, model), _outcome(indicators, scene, model)
     assert a[0] == b[0], (a, b)

@@ -8,15 +8,16 @@ import pytest
 from labtool.models.dynamics import elastic, events, rigid
 from labtool.models.dynamics.contact import contact_potential, contact_stiffness
 from labtool.models.dynamics.kernels import dopri5
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.study.paper import table1_runs
+from labtool.common.units import RPM
 
 T, KIND, SIDE = events.COL_TIME, events.COL_KIND, events.COL_SIDE
 
 
 def _scene(run, **kw):
     r = table1_runs().iloc[run - 1]
-    return Scene(cam_speed_rpm=r.n1_rpm, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
+    return paper_scene(cam_speed=r.n1_rpm * RPM, Fu=r.Fu_N, backlash=r.j_mm * 1e-3, jt_factor=r.Jt_factor, **kw)
 
 
 def test_tableau_is_dormand_prince():
@@ -131,7 +132,7 @@ def _event_list(result):
     return list(zip(ev["event_kind"].values, ev["event_side"].values)), ev["event_time"].values
 
 
-MICRO_BOUNCE = dict(law="sine", cam_speed_rpm=408.0, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
+MICRO_BOUNCE = dict(law="sine", cam_speed=408.0 * RPM, Fu=124.0, backlash=1.6e-05, jt_factor=4.9375,
                     contact_length=0.009765625, contact_damping=1.0)
 
 
@@ -149,7 +150,7 @@ def test_compiled_and_reference_loops_give_the_same_events(model, kw):
     from labtool.models.dynamics.simulate import simulate
 
     kw = dict(kw)
-    scene = _scene(kw.pop("run")) if "run" in kw else Scene(**kw)
+    scene = _scene(kw.pop("run")) if "run" in kw else paper_scene(**kw)
     a = _event_list(simulate(scene.replace(accuracy="standard"), model))
     b = _event_list(simulate(scene.replace(accuracy="reference"), model))
     assert a[0] == b[0] and len(a[0]) > 0

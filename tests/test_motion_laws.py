@@ -93,9 +93,9 @@ def test_impossible_programs_are_rejected(kw):
 def test_a_program_keeps_its_hash_but_does_not_pickle_it():
     import pickle
 
-    from labtool.models.dynamics.scene import Scene
-    program = Scene(law="cosine").program
-    assert Scene(law="cosine").program is program            # one per mechanism and law: found by identity
+    from labtool.models.study.paper import paper_scene
+    program = paper_scene(law="cosine").program
+    assert paper_scene(law="cosine").program is program            # one per mechanism and law: found by identity
     h = hash(program)
     assert hash(program) == h == hash(dataclasses.replace(program))
     copy = pickle.loads(pickle.dumps(program))

@@ -7,6 +7,7 @@ import pytest
 import xarray as xr
 
 from labtool.cli import main
+from labtool.common.units import RPM
 
 sc = pytest.importorskip("labtool.acquisition.signal_chain")
 
@@ -23,7 +24,7 @@ def test_simulated_stand_recording(tmp_path, rpm):
     assert main(["process", str(rec), "-o", str(out)]) == 0
     ds = xr.open_dataset(out, engine="h5netcdf", decode_times=False).load()
     fs = float(ds.attrs["sample_rate_hz"])
-    scene = sc.StandScene(cam_speed_rpm=rpm, truth_model="kinematic")
+    scene = sc.StandScene(cam_speed=rpm * RPM, truth_model="kinematic")
     tr = sc.truth(scene, np.arange(ds.sizes["time"]) / fs)
     om, ep = ds["omega2"].values, ds["epsilon2"].values
     rise = (np.mod(tr["phi1"], 2 * np.pi) < scene.program.rise_angle) & np.isfinite(om)

@@ -8,6 +8,7 @@ import pytest
 from labtool.cli import main
 from labtool.common.files import write_netcdf
 from labtool.common.errors import InputError
+from labtool.common.units import RPM
 from labtool.reports import align, pipeline
 from labtool.reports.synthetic import synthetic_measured
 
@@ -301,10 +302,16 @@ def test_damaged_measurements_give_a_report_or_an_input_error(kind, start, frac)
     assert all(np.all(np.isfinite(v)) for v in cyc.signals.values())
 
 
-def test_a_measured_speed_far_from_the_nominal_one_is_noted(files):
-    rep = pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",), overrides={"cam_speed_rpm": 250.0})
-    assert any("differs by -28 %" in n for n in rep.notes)
-    assert not any("differs" in n for n in _kin_report(files["exact"]).notes)
+def test_a_given_speed_that_contradicts_the_measured_one_is_refused(files):
+    """--rpm 250 on a recording whose cam turned at 180 rpm: the models would not run where the
+    stand did; refused before any simulation, naming the measured speed (5 rpm answered with the
+    rigid model's 5000-event cap)."""
+    for rpm in (250.0, 5.0):
+        with pytest.raises(InputError, match=r"--rpm .* contradicts the measured cam speed 180\.0 rpm"):
+            pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",),
+                                  overrides={"cam_speed": rpm * RPM})
+    rep = pipeline.build_report(files["exact"], models=("kinematic",), modes=("const",), overrides={"cam_speed": 185 * RPM})
+    assert rep.scene["cam_speed_rpm"] == 185.0 and rep.scene["cam_speed_rpm_source"] == "option --rpm"
 
 
 @pytest.mark.slow
@@ -313,7 +320,7 @@ def test_the_models_run_at_the_measured_speed_not_the_stated_one(tmp_path):
     it states: the models run at the measured mean speed; omega1 var has its drive set to that speed
     at no load, so its cam turns at it on average too (no load: the inertia moments average out)."""
     ds = synthetic_measured(noise=0.01, revolutions=4.3)
-    ds.attrs["cam_speed_rpm_stated"] = 200.0
+    ds.attrs["cam_speed_rpm"] = 200.0
     path = tmp_path / "m.nc"
     write_netcdf(ds, path)
     rep = pipeline.build_report(path, models=("rigid",), modes=("const", "var"), accuracy="fast", revolutions=3,
@@ -373,7 +380,8 @@ def test_model_options_reach_the_simulations_and_the_page(files, capsys, tmp_pat
     (not the paper's idealisations), are shown on the page and in the JSON; bad values exit 2."""
     op = pipeline.operating_point(pipeline.load_measured(files["exact"]), 180.0,
                                   {"restitution": 0.3, "contact_damping": 20.0, "elastic_gap": "closed"})
-    assert (op["restitution"], op["contact_damping"], op["contact_length_mm"], op["elastic_gap"]) == (0.3, 20.0, 6.0, "closed")
+    assert (op["restitution"], op["contact_damping_s_per_m"], op["contact_length_mm"], op["elastic_gap"]) == \
+        (0.3, 20.0, 6.0, "closed")
     cond = align.Conditioning()
     paper = pipeline.run_simulation({**op, "restitution": 1.0}, "rigid", "const", "fast", 1.0, cond)
     damped = pipeline.run_simulation(op, "rigid", "const", "fast", 1.0, cond)

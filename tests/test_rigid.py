@@ -15,7 +15,8 @@ from labtool.models.dynamics.impact import impact, kinetic_energy, paper_eq10
 from labtool.models.mechanism.kinematics import analyze, load_force_x
 from labtool.models.mechanism.linkage import reduced_follower
 from labtool.models.mechanism.motor import motor_moment_on_cam, no_load_cam_speed
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
+from labtool.common.units import RPM
 
 finite = dict(allow_nan=False, allow_infinity=False)
 
@@ -46,7 +47,7 @@ def test_impact_law_is_papers_eq10_and_newton(w1, w2, A1, A2, Jc, Jf, k):
 
 # --- geometry of the gap: the arms are the paper's Db1/2, Db2/2 --------------------------------
 def test_arms_match_contact_geometry_and_kinematics():
-    sc = Scene()
+    sc = paper_scene()
     P, info = rigid.build_model(sc)
     phi = np.linspace(0.0, sc.program.rise_angle, 301)
     psi, d1, d2, A2, dA2, ddA2, Mc, dirn = rigid.cam_columns(P, phi)
@@ -69,7 +70,7 @@ def geo_a2(sc, phi):
 # --- the 1-DOF model (j = 0) -------------------------------------------------------------------
 def test_const_speed_contact_is_the_kinetostatic_model():
     """omega1 const, j = 0: the follower follows the law and MR13D is labtool.models.mechanism.kinematics' value."""
-    sc = Scene(omega1_mode="const", backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300)
+    sc = paper_scene(omega1_mode="const", backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed=300 * RPM)
     ds = rigid.simulate(sc).dataset
     assert np.all(ds["contact"].values != 0) and ds.sizes["event"] == 0
     np.testing.assert_allclose(ds["omega1"], sc.omega1_nominal, rtol=1e-12)
@@ -84,7 +85,7 @@ def test_const_speed_contact_is_the_kinetostatic_model():
 def test_variable_speed_power_balance():
     """omega1 var, j = 0: d/dt(1/2 J' w1^2 + 1/2 J'' w2^2) = motor + cam gravity + gravity + load power,
     each term from labtool.models.mechanism.motor / labtool.models.mechanism.linkage (not from the model's tables)."""
-    sc = Scene(backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed_rpm=300, accuracy="reference")
+    sc = paper_scene(backlash=0.0, Fu=65.0, jt_factor=4.0, cam_speed=300 * RPM, accuracy="reference")
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism
     t, w1, w2 = ds["time"].values, ds["omega1"].values, ds["omega2"].values
@@ -104,7 +105,7 @@ def test_variable_speed_power_balance():
 
 def test_backlash_without_sign_change_is_the_no_backlash_run():
     """Run 9 of Table 1 (MR13D > 0 over the rise): no jump, the j > 0 run equals the j = 0 one."""
-    res = rigid.simulate(Scene(Fu=65.0, backlash=0.128e-3))
+    res = rigid.simulate(paper_scene(Fu=65.0, backlash=0.128e-3))
     ind = res.indicators
     assert ind["jumps"] == 0 and ind["impacts"] == 0
     assert ind["dphi2_max_deg"] == 0.0 and ind["domega2_max_rad_s"] == 0.0 and ind["domega1_max_rad_s"] == 0.0
@@ -112,7 +113,7 @@ def test_backlash_without_sign_change_is_the_no_backlash_run():
 
 
 def test_j0_never_jumps_even_when_MR13D_changes_sign():
-    ind = rigid.simulate(Scene(backlash=0.0)).indicators
+    ind = rigid.simulate(paper_scene(backlash=0.0)).indicators
     assert ind["MR13D_max_Nm"] > 0 > ind["MR13D_min_Nm"]
     assert ind["jumps"] == 0 and ind["impacts"] == 0
 
@@ -120,7 +121,7 @@ def test_j0_never_jumps_even_when_MR13D_changes_sign():
 # --- impacts in the simulation ------------------------------------------------------------------
 @pytest.mark.parametrize("backlash_mm,jt", [(0.016, 1.0), (0.128, 4.0)])
 def test_k1_conserves_energy_and_reverses_normal_velocity(backlash_mm, jt):
-    sc = Scene(backlash=backlash_mm * 1e-3, jt_factor=jt, restitution=1.0)
+    sc = paper_scene(backlash=backlash_mm * 1e-3, jt_factor=jt, restitution=1.0)
     res = rigid.simulate(sc)
     ds = res.dataset
     P, _ = rigid.build_model(sc)
@@ -145,11 +146,11 @@ def test_k1_conserves_energy_and_reverses_normal_velocity(backlash_mm, jt):
 
 @pytest.mark.parametrize("kw", [dict(backlash=0.128e-3, jt_factor=4.0),
                                 dict(Fu=65.0, backlash=0.016e-3, jt_factor=4.0, restitution=0.5),
-                                dict(Fu=65.0, backlash=0.128e-3, cam_speed_rpm=300, restitution=0.8)])
+                                dict(Fu=65.0, backlash=0.128e-3, cam_speed=300 * RPM, restitution=0.8)])
 def test_energy_balance_through_flights_and_impacts(kw):
     """Whole hybrid run (contact, flights, impacts): T(t) - T(0) = work of motor, cam gravity,
     follower gravity and load - the impacts' losses, all recomputed from labtool.models.mechanism.motor/linkage."""
-    sc = Scene(**kw)
+    sc = paper_scene(**kw)
     ds = rigid.simulate(sc).dataset
     mech = sc.mechanism
     t, w1, w2 = ds["time"].values, ds["omega1"].values, ds["omega2"].values
@@ -173,7 +174,7 @@ def test_energy_balance_through_flights_and_impacts(kw):
 
 
 def test_restitution_law_exact_for_k_below_one():
-    ds = rigid.simulate(Scene(restitution=0.6, backlash=0.128e-3)).dataset
+    ds = rigid.simulate(paper_scene(restitution=0.6, backlash=0.128e-3)).dataset
     vb, va = ds["event_v_before"].values, ds["event_v_after"].values
     reb = events.is_impact(ds) & ~ds["event_persistent"].values
     assert reb.sum() >= 2
@@ -239,7 +240,7 @@ def test_event_cap_raises_solver_error():
 
 # --- omega1 constant vs variable ----------------------------------------------------------------
 def test_omega1_const_vs_var_differ_by_what_the_motor_allows():
-    sc = Scene(backlash=0.0, cam_speed_rpm=300, jt_factor=4.0)
+    sc = paper_scene(backlash=0.0, cam_speed=300 * RPM, jt_factor=4.0)
     var = rigid.simulate(sc).dataset
     const = rigid.simulate(sc.replace(omega1_mode="const")).dataset
     mech = sc.mechanism
@@ -258,7 +259,7 @@ def test_omega1_const_vs_var_differ_by_what_the_motor_allows():
     def ratio(scene):
         return (rigid.simulate(scene).indicators["MR13D_max_Nm"]
                 / rigid.simulate(scene.replace(omega1_mode="const")).indicators["MR13D_max_Nm"])
-    light = ratio(Scene(backlash=0.0, cam_speed_rpm=180, jt_factor=1.0))
+    light = ratio(paper_scene(backlash=0.0, cam_speed=180 * RPM, jt_factor=1.0))
     assert light == pytest.approx((mech.omega_sync_motor / mech.omega_nominal_motor) ** 2, rel=0.01)
     assert ratio(sc) < light - 0.02
 
@@ -268,11 +269,11 @@ def test_omega1_const_vs_var_differ_by_what_the_motor_allows():
                                 dict(jt_factor=0.0)])
 def test_bad_scene_is_input_error(kw):
     with pytest.raises(InputError):
-        rigid.simulate(Scene(**kw))
+        rigid.simulate(paper_scene(**kw))
 
 
 def test_zero_follower_inertia_is_input_error():
-    mech = Scene().mechanism
+    mech = paper_scene().mechanism
     zero = dataclasses.replace(mech, m2=0.0, J2=0.0, m3=0.0, m4=0.0, J4=0.0, m5=0.0, J5=0.0)
     with pytest.raises(InputError, match="inertia"):
-        rigid.simulate(Scene(mechanism=zero))
+        rigid.simulate(paper_scene(mechanism=zero))

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from labtool.cli import main
 from labtool.models.dynamics.simulate import INDICATORS
+from labtool.common.units import RPM
 
 
 def _json(capsys, args):
@@ -17,7 +18,7 @@ def _json(capsys, args):
 
 def test_json_keys_and_rigid_values(capsys):
     out = _json(capsys, ["--model", "rigid", "--rpm", "180", "--fu", "0", "--backlash-mm", "0.128",
-                         "--accuracy", "fast"])
+                         "--omega1", "var", "--restitution", "1", "--accuracy", "fast"])   # the paper's experiment
     assert list(out) == [*INDICATORS, "model", "accuracy", "wall_s"]
     assert out["model"] == "rigid" and out["accuracy"] == "fast"
     assert out["xel_max_mm"] is None and out["xel_min_mm"] is None
@@ -97,10 +98,10 @@ import pytest as _pytest
 
 
 @_pytest.mark.parametrize("args,needle", [
-    (["--contact-length-mm", "0"], "contact length lw must be > 0"),
-    (["--kc-factor", "-1"], "contact stiffness factor must be > 0"),
-    (["--contact-damping", "-2"], "contact damping must be >= 0"),
-    (["--backlash-mm", "-0.01"], "backlash must be >= 0"),
+    (["--contact-length-mm", "0"], "contact length lw must be in (0, 100] mm, got 0 mm (--contact-length-mm)"),
+    (["--kc-factor", "-1"], "contact stiffness factor must be in (0, 1e+06], got -1 (--kc-factor)"),
+    (["--contact-damping", "-2"], "contact damping must be in [0, 10000] s/m, got -2 s/m (--contact-damping)"),
+    (["--backlash-mm", "-0.01"], "backlash j must be in [0, 10] mm, got -0.01 mm (--backlash-mm)"),
 ])
 def test_elastic_contact_options_reject_impossible_values(args, needle, capsys):
     from labtool.cli import main
@@ -117,8 +118,10 @@ def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
     import dataclasses
     import hashlib
 
-    from labtool.models.dynamics.provenance import SCENE_ATTRIBUTES
+    from labtool.common.operating_point import FIELDS
+    from labtool.models.dynamics.provenance import scene_from_attributes
     from labtool.models.dynamics.scene import Scene
+    from labtool.models.mechanism import Mechanism
 
     mech_file = tmp_path / "mech.toml"
     from importlib import resources
@@ -132,16 +135,25 @@ def test_netcdf_carries_the_whole_scene_the_mechanism_and_the_version(tmp_path):
     assert main(args) == 0
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         a = ds.attrs
-        assert set(SCENE_ATTRIBUTES.values()) <= set(a)
-        assert {f.name for f in dataclasses.fields(Scene)} - {"mechanism"} == set(SCENE_ATTRIBUTES)
-        assert (a["cam_speed_rpm"], a["Fu_N"], a["backlash_m"], a["jt_factor"]) == (200.0, 10.0, 0.05e-3, 2.0)
-        assert (a["restitution"], a["contact_length_m"], a["kc_factor"], a["contact_damping_s_per_m"]) == (0.7, 7e-3, 1.5, 2.0)
+        assert {f.attr for f in FIELDS} <= set(a)
+        assert (a["cam_speed_rpm"], a["Fu_N"], a["backlash_mm"], a["jt_factor"]) == (200.0, 10.0, 0.05, 2.0)
+        assert (a["restitution"], a["contact_length_mm"], a["kc_factor"], a["contact_damping_s_per_m"]) == (0.7, 7.0, 1.5, 2.0)
+        assert all(a[f.attr + "_source"] == f"option {f.option}" for f in FIELDS if f.name != "law")
+        # the file's attributes alone give the scene back (with its mechanism from the file it names)
+        again = scene_from_attributes(a, Mechanism.from_toml(mech_file))
+        given = Scene(law="sine", cam_speed=200 * RPM, Fu=10.0, backlash=0.05e-3, jt_factor=2.0, omega1_mode="const",
+                      restitution=0.7, revolutions=1.0, contact_length=7e-3, kc_factor=1.5, contact_damping=2.0,
+                      elastic_gap="closed", accuracy="fast", rise_only=False)
+        for f in dataclasses.fields(Scene):
+            if f.name != "mechanism":
+                v = getattr(given, f.name)
+                assert getattr(again, f.name) == (v if isinstance(v, str) else pytest.approx(v, rel=1e-12)), f.name
         assert (a["elastic_gap"], a["omega1_mode"], a["accuracy"], a["revolutions"], a["rise_only"]) == \
             ("closed", "const", "fast", 1.0, 0)
         assert a["mechanism_source"] == str(mech_file)
         assert a["mechanism_sha256"] == hashlib.sha256(text.encode()).hexdigest()
         assert a["labtool_version"] and a["labtool_kernels_sha256"]
-        assert "--contact-damping 2.0" in a["history"] and "--full-cycle" in a["history"]
+        assert a["history"].endswith(" ".join(["labtool", *map(str, args)]))     # the command line as typed
         assert a["validity_warnings"] == "[]"
 
 

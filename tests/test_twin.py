@@ -12,11 +12,12 @@ from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics import elastic, rigid, twin
 from labtool.models.dynamics.contact import contact_potential, static_penetration
 from labtool.models.dynamics.kernels import twin_nb as nb
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.mechanism import Mechanism
 from labtool.models.mechanism.cam_profile import cached_sense
 from labtool.models.mechanism.kinematics import follower_motion
 from labtool.models.mechanism.linkage import linkage_state
+from labtool.common.units import RPM
 
 OFF = dict(friction_torque=0.0, friction_radius=0.0)          # no pivot friction
 PLAIN = dict(drive="input", ripple=0.0, mode_mass_share=0.0, warmup_revolutions=0, **OFF)
@@ -49,7 +50,7 @@ def _energy(run, s):
 def test_energy_is_conserved_with_damping_friction_and_motor_off():
     """A free-running cam, the follower bouncing through the 0.128 mm backlash (> 100 contact
     events), gravity on: the total energy stays constant to 1e-5 of the follower's kinetic energy."""
-    scene = Scene(cam_speed_rpm=300, backlash=0.128e-3, contact_damping=0.0, accuracy="standard")
+    scene = paper_scene(cam_speed=300 * RPM, backlash=0.128e-3, contact_damping=0.0, accuracy="standard")
     run = twin.TwinRun(scene, twin.TwinPhysics(mode_zeta=0.0, warmup_revolutions=0, **OFF))
     run.plant.p[nb.P_SLOPE] = 0.0                      # the motor off: nothing does work
     s = run.sample(np.arange(0.0, 0.4, 2e-5))
@@ -63,7 +64,7 @@ def test_energy_lost_is_what_the_contact_damping_takes():
     """With Hunt-Crossley damping (the motor off, no friction, no modal damping) the energy never
     rises, it stays constant while the follower flies through the gap (no force can take it), and
     the impacts take it."""
-    scene = Scene(cam_speed_rpm=300, backlash=0.128e-3, contact_damping=40.0, accuracy="standard")
+    scene = paper_scene(cam_speed=300 * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy="standard")
     run = twin.TwinRun(scene, twin.TwinPhysics(mode_zeta=0.0, warmup_revolutions=0, **OFF))
     run.plant.p[nb.P_SLOPE] = 0.0
     t = np.arange(0.0, 0.1, 2e-5)
@@ -81,7 +82,7 @@ def test_bending_mode_frequency_in_flight_is_its_closed_form():
     against the rest of the follower J_r oscillates at sqrt(k_b kappa - (c_b kappa / 2)^2),
     kappa = 1/m_b + DE^2/J_r."""
     mech = Mechanism.default().replace(g=0.0)
-    scene = Scene(cam_speed_rpm=180, backlash=5e-3, contact_damping=0.0, accuracy="standard", mechanism=mech)
+    scene = paper_scene(cam_speed=180 * RPM, backlash=5e-3, contact_damping=0.0, accuracy="standard", mechanism=mech)
     physics = twin.TwinPhysics(drive="input", ripple=0.0, **OFF)
     run = twin.TwinRun(scene, physics, start=dict(phi1=math.radians(120), q=2.5e-3 / 0.06, phase=nb.FLIGHT, u=1e-6))
     t = np.arange(0.0, 0.02, 1e-6)
@@ -105,7 +106,7 @@ def test_bending_mode_frequency_in_flight_is_its_closed_form():
 def test_static_deflection_in_the_upper_dwell_is_the_contact_laws():
     """At rest on the exterior flank through the upper dwell, gravity's moment is carried by the
     flank: g - j = (F / Kc)^(9/10) with F = |M_gravity| / A2."""
-    scene = Scene(cam_speed_rpm=180, backlash=0.128e-3, contact_damping=40.0, accuracy="standard")
+    scene = paper_scene(cam_speed=180 * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy="standard")
     run = twin.TwinRun(scene, twin.TwinPhysics(ripple=0.0, **OFF))
     T = 60.0 / 180.0
     s = run.sample(np.array([(1 + 150 / 360) * T]), accelerations=True)
@@ -121,7 +122,7 @@ def test_static_deflection_in_the_upper_dwell_is_the_contact_laws():
 def _elastic_and_twin(rpm, backlash, damping, accuracy="standard"):
     # the cam as input in both (the elastic model's reduced mass with an immovable cam: M = M2)
     mech = Mechanism.default().replace(Jm=1e3)
-    scene = Scene(cam_speed_rpm=rpm, backlash=backlash, contact_damping=damping, accuracy=accuracy,
+    scene = paper_scene(cam_speed=rpm * RPM, backlash=backlash, contact_damping=damping, accuracy=accuracy,
                   omega1_mode="const", mechanism=mech, rise_only=True)
     ds = elastic.simulate(scene).dataset
     run = twin.TwinRun(scene, twin.TwinPhysics(**PLAIN))
@@ -150,7 +151,7 @@ def test_the_flight_across_the_gap_converges_to_the_rigid_models():
     g = A2 q, eqs 4-7): as the contact stiffens the lift-off and the landing converge to the rigid
     model's instants. (The elastic model lands 87 us = 1.5 % of the flight later than both: its
     relative equation M x'' = -R31 leaves out the transport terms of x = A2(phi1) q, docs/twin.md.)"""
-    scene = Scene(cam_speed_rpm=180, backlash=0.128e-3, restitution=0.5, accuracy="standard", omega1_mode="const",
+    scene = paper_scene(cam_speed=180 * RPM, backlash=0.128e-3, restitution=0.5, accuracy="standard", omega1_mode="const",
                   rise_only=True)
     tr = rigid.simulate(scene).dataset["event_time"].values
     errors = []
@@ -171,7 +172,7 @@ def test_kinematic_limit_at_low_speed_without_backlash(drive):
     """10 rpm, no backlash, every twin effect on: the follower follows the cam. omega2 equals the
     kinematics (labtool.models.mechanism.kinematics.follower_motion) at the twin's own cam motion to 2e-5,
     phi2 to 1e-6 rad; with the cam as input phi1 is the kinematic truth's ripple law."""
-    scene = Scene(cam_speed_rpm=10, backlash=0.0, contact_damping=40.0, accuracy="fast")
+    scene = paper_scene(cam_speed=10 * RPM, backlash=0.0, contact_damping=40.0, accuracy="fast")
     run = twin.TwinRun(scene, twin.TwinPhysics(drive=drive, ripple=0.005))
     T = 6.0
     t = np.linspace(0.0, T, 4001)
@@ -187,7 +188,7 @@ def test_kinematic_limit_at_low_speed_without_backlash(drive):
 
 def test_streaming_does_not_depend_on_the_blocks():
     """The same trajectory and events whether sampled at once or in uneven blocks."""
-    scene = Scene(cam_speed_rpm=500, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
+    scene = paper_scene(cam_speed=500 * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
     t = np.arange(0.0, 0.3, 5e-5)
     a = twin.TwinRun(scene)
     sa = a.sample(t)
@@ -206,7 +207,7 @@ def test_default_stand_jumps_in_the_rise_second_half_and_rests_in_the_upper_dwel
     """docs/twin.md's promise at 180 rpm: lift-off from the interior flank in the second half of the
     rise, the first impact on the exterior flank a few degrees later, a few visible impacts, rest
     (one lasting contact, no impact above 1 mm/s) through the upper dwell; the same every turn."""
-    scene = Scene(cam_speed_rpm=180, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
+    scene = paper_scene(cam_speed=180 * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
     run = twin.TwinRun(scene)
     T = 60.0 / 180.0
     run.sample(np.linspace(0.0, 3 * T, 31))
@@ -226,7 +227,7 @@ def test_default_stand_jumps_in_the_rise_second_half_and_rests_in_the_upper_dwel
 
 
 def test_simulate_dataset_carries_the_event_record():
-    scene = Scene(cam_speed_rpm=300, backlash=0.128e-3, contact_damping=40.0, accuracy="fast", revolutions=1.0)
+    scene = paper_scene(cam_speed=300 * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy="fast", revolutions=1.0)
     ds = twin.simulate(scene, duration=0.2, output_step=1e-4)
     for name in ("event_time", "event_phi1", "event_kind", "event_side", "event_v_rel", "event_domega2",
                  "event_percussion", "event_persistent"):
@@ -265,7 +266,7 @@ def test_impossible_physics_is_refused(kw):
 
 @pytest.mark.hostile("hang")
 def test_a_motor_that_cannot_drive_the_load_ends_in_a_solver_error():
-    scene = Scene(cam_speed_rpm=180, Fu=5e5, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
+    scene = paper_scene(cam_speed=180 * RPM, Fu=5e5, backlash=0.128e-3, contact_damping=40.0, accuracy="fast")
     with pytest.raises(SolverError, match="stalled|twin"):
         run = twin.TwinRun(scene)
         run.sample(np.linspace(0.0, 2.0, 50))
@@ -281,7 +282,7 @@ def test_the_stands_fast_preset_against_the_reference(rpm):
     t = np.arange(0.0, 2 * T, 2e-5)
     out = {}
     for acc in ("fast", "reference"):
-        run = twin.TwinRun(Scene(cam_speed_rpm=rpm, backlash=0.128e-3, contact_damping=40.0, accuracy=acc))
+        run = twin.TwinRun(paper_scene(cam_speed=rpm * RPM, backlash=0.128e-3, contact_damping=40.0, accuracy=acc))
         out[acc] = (run.sample(t), run.take_events())
     (s, e), (sr, er) = out["fast"], out["reference"]
     assert list(e["event_kind"]) == list(er["event_kind"]) and list(e["event_side"]) == list(er["event_side"])

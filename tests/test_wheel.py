@@ -111,3 +111,22 @@ def test_labtool_demo_runs_from_the_wheel_beside_a_users_modules(fresh_env, shad
     res = _run(fresh_env, [str(fresh_env / "bin" / "labtool"), "demo", "-o", "out"], shadowing_folder)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert (shadowing_folder / "out" / "report.html").exists()
+
+
+SCRIPT = """
+import labtool
+sim = labtool.simulate(model="rigid", accuracy="fast")
+measured = labtool.process("r.h5")
+print(sim.model, sim.cycles.sizes["phi1"], round(float(measured.attrs["cam_speed_rpm_measured"])))
+"""
+
+
+@pytest.mark.slow
+def test_a_script_calls_the_api_from_the_wheel_beside_a_users_modules(fresh_env, shadowing_folder):
+    rec = _run(fresh_env, [str(fresh_env / "bin" / "labtool"), "acquire", "--device", "sim", "--fast", "--duration", "2",
+                           "--status-every", "0", "-o", "r.h5"], shadowing_folder)
+    assert rec.returncode == 0, rec.stderr
+    (shadowing_folder / "script.py").write_text(SCRIPT)
+    res = _run(fresh_env, [str(fresh_env / "bin" / "python"), "script.py"], shadowing_folder)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.split() == ["rigid", "720", "180"]

@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 from benchmarks.whole_call_bound import peer_outputs_call
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.simulate import simulate
+from labtool.common.units import RPM
 
 
 @pytest.mark.parametrize("rpm,fu,j_mm,jt", [(200.0, 0.0, 0.016, 1.0), (300.0, 75.0, 0.128, 4.0)])
 def test_peer_outputs_equal_the_dataset_at_the_uniform_instants(rpm, fu, j_mm, jt):
-    scene = Scene(cam_speed_rpm=rpm, Fu=fu, backlash=j_mm * 1e-3, jt_factor=jt, omega1_mode="var")
+    scene = paper_scene(cam_speed=rpm * RPM, Fu=fu, backlash=j_mm * 1e-3, jt_factor=jt, omega1_mode="var")
     full = simulate(scene, "elastic").dataset
     lean = peer_outputs_call(scene)
     on_grid = np.isin(full["time"].values, lean["time"].values)

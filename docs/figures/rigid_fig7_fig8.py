@@ -2,10 +2,11 @@
 .venv/bin/python docs/figures/rigid_fig7_fig8.py  ->  docs/figures/rigid_fig7_fig8.png"""
 import matplotlib; matplotlib.use("Agg")
 import matplotlib.pyplot as plt, numpy as np
-from labtool.models.dynamics.scene import Scene
+from labtool.models.study.paper import paper_scene
 from labtool.models.dynamics.rigid import simulate
-r10 = simulate(Scene(cam_speed_rpm=180, Fu=65, backlash=0.016e-3, jt_factor=4)).dataset
-r13 = simulate(Scene(cam_speed_rpm=180, Fu=65, backlash=0.128e-3, jt_factor=1)).dataset
+from labtool.common.units import RPM
+r10 = simulate(paper_scene(cam_speed=180 * RPM, Fu=65, backlash=0.016e-3, jt_factor=4)).dataset
+r13 = simulate(paper_scene(cam_speed=180 * RPM, Fu=65, backlash=0.128e-3, jt_factor=1)).dataset
 fig, ax = plt.subplots(3, 2, figsize=(11, 9))
 t = r10.time.values * 1e3
 ax[0,0].plot(t, r10.MR13D, label="with backlash (rcj)"); ax[0,0].plot(t[:-1], r10.MR13D_rfj[:-1], "--", label="j = 0 (rfj)")

@@ -18,6 +18,7 @@ import xarray as xr  # noqa: E402
 from labtool.processing.pipeline import ProcessOptions, process_recording  # noqa: E402
 from labtool.processing.readers import open_recording  # noqa: E402
 from stand_data import stand_recording  # noqa: E402  (the simulated stand's chain, tests/stand_data.py)
+from labtool.common.units import RPM
 
 
 def run_synth(tmp, opts=None, **kw):
@@ -49,7 +50,7 @@ def sim_stand(tmp, rpm):
     main(["acquire", "--device", "sim", "--rpm", str(rpm), "--duration", "5", "--fast", "--seed", "7", "-o", str(rec)])
     main(["process", str(rec), "-o", str(out)])
     ds = xr.open_dataset(out, engine="h5netcdf", decode_times=False).load()
-    scene = sc.StandScene(cam_speed_rpm=rpm)
+    scene = sc.StandScene(cam_speed=rpm * RPM)
     t = sc.truth(scene, np.arange(ds.sizes["time"]) / ds.attrs["sample_rate_hz"])
     t["program"] = scene.program
     return ds, t

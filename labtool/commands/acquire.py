@@ -12,7 +12,9 @@ from labtool.acquisition.metadata import OPTION, missing_operating_point, operat
 from labtool.common.errors import InputError
 from labtool.common.files import check_output_path
 from labtool.common.names import shown
+from labtool.common.operating_point import FIELD, schema_field
 from labtool.common.schema import Integer, Number, String, Table, load_toml
+from labtool.options import op_option
 from labtool.processing.calibration_file import KA_MAX, KA_MIN
 
 # keys a scene file's [stand] table may hold -> option name
@@ -22,10 +24,11 @@ SCENE_KEYS = {
     "cal_channel": "cal_channel", "seed": "seed", "duration_s": "duration", "rate_hz": "rate",
     "ka_m_s2_per_v": "ka", "truth_model": "truth",
 }
-DEFAULTS = {"mode": "run", "law": "sine", "rpm": 180.0, "fu": 0.0, "backlash_mm": 0.128, "jt_factor": 1.0,
-            "ripple": 0.005, "cal_accel": 9.81, "cal_freq": 79.6, "cal_channel": "aE_t", "seed": 0,
-            "duration": 10.0, "rate": 10000.0, "ka": 864.3,
-            "truth": "twin"}
+# option -> operating-point field (labtool.common.operating_point: its default, unit and bounds)
+POINT_OPTIONS = {"law": "law", "rpm": "cam_speed", "fu": "Fu", "backlash_mm": "backlash", "jt_factor": "jt_factor"}
+DEFAULTS = {**{opt: FIELD[name].default_edge for opt, name in POINT_OPTIONS.items()},
+            "mode": "run", "ripple": 0.005, "cal_accel": 9.81, "cal_freq": 79.6, "cal_channel": "aE_t", "seed": 0,
+            "duration": 10.0, "rate": 10000.0, "ka": 864.3, "truth": "twin"}
 
 
 def register(app: typer.Typer) -> None:
@@ -35,11 +38,7 @@ def register(app: typer.Typer) -> None:
 # the [stand] table of a scene file (labtool.common.schema): types, plausible bounds, unknown keys named
 STAND_SCHEMA = Table({
     "mode": String(choices=("run", "calibration"), required=False),
-    "law": String(required=False),
-    "cam_speed_rpm": Number(gt=0, le=1e5, unit="rpm", required=False),
-    "Fu_N": Number(ge=0, le=1e6, unit="N", required=False),
-    "backlash_mm": Number(ge=0, le=100, unit="mm", required=False),
-    "jt_factor": Number(gt=0, le=1e3, required=False),
+    **{FIELD[name].attr: schema_field(name) for name in POINT_OPTIONS.values()},
     "ripple": Number(ge=0, lt=1, required=False),
     "cal_accel_m_s2": Number(gt=0, le=1e6, unit="m/s^2", required=False),
     "cal_freq_hz": Number(gt=0, le=1e6, unit="Hz", required=False),
@@ -75,15 +74,15 @@ def acquire(
     output: Path = typer.Option(..., "-o", "--output", help="recording to write (HDF5, format v1)"),
     device: Optional[str] = typer.Option(None, help="sim | nidaqmx:<physical channels> (e.g. nidaqmx:Dev1/ai0:2), "
                                          "or nidaqmx with --device-file (default: sim)"),
-    rpm: Optional[float] = typer.Option(None, help="cam speed n1 (rpm) (sim) (default 180)"),
+    rpm: Optional[float] = op_option("cam_speed", "sim: the stand's; nidaqmx: stored as stated"),
     duration: Optional[float] = typer.Option(None, help="seconds to record; inf = until Ctrl-C (default 10)"),
     rate: Optional[float] = typer.Option(None, help="sample rate (Hz) (default 10000)"),
     realtime: bool = typer.Option(True, "--realtime/--fast", help="pace the simulated stand in real time, or run as fast as possible"),
     seed: Optional[int] = typer.Option(None, help="noise seed of the simulated stand (default 0)"),
-    law: Optional[str] = typer.Option(None, help="motion law of the simulated cam (default sine)"),
-    fu: Optional[float] = typer.Option(None, "--fu", help="load Fu (N) (sim, stored) (default 0)"),
-    backlash_mm: Optional[float] = typer.Option(None, help="groove backlash j (mm) (sim, stored) (default 0.128)"),
-    jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt (sim, stored) (default 1)"),
+    law: Optional[str] = op_option("law", "sim: the stand's; nidaqmx: stored as stated"),
+    fu: Optional[float] = op_option("Fu", "sim: the stand's; nidaqmx: stored as stated"),
+    backlash_mm: Optional[float] = op_option("backlash", "sim: the stand's; nidaqmx: stored as stated"),
+    jt_factor: Optional[float] = op_option("jt_factor", "sim: the stand's; nidaqmx: stored as stated"),
     ripple: Optional[float] = typer.Option(None, help="motor speed ripple on omega1, relative (sim) (default 0.005)"),
     ka: Optional[float] = typer.Option(None, help="Ka (m/s^2/V): the simulated chain's, or the calibration to store for nidaqmx "
                                        "(default 864.3 sim = the 480C02 at gain x1; 86.43 = gain x10, the impacts clip; none nidaqmx)"),
@@ -94,8 +93,8 @@ def acquire(
     truth: Optional[str] = typer.Option(None, help="sim: what moves the follower: twin (the stand's model richer than "
                                         "both models, default; docs/twin.md), kinematic (cam as input), or the rigid / "
                                         "elastic model's own equations (their periodic steady state)"),
-    restitution: Optional[float] = typer.Option(None, help="sim, rigid truth: Newton's restitution k of the impacts (default 0.2)"),
-    contact_damping: Optional[float] = typer.Option(None, help="sim, twin and elastic truths: Hunt-Crossley contact damping (s/m) (default 40)"),
+    restitution: Optional[float] = op_option("restitution", "sim: the rigid truth's impacts"),
+    contact_damping: Optional[float] = op_option("contact_damping", "sim: the twin's and the elastic truth's contact"),
     scene: Optional[Path] = typer.Option(None, help="TOML scene file with a (stand) table; options given here override it"),
     fault: Optional[List[str]] = typer.Option(None, help="sim fault injection kind@seconds (overrun, drop, disconnect, clip); repeatable"),
     iepe_excitation: bool = typer.Option(False, help="nidaqmx: the DAQ powers the IEPE sensors with 4 mA (no 480C02)"),
@@ -234,9 +233,8 @@ def _sim_device(opts, realtime, faults, dur):
     model = str(opts["truth"])
     if model in sc.MODEL_TRUTHS and opts.get("_ripple_given") is None:
         opts["ripple"] = 0.0  # the model's cam runs at constant speed
-    scene = sc.StandScene(truth_model=model, mode=str(opts["mode"]), law=str(opts["law"]), cam_speed_rpm=float(opts["rpm"]),
-                          Fu=float(opts["fu"]), backlash=float(opts["backlash_mm"]) * 1e-3,
-                          jt_factor=float(opts["jt_factor"]), ripple=float(opts["ripple"]),
+    point = {name: FIELD[name].check_edge(opts[opt]) for opt, name in POINT_OPTIONS.items()}
+    scene = sc.StandScene(truth_model=model, mode=str(opts["mode"]), **point, ripple=float(opts["ripple"]),
                           cal_accel=float(opts["cal_accel"]), cal_freq=float(opts["cal_freq"]),
                           cal_channel=str(opts["cal_channel"]), **opts["_truth"])
     if model in sc.MODEL_TRUTHS and scene.mode == "run":

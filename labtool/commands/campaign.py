@@ -14,6 +14,7 @@ from typing import List, Optional
 
 import typer
 
+from labtool.options import given, op_option
 from labtool.common.files import check_output_path
 
 campaign_app = typer.Typer(
@@ -110,6 +111,11 @@ def report_cmd(
     accuracy: str = typer.Option("fast", help="measured.nc inputs: solver preset (fast, standard, reference)"),
     revolutions: Optional[float] = typer.Option(None, help="measured.nc inputs: simulated cam revolutions [-] "
                                                 "(default: labtool report's)"),
+    restitution: Optional[float] = op_option("restitution", "measured.nc inputs"),
+    contact_damping: Optional[float] = op_option("contact_damping", "measured.nc inputs"),
+    contact_length_mm: Optional[float] = op_option("contact_length", "measured.nc inputs"),
+    kc_factor: Optional[float] = op_option("kc_factor", "measured.nc inputs"),
+    elastic_gap: Optional[str] = op_option("elastic_gap", "measured.nc inputs"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
 ) -> None:
     """One page across the points: ratings against rpm per model, the closest model and where it
@@ -128,14 +134,17 @@ def report_cmd(
 
     cmp = check_compare({"models": _split(models), "omega1": _split(omega1), "accuracy": accuracy,
                          **({} if revolutions is None else {"revolutions": float(revolutions)})}, "options")
-    _report(inputs, output, json_path, csv_path, force, cmp)
+    _report(inputs, output, json_path, csv_path, force, cmp,
+            given(restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
+                  kc_factor=kc_factor, elastic_gap=elastic_gap))
 
 
 def _split(text: str) -> list[str]:
     return [v.strip() for v in text.split(",") if v.strip()]
 
 
-def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, compare=None) -> None:
+def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, compare=None,
+            overrides: dict | None = None) -> None:
     from labtool.common.errors import InputError
     from labtool.campaign.report import collect_inputs, write_outputs
 
@@ -145,7 +154,7 @@ def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, co
     for p in outs:
         check_output_path(p, force)
     say = _reporter().say if sys.stderr.isatty() else None   # progress on a terminal, quiet when piped
-    rep = collect_inputs(inputs, compare, page_base=html.parent, say=say)
+    rep = collect_inputs(inputs, compare, overrides, page_base=html.parent, say=say)
     write_outputs(rep, html, json_path, csv_path)
     for r in rep.records:
         best = r.summary.get("closest")

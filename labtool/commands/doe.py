@@ -65,6 +65,7 @@ def run(
     from labtool.common.errors import InputError, SolverError
     from labtool.execution.backends import backend_for, check_scheduler_address
     from labtool.execution.design import parts_folder, run_design
+    from labtool.common.operating_point import PAPER_EXPERIMENT
     from labtool.models.dynamics.scene import Scene
     from labtool.models.study.doe import Design, read_factors, responses_for, table1_factors
 
@@ -88,7 +89,7 @@ def run(
     if chunk_runs is not None and chunk_runs < 1:
         raise typer.BadParameter(f"must be >= 1, got {chunk_runs}", param_hint="--chunk-runs")
     fset = read_factors(factors) if factors is not None else table1_factors()
-    base = Scene(law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
+    base = Scene.at(PAPER_EXPERIMENT, law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
     design = Design(tuple(fset), base, model)
     design.validate()
     n_runs = len(design)

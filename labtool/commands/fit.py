@@ -16,6 +16,8 @@ from typing import Optional
 
 import typer
 
+from labtool.options import given, op_option
+
 from labtool.common.files import atomic_write, check_output_path
 
 
@@ -40,18 +42,17 @@ def fit(
                               "name=value,... (edge units): searched from first, beside the scan's best points"),
     scan: bool = typer.Option(True, "--scan/--no-scan", help="also search from the coarse scan's best points (with "
                               "--no-scan a given start alone: the answer may then depend on it)"),
-    rpm: Optional[float] = typer.Option(None, help="cam speed n1 to simulate [rpm] (default: the file's)"),
-    law: Optional[str] = typer.Option(None, help="motion law (default: the file's, else sine)"),
-    fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0)"),
-    jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt [-] (default: the file's, else 1)"),
-    backlash_mm: Optional[float] = typer.Option(None, help="backlash j [mm]: fixed, or the scene's start when free "
-                                                "(default: the file's, else 0.128)"),
-    restitution: Optional[float] = typer.Option(None, help="rigid restitution k [-], fixed or the scene's start (default 1)"),
-    contact_damping: Optional[float] = typer.Option(None, help="elastic contact damping [s/m], fixed or the scene's start "
-                                                    "(default 0)"),
-    contact_length_mm: Optional[float] = typer.Option(None, help="elastic contact length lw [mm], fixed or the scene's "
-                                                      "start (default 6)"),
-    elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
+    rpm: Optional[float] = op_option("cam_speed", default_note="default: the measured mean speed of the whole "
+                                     "revolutions; a value more than 10 % off it is refused"),
+    law: Optional[str] = op_option("law", file_first=True),
+    fu: Optional[float] = op_option("Fu", file_first=True),
+    jt_factor: Optional[float] = op_option("jt_factor", file_first=True),
+    backlash_mm: Optional[float] = op_option("backlash", "fixed, or the search's start when free", file_first=True),
+    restitution: Optional[float] = op_option("restitution", "fixed, or the search's start when free"),
+    contact_damping: Optional[float] = op_option("contact_damping", "fixed, or the search's start when free"),
+    contact_length_mm: Optional[float] = op_option("contact_length", "fixed, or the search's start when free"),
+    kc_factor: Optional[float] = op_option("kc_factor"),
+    elastic_gap: Optional[str] = op_option("elastic_gap"),
     ka_gain: float = typer.Option(1.0, help="true Ka / the Ka processing used [-] when not free"),
     delay_ms: float = typer.Option(0.0, help="delay of the acceleration channels behind the tacho [ms] when not free"),
     revolutions: int = typer.Option(3, help="cam revolutions each model run simulates [-] (the first is the start-up)"),
@@ -68,18 +69,16 @@ def fit(
     from labtool.identification.parameters import parse_assignments
     from labtool.output import ProgressLines, console
 
-    for name, value in (("--restitution", restitution), ("--contact-damping", contact_damping),
-                        ("--contact-length-mm", contact_length_mm), ("--backlash-mm", backlash_mm),
-                        ("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
+    for name, value in (("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
         if value is not None and not math.isfinite(value):
             raise InputError(f"{name} must be a finite number, got {value}")
     if not (ka_gain > 0):
         raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
     figure = _outputs(output, figure, force)
     start_value = start if start in ("scan", "scene") else parse_assignments(start, "--start")
-    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
-                 "restitution": restitution, "contact_damping": contact_damping,
-                 "contact_length_mm": contact_length_mm, "elastic_gap": elastic_gap}
+    overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
+                      restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
+                      kc_factor=kc_factor, elastic_gap=elastic_gap)
     req = FitRequest(measured, model, free, omega1, accuracy, revolutions,
                      parse_assignments(bounds, "--bounds", ranges=True), start_value, overrides,
                      {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs, scan=scan)

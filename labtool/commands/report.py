@@ -14,6 +14,7 @@ import typer
 
 from labtool.common import budget
 from labtool.common.files import OutputSet, check_outputs
+from labtool.options import given, op_option
 
 PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no estimate needed
 
@@ -57,15 +58,17 @@ def report(
     thresholds: Optional[Path] = typer.Option(None, help="TOML file of limits on the metrics (exit 1 if one fails)"),
     pdf: Optional[Path] = typer.Option(None, "--pdf", help="also write the report as PDF"),
     json_path: Optional[Path] = typer.Option(None, "--json", help="also write the JSON summary to this file ('-' = stdout)"),
-    rpm: Optional[float] = typer.Option(None, help="cam speed n1 to simulate [rpm] (default: the file's cam_speed_rpm)"),
-    law: Optional[str] = typer.Option(None, help="motion law (default: the file's, else sine)"),
-    fu: Optional[float] = typer.Option(None, "--fu", help="load Fu [N] (default: the file's, else 0, the paper's experiment)"),
-    backlash_mm: Optional[float] = typer.Option(None, help="groove backlash j [mm] (default: the file's, else 0.128)"),
-    jt_factor: Optional[float] = typer.Option(None, help="inertia factor Jt [-] (default: the file's, else 1)"),
-    restitution: Optional[float] = typer.Option(None, help="rigid model: Newton's restitution k in [0, 1] (default 1, the paper's)"),
-    contact_damping: Optional[float] = typer.Option(None, help="elastic model: Hunt-Crossley damping [s/m] (default 0, the paper's)"),
-    contact_length_mm: Optional[float] = typer.Option(None, help="elastic model: contact length lw [mm] (default 6)"),
-    elastic_gap: Optional[str] = typer.Option(None, help="elastic model: physical (crosses the backlash, default) or closed"),
+    rpm: Optional[float] = op_option("cam_speed", default_note="default: the measured mean speed of the whole "
+                                     "revolutions; a value more than 10 % off it is refused"),
+    law: Optional[str] = op_option("law", file_first=True),
+    fu: Optional[float] = op_option("Fu", file_first=True),
+    backlash_mm: Optional[float] = op_option("backlash", file_first=True),
+    jt_factor: Optional[float] = op_option("jt_factor", file_first=True),
+    restitution: Optional[float] = op_option("restitution"),
+    contact_damping: Optional[float] = op_option("contact_damping"),
+    contact_length_mm: Optional[float] = op_option("contact_length"),
+    kc_factor: Optional[float] = op_option("kc_factor"),
+    elastic_gap: Optional[str] = op_option("elastic_gap"),
     accuracy: str = typer.Option("standard", help="solver preset of the models: fast, standard, reference"),
     revolutions: int = typer.Option(6, help="cam revolutions to simulate [-]: the last one is compared when the model's "
                                     "motion is periodic, else the cycle statistics of revolutions 2..N"),
@@ -97,13 +100,9 @@ def report(
         from labtool.identification.fit import load_fit
         fitted = [load_fit(p) for p in fit]
     cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
-    overrides = {"cam_speed_rpm": rpm, "law": law, "Fu": fu, "backlash_mm": backlash_mm, "jt_factor": jt_factor,
-                 "restitution": restitution, "contact_damping": contact_damping,
-                 "contact_length_mm": contact_length_mm, "elastic_gap": elastic_gap}
-    for name, value in (("--restitution", restitution), ("--contact-damping", contact_damping),
-                        ("--contact-length-mm", contact_length_mm)):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value}")
+    overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
+                      restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
+                      kc_factor=kc_factor, elastic_gap=elastic_gap)
     err = console(stderr=True)
     quiet = json_path is not None and str(json_path) == "-"
     with (err.status("report") if err.is_terminal else ProgressLines(sys.stderr, "report")) as status:

@@ -18,7 +18,9 @@ import typer
 
 from labtool.common import budget
 from labtool.common.files import check_output_path, write_netcdf
-from labtool.common.units import MM
+from labtool.invocation import command_line
+from labtool.options import given, op_option
+from labtool.common.units import RPM
 
 PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 
@@ -38,21 +40,20 @@ def _json_value(v):
 
 def simulate(
     model: str = typer.Option("auto", help="model level: auto, kinematic, rigid, elastic"),
-    law: Optional[str] = typer.Option(None, help="motion law: sine, cosine, poly345, poly4567, modtrap, modsine "
-                                      "(default: the mechanism's [program] law, sine for the STB-216)"),
-    rpm: float = typer.Option(180.0, help="nominal cam speed n1 [rpm]"),
-    fu: float = typer.Option(0.0, "--fu", help="load Fu at point N [N], opposing the rod's sliding"),
-    backlash_mm: float = typer.Option(0.016, help="groove backlash j [mm]"),
-    jt_factor: float = typer.Option(1.0, help="inertia factor of the follower side Jt [-] (paper: 1 or 4)"),
-    omega1: str = typer.Option("var", help="cam speed: var (motor characteristic, eq. 3) or const (cam as input at n1)"),
-    accuracy: str = typer.Option("standard", help="solver preset: fast, standard, reference"),
-    restitution: float = typer.Option(1.0, help="Newton's restitution coefficient k in [0, 1] (rigid model)"),
+    law: Optional[str] = op_option("law", default_note="default: the mechanism file's [program] law, sine for "
+                                   "the STB-216"),
+    rpm: Optional[float] = op_option("cam_speed"),
+    fu: Optional[float] = op_option("Fu"),
+    backlash_mm: Optional[float] = op_option("backlash"),
+    jt_factor: Optional[float] = op_option("jt_factor"),
+    omega1: Optional[str] = op_option("omega1_mode"),
+    accuracy: Optional[str] = op_option("accuracy"),
+    restitution: Optional[float] = op_option("restitution"),
     revolutions: float = typer.Option(1.0, help="cam revolutions to simulate [-]"),
-    contact_length_mm: float = typer.Option(6.0, help="roller-groove contact length lw [mm] for Kc = 8.05e4 lw^(8/9) (elastic model)"),
-    kc_factor: float = typer.Option(1.0, help="multiplier of the contact stiffness Kc [-] (elastic model)"),
-    contact_damping: float = typer.Option(0.0, help="Hunt-Crossley contact damping [s/m]; 0 = none, as in the paper (elastic model)"),
-    elastic_gap: str = typer.Option("physical", help="how the backlash enters the elastic model: physical (the follower "
-                                                     "crosses the gap j) or closed (no gap: the convention of the paper's Table 3)"),
+    contact_length_mm: Optional[float] = op_option("contact_length"),
+    kc_factor: Optional[float] = op_option("kc_factor"),
+    contact_damping: Optional[float] = op_option("contact_damping"),
+    elastic_gap: Optional[str] = op_option("elastic_gap"),
     rise_only: bool = typer.Option(True, "--rise-only/--full-cycle",
                                    help="simulate the rise only (as the paper's tables) or whole revolutions"),
     mechanism: Optional[Path] = typer.Option(None, help="mechanism TOML file (default: the paper's STB-216)"),
@@ -64,6 +65,7 @@ def simulate(
 ) -> None:
     """Simulate the mechanism at one operating point and report the jump indicators."""
     from labtool.common.errors import InputError
+    from labtool.common.operating_point import resolve
     from labtool.models.dynamics.scene import Scene
     from labtool.models.dynamics.simulate import INDICATORS
     from labtool.models.dynamics.simulate import simulate as run
@@ -71,19 +73,17 @@ def simulate(
 
     if output is not None:
         check_output_path(output, force)
-    for name, value in (("--rpm", rpm), ("--fu", fu), ("--backlash-mm", backlash_mm), ("--jt-factor", jt_factor),
-                        ("--restitution", restitution), ("--revolutions", revolutions),
-                        ("--contact-length-mm", contact_length_mm), ("--kc-factor", kc_factor),
-                        ("--contact-damping", contact_damping)):
-        if not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value}")
+    if not (math.isfinite(revolutions) and revolutions > 0):
+        raise InputError(f"--revolutions must be a finite number > 0, got {revolutions}")
+    values = given(law=law, cam_speed=rpm, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor, omega1_mode=omega1,
+                   accuracy=accuracy, restitution=restitution, contact_length=contact_length_mm, kc_factor=kc_factor,
+                   contact_damping=contact_damping, elastic_gap=elastic_gap)
     mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
-    if law is None:     # the file's [program] law: it was replaced by "sine" without a word
-        law = mech.program.get("law", "sine")
-    scene = Scene(law=law, cam_speed_rpm=rpm, Fu=fu, backlash=backlash_mm * MM, jt_factor=jt_factor,
-                  omega1_mode=omega1, restitution=restitution, accuracy=accuracy, revolutions=revolutions,
-                  rise_only=rise_only, contact_length=contact_length_mm * MM, kc_factor=kc_factor,
-                  contact_damping=contact_damping, elastic_gap=elastic_gap, mechanism=mech)
+    # a mechanism file's [program] law stands where --law is not given
+    program_law = ({"law": mech.program["law"], "law_source": "its [program] table"}
+                   if mechanism is not None and mech.program.get("law") else None)
+    sourced = resolve(values, program_law, where=f"mechanism file {mechanism}")
+    scene = Scene.at(sourced.point, revolutions=revolutions, rise_only=rise_only, mechanism=mech)
     budget.check_limit(max_seconds)
     if revolutions > PROBE_ABOVE_REVOLUTIONS:
         _check_budget(scene, model, revolutions, max_seconds, output is not None)
@@ -97,21 +97,15 @@ def simulate(
         typer.echo(json.dumps(out))
         typer.echo(f"labtool simulate: {result.model} model ({result.reason})", err=True)
     else:
-        _print(result, scene)
+        _print(result, scene, sourced)
     if output is not None:
         from labtool.common import cf
 
         ds = result.dataset
-        command = " ".join([
-            f"labtool simulate --model {model} --law {law} --rpm {rpm!r} --fu {fu!r}",
-            f"--backlash-mm {backlash_mm!r} --jt-factor {jt_factor!r} --omega1 {omega1} --accuracy {accuracy}",
-            f"--restitution {restitution!r} --revolutions {revolutions!r} --contact-length-mm {contact_length_mm!r}",
-            f"--kc-factor {kc_factor!r} --contact-damping {contact_damping!r} --elastic-gap {elastic_gap}",
-            "--rise-only" if rise_only else "--full-cycle",
-            *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
+        ds.attrs.update(sourced.source_attrs())
         # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
         cf.apply(ds, title=f"labtool simulation, {result.model} model", source=f"labtool {result.model} model",
-                 history=command)
+                 history=command_line("labtool.simulate"))
         write_netcdf(ds, output)
         typer.echo(f"wrote {output}", err=as_json)
 
@@ -143,8 +137,9 @@ _LABELS = {
 }
 
 
-def _print(result, scene) -> None:
+def _print(result, scene, sourced) -> None:
     from labtool.output import console
+    from rich.markup import escape
     from rich.table import Table
 
     title = (f"simulate ({result.model}): {scene.law} law, {scene.cam_speed_rpm:g} rpm, Fu = {scene.Fu:g} N, "
@@ -162,3 +157,9 @@ def _print(result, scene) -> None:
     console.print(table)
     console.print(f"model: {result.model} ({result.reason}); accuracy {scene.accuracy}; {result.wall_s:.2f} s",
                   markup=False, highlight=False)
+    where = Table(title="operating point and model options", title_justify="left", box=None)
+    for col in ("", "value", "from"):
+        where.add_column(col)
+    for row in sourced.rows():
+        where.add_row(*map(escape, row))
+    console.print(where)

@@ -6,18 +6,10 @@ again from its attributes alone.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 from importlib import metadata
 
-# Scene field -> (attribute name, how to store it): names carry their unit as elsewhere in labtool
-SCENE_ATTRIBUTES = {
-    "law": "law", "cam_speed_rpm": "cam_speed_rpm", "Fu": "Fu_N", "backlash": "backlash_m",
-    "jt_factor": "jt_factor", "omega1_mode": "omega1_mode", "restitution": "restitution",
-    "contact_length": "contact_length_m", "kc_factor": "kc_factor",
-    "contact_damping": "contact_damping_s_per_m", "elastic_gap": "elastic_gap", "accuracy": "accuracy",
-    "revolutions": "revolutions", "rise_only": "rise_only",
-}
+from labtool.common.operating_point import OperatingPoint, from_attrs
 
 
 @functools.lru_cache(maxsize=1)
@@ -56,18 +48,24 @@ def mechanism_attributes(mech) -> dict:
 
 
 def scene_attributes(scene) -> dict:
-    """Every field of the scene (netCDF attributes: booleans as 0/1), the mechanism's source and
-    labtool's version with the hash of its compiled kernels' source."""
+    """The scene as attributes (netCDF: booleans as 0/1): its operating point as the owner writes
+    it (OperatingPoint.attrs, edge units), its extent, the mechanism's source and labtool's version
+    with the hash of its compiled kernels' source. ``scene_from_attributes`` reads it back."""
     from labtool.models.dynamics.jit import KERNEL_SOURCES_HASH
 
-    fields = {f.name for f in dataclasses.fields(scene)} - {"mechanism"}
-    missing = fields - set(SCENE_ATTRIBUTES)
-    if missing:        # a new Scene field must be recorded too
-        raise AssertionError(f"provenance: Scene fields without an attribute name: {sorted(missing)}")
-    out = {}
-    for field, name in SCENE_ATTRIBUTES.items():
-        value = getattr(scene, field)
-        out[name] = int(value) if isinstance(value, bool) else value
+    out = OperatingPoint.attrs(scene)
+    out.update(revolutions=float(scene.revolutions), rise_only=int(scene.rise_only))
     out.update(mechanism_attributes(scene.mechanism))
     out.update(labtool_version=labtool_version(), labtool_kernels_sha256=KERNEL_SOURCES_HASH[:16])
     return out
+
+
+def scene_from_attributes(attrs, mechanism=None):
+    """The Scene a dataset's attributes (``scene_attributes``) describe, with ``mechanism`` (default:
+    the built-in one; a dataset records its mechanism's source and hash, not its parameters)."""
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.mechanism import Mechanism
+
+    point = from_attrs(attrs, where="the dataset")
+    return Scene.at(point, revolutions=float(attrs.get("revolutions", 1.0)),
+                    rise_only=bool(int(attrs.get("rise_only", 1))), mechanism=mechanism or Mechanism.default())

@@ -54,6 +54,7 @@ import math
 import numpy as np
 import xarray as xr
 
+from labtool.common.operating_point import OperatingPoint
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics.contact import contact_stiffness, static_penetration
 from labtool.models.dynamics.scene import Scene
@@ -467,10 +468,7 @@ def simulate(scene: Scene, physics: TwinPhysics | None = None, duration: float |
     data["aE_n"] = ("time", s["omega2"] ** 2 * DE, {"units": "m/s^2", "long_name": "normal acceleration of E, towards D"})
     ds = xr.Dataset(data, coords={"time": ("time", t, {"units": "s", "long_name": "time from the start of the first rise"})})
     ds = ds.merge(event_dataset(run.take_events(final=True)))
-    ds.attrs.update(title="labtool stand twin (docs/twin.md)", law=scene.law, cam_speed_rpm=scene.cam_speed_rpm,
-                    Fu_N=scene.Fu, backlash_m=scene.backlash, jt_factor=scene.jt_factor,
-                    contact_length_m=scene.contact_length, kc_factor=scene.kc_factor,
-                    contact_damping_s_per_m=scene.contact_damping, accuracy=scene.accuracy,
+    ds.attrs.update(title="labtool stand twin (docs/twin.md)", **OperatingPoint.attrs(scene),
                     **{k: v for k, v in physics.attrs().items()},
                     **{f"twin_{k}": v for k, v in run.plant.info.items()}, **run.stats)
     return ds

@@ -32,13 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
+from labtool.common.units import RPM
+
 from labtool.common.errors import FileFormatError, InputError
 
 # symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
 SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
     "Fu": ("Fu", {"N": 1.0}, "load force at point N"),
     "j": ("backlash", {"mm": 1e-3, "m": 1.0, "um": 1e-6}, "cam-follower groove backlash"),
-    "n1": ("cam_speed_rpm", {"rpm": 1.0}, "nominal cam speed"),
+    "n1": ("cam_speed", {"rpm": RPM, "rad/s": 1.0}, "nominal cam speed"),
     "Jt": ("jt_factor", {"factor_of_nominal": 1.0, "-": 1.0, "": 1.0},
            "inertia factor of the follower side"),
     "k": ("restitution", {"-": 1.0, "": 1.0}, "Newton's restitution coefficient"),

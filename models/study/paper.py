@@ -12,6 +12,8 @@ import pandas as pd
 
 from labtool.models.dynamics.scene import Scene
 from labtool.models.dynamics.simulate import indicators
+from labtool.common.operating_point import PAPER_EXPERIMENT
+from labtool.common.units import MM, RPM
 
 FACTOR_LEVELS = {  # Table 1, in the units of the table
     "Fu_N": (0.0, 65.0),
@@ -51,8 +53,7 @@ def kinematic_vs_table3(no_load_speed: bool = True) -> pd.DataFrame:
     t3 = read_reference("table3_elastic")
     rows = []
     for run, r3 in zip(table1_runs().itertuples(), t3.itertuples()):
-        scene = Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3,
-                      jt_factor=run.Jt_factor, omega1_mode="var" if no_load_speed else "const")
+        scene = _table1_scene(run, omega1_mode="var" if no_load_speed else "const")
         ind = indicators(scene, "kinematic")
         mx, mn = ind["MR13D_max_Nm"], ind["MR13D_min_Nm"]
         rows.append({
@@ -65,8 +66,16 @@ def kinematic_vs_table3(no_load_speed: bool = True) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def paper_scene(**changes) -> Scene:
+    """A Scene of the paper's simulated experiment (PAPER_EXPERIMENT: Table 1's first run, k = 1,
+    no contact damping, omega1 variable) with ``changes`` (any Scene field)."""
+    return Scene.at(PAPER_EXPERIMENT, **changes)
+
+
 def _table1_scene(run, **changes) -> Scene:
-    return Scene(cam_speed_rpm=run.n1_rpm, Fu=run.Fu_N, backlash=run.j_mm * 1e-3, jt_factor=run.Jt_factor, **changes)
+    """Table 1's run ``run`` in the paper's simulated experiment (PAPER_EXPERIMENT), with ``changes``."""
+    return Scene.at(PAPER_EXPERIMENT, cam_speed=run.n1_rpm * RPM, Fu=run.Fu_N, backlash=run.j_mm * MM,
+                    jt_factor=run.Jt_factor, **changes)
 
 
 def _pct(ours: float, paper: float) -> float:

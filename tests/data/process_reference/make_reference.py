@@ -11,7 +11,9 @@ tests/stand_data.py, seed 7), with a gap (250 samples lost) and an overrun at sa
 recorder clip event at 21000, three impact bursts (spikes), and 4 samples of aE_t held at a new
 extreme value from 25000 (a saturated ADC of unknown range). The references: its measured.nc
 with the tacho, and with the cam angle by correlation (the tacho ignored), stored compressed by
-tests/measured_compare.store_reference. tests/test_proc_reference.py compares the current output.
+tests/measured_compare.store_reference; their attributes carry the current names (the nominal speed
+as cam_speed_rpm, the measured one as cam_speed_rpm_measured). tests/test_proc_reference.py compares
+the current output.
 """
 from __future__ import annotations
 
