@@ -1,0 +1,68 @@
+"""``labtool.fit``: model parameters identified from a measurement, with 95 % intervals."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str = "standard", revolutions: int = 3,
+        bounds: dict | None = None, start="scan", scan: bool = True, max_runs: int = 200, ka_gain: float = 1.0,
+        delay_ms: float = 0.0, progress=None, **changes):
+    """Identify a model's parameters from a processed measurement.
+
+    Parameters
+    ----------
+    measured : path
+        measured.nc (``labtool.process``).
+    model : {"rigid", "elastic"}
+        The model whose parameters are identified.
+    free : str
+        The parameters to identify, comma-separated: ``backlash`` [mm], ``restitution`` [-]
+        (rigid), ``contact_damping`` [s/m], ``contact_length`` [mm] (elastic), ``ka_gain`` [-],
+        ``delay`` [ms].
+    omega1 : {"const", "var"}
+        The model's cam speed mode.
+    accuracy : {"fast", "standard"}
+        Solver preset of the final evaluation (the search runs at fast).
+    revolutions : int
+        Cam revolutions each model run simulates [-].
+    bounds : dict, optional
+        Search bounds in edge units by parameter name, ``{"backlash": (0.02, 0.4)}``.
+    start : "scan", "scene" or dict
+        Where the search starts: a coarse scan (default), the operating point's values, or given
+        values in edge units.
+    scan : bool
+        Also search from the scan's best points when a start is given.
+    max_runs : int
+        Model runs the search may use [-].
+    ka_gain, delay_ms : float
+        The chain's gain [-] and delay [ms] when they are not free.
+    progress : callable, optional
+        ``progress(text)`` before each long step.
+    **changes
+        Operating-point fields (SI, ``labtool.OperatingPoint``'s names) fixed for the models, or the
+        start of a free one; default: the measured file's, else labtool's defaults.
+
+    Returns
+    -------
+    labtool.identification.fit.FitOutcome
+        ``summary``: the result as a JSON-ready dict (values, 95 % intervals, identifiability,
+        metrics before and after, notes); what the figures need.
+    """
+    import math
+
+    from labtool.common.errors import InputError
+    from labtool.identification.fit import FitRequest, identify
+    from labtool.identification.parameters import parse_assignments
+
+    for name, value in (("ka_gain", ka_gain), ("delay_ms", delay_ms)):
+        if not math.isfinite(value):
+            raise InputError(f"{name} must be a finite number, got {value}")
+    if not ka_gain > 0:
+        raise InputError(f"ka_gain must be > 0, got {ka_gain:g}")
+
+    if isinstance(bounds, str):
+        bounds = parse_assignments(bounds, "bounds", ranges=True)
+    req = FitRequest(Path(measured), model, free, omega1, accuracy, int(revolutions), dict(bounds or {}), start,
+                     {k: v for k, v in changes.items() if v is not None},
+                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, int(max_runs), scan=scan)
+    return identify(req, progress=progress)

@@ -1,0 +1,75 @@
+"""``labtool.process``: a recording -> the follower's motion (measured.nc), as a CF dataset."""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import xarray as xr
+
+from labtool.common.errors import InputError
+
+
+def process(recording, output=None, *, calibration=(), channels: dict | None = None, law: str | None = None,
+            cam_speed_rpm: float | None = None, lowpass_hz: float | None = None, ac_tau_s: float | None = None,
+            mechanism=None, chunk_samples: int = 1 << 17, progress=None, warn=None, **reader_options) -> xr.Dataset:
+    """Recorded accelerations at E -> the follower's omega2 and epsilon2, the cam angle, spectra,
+    cycle statistics and spikes, with every step in the processing history.
+
+    Parameters
+    ----------
+    recording : path
+        A labtool recording (HDF5 v1), a LabVIEW TDMS or LVM file, or a CSV export.
+    output : path, optional
+        The NetCDF file to write (measured.nc). Without it the result is held in memory (a long
+        recording's is large: give a file, whose variables are then read lazily).
+    calibration : sequence of paths
+        Calibration files (``labtool calibrate``): Ka [m/s^2/V] per channel, merged.
+    channels : dict, optional
+        The file's channel for each of ``aE_t``, ``aE_n``, ``tacho`` (``{"aE_t": "ai0"}``).
+    law : str, optional
+        The cam's motion law (default: the recording's, else sine).
+    cam_speed_rpm : float, optional
+        Nominal cam speed [rpm] (default: the recording's; the speed used is measured).
+    lowpass_hz : float, optional
+        Low-pass corner [Hz] (default: 100 x the cam frequency).
+    ac_tau_s : float, optional
+        AC-coupling time constant of the sensor chain [s], undone when given.
+    mechanism : labtool.models.mechanism.Mechanism, optional
+        The mechanism (default: the paper's STB-216).
+    chunk_samples : int
+        Samples per processing chunk: the memory bound [-].
+    progress : callable, optional
+        ``progress(n)`` after every ``n`` samples of the two passes (2 x the recording's length).
+    warn : callable, optional
+        ``warn(text)`` for each warning (default: Python warnings, ProcessingWarning).
+    **reader_options
+        What the file's reader takes: ``sample_rate_hz``, ``group`` (TDMS), ``delimiter``,
+        ``decimal``, ``time_unit_s`` (text tables).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``omega2`` [rad s-1], ``epsilon2`` [rad s-2], ``aE_t``, ``aE_n`` [m s-2], ``phi1`` [rad] over
+        ``time``; cycle statistics (``omega2_mean``, ``omega2_std``, ...) on the cam-angle grid;
+        spectra; the operating point and the processing history as attributes.
+    """
+    from labtool.processing.pipeline import ProcessOptions, process_file
+
+    for name, v in (("cam_speed_rpm", cam_speed_rpm), ("lowpass_hz", lowpass_hz), ("ac_tau_s", ac_tau_s)):
+        if v is not None and not (0 < v < float("inf")):
+            raise InputError(f"{name} must be a positive number, got {v}")
+    if chunk_samples < 1024:
+        raise InputError("chunk_samples must be at least 1024")
+    opts = ProcessOptions(law=law, cam_speed_rpm=cam_speed_rpm, lowpass_hz=lowpass_hz, ac_tau_s=ac_tau_s,
+                          chunk_samples=int(chunk_samples), mechanism=mechanism)
+    if output is not None:
+        output = Path(output)
+        if output.resolve() == Path(recording).resolve():
+            raise InputError("the output file must not be the recording itself")
+        process_file(recording, output, calibration, channels, opts, progress=progress, warn=warn, **reader_options)
+        return xr.open_dataset(output, engine="h5netcdf")
+    with tempfile.TemporaryDirectory(prefix="labtool-") as tmp:
+        path = Path(tmp) / "measured.nc"
+        process_file(recording, path, calibration, channels, opts, progress=progress, warn=warn, **reader_options)
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            return ds.load()

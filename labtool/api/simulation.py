@@ -1,0 +1,128 @@
+"""``labtool.simulate``: one operating point through a model level, as CF datasets."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import xarray as xr
+
+from labtool.common import cf
+from labtool.common.operating_point import DEFAULT, OperatingPoint
+from labtool.processing.cycles import phi1_grid, resample_revolution
+
+# the variables put on the cam-angle grid, when the model has them
+CYCLE_VARIABLES = ("phi2", "omega2", "epsilon2", "omega1", "MR13D", "aE_t", "aE_n", "x_el")
+
+
+@dataclasses.dataclass
+class Simulation:
+    """A simulation's results.
+
+    dataset     the time series (CF: UDUNITS units and a long name on every variable; the scene,
+                the mechanism's source and labtool's version as attributes; ``time`` in s from
+                the start of the first rise, not uniform: the solver's steps and events)
+    cycles      the same variables on the uniform cam-angle grid a measurement uses
+                (``labtool.process``: ``grid_points`` per revolution, ``phi1`` in rad from the
+                start of the rise), one row per simulated whole revolution (dimension
+                ``revolution``); NaN where the run does not cover the angle (a rise-only run)
+    indicators  the paper's indicators (Tables 2-3 keys: ``MR13D_max_Nm``, ``jumps``, ...; None
+                where the level does not compute one)
+    model       the level that ran (kinematic, rigid, elastic), ``reason`` why
+    warnings    what the model doubts about its own validity, one sentence each
+    scene       the Scene that ran (an OperatingPoint with revolutions, rise_only, mechanism)
+    wall_s      wall time of the model run [s]
+    """
+
+    dataset: xr.Dataset
+    cycles: xr.Dataset
+    indicators: dict
+    model: str
+    reason: str
+    warnings: list
+    scene: object
+    wall_s: float
+
+
+def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolutions: float = 1.0,
+             rise_only: bool = True, mechanism=None, grid_points: int = 720, **changes) -> Simulation:
+    """Simulate the mechanism at an operating point.
+
+    Parameters
+    ----------
+    point : OperatingPoint, optional
+        The operating point and model options (SI); default labtool's defaults
+        (``labtool.OperatingPoint()``: the simulated stand's), or ``labtool.PAPER_EXPERIMENT``.
+    model : {"auto", "kinematic", "rigid", "elastic"}
+        The model level; ``auto`` runs the cheapest level the point needs and says why.
+    revolutions : float
+        Cam revolutions to simulate [-], the first starting at the start of the rise.
+    rise_only : bool
+        Simulate the rise only, as the paper's tables do (``revolutions`` then counts rises).
+    mechanism : labtool.models.mechanism.Mechanism, optional
+        The mechanism (default: the paper's STB-216; ``Mechanism.from_toml(path)`` for another).
+    grid_points : int
+        Points per revolution of the cam-angle grid of ``Simulation.cycles`` [-].
+    **changes
+        Operating-point fields replacing ``point``'s, in SI (``cam_speed`` [rad/s], ``Fu`` [N],
+        ``backlash`` [m], ``restitution`` [-], ...; see ``labtool.OperatingPoint``).
+
+    Returns
+    -------
+    Simulation
+        The time series and the cam-angle cycles as CF datasets, the indicators, the level that ran.
+
+    Examples
+    --------
+    >>> import labtool
+    >>> from labtool.common.units import RPM
+    >>> sim = labtool.simulate(model="rigid", cam_speed=300 * RPM, revolutions=3, rise_only=False)
+    >>> sim.cycles["omega2"].sel(revolution=2)          # doctest: +SKIP
+    """
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import simulate as run
+    from labtool.models.mechanism import Mechanism
+
+    base = point if point is not None else DEFAULT
+    extent = {"revolutions": float(revolutions), "rise_only": bool(rise_only),
+              "mechanism": mechanism if mechanism is not None else Mechanism.default()}
+    scene = Scene.at(base, **changes, **extent)
+    res = run(scene, model)
+    ds = cf.apply(res.dataset, title=f"labtool simulation, {res.model} model", source=f"labtool {res.model} model")
+    return Simulation(ds, cam_angle_cycles(ds, grid_points), res.indicators, res.model, res.reason,
+                      list(res.warnings), scene, res.wall_s)
+
+
+def cam_angle_cycles(ds: xr.Dataset, grid_points: int = 720) -> xr.Dataset:
+    """A simulation's variables on the uniform cam-angle grid, one row per revolution it covers.
+
+    ``ds`` holds ``phi1`` (rad, unwrapped, 0 at the start of the first rise) over ``time`` (the
+    dynamic models) or as its coordinate (the kinematic level). Revolution k covers phi1 in
+    [2 pi k, 2 pi (k + 1)); grid points the run does not reach are NaN.
+    """
+    phi = np.asarray(ds["phi1"].values, float)
+    dims = ds["phi1"].dims
+    names = [n for n in CYCLE_VARIABLES if n in ds and ds[n].dims == dims]
+    grid = phi1_grid(grid_points)
+    n_rev = max(int(math.ceil(phi[-1] / (2.0 * math.pi) - 1e-9)), 1) if phi.size else 0
+    values = {n: np.full((n_rev, grid_points), np.nan) for n in names}
+    order = np.argsort(phi, kind="stable")
+    phi_sorted = phi[order]
+    for k in range(n_rev):
+        lo, hi = np.searchsorted(phi_sorted, [2.0 * math.pi * k, 2.0 * math.pi * (k + 1)], side="left")
+        lo, hi = max(lo - 1, 0), min(hi + 1, phi.size)
+        if hi - lo < 2:
+            continue
+        sel = order[lo:hi]
+        rows = resample_revolution(phi_sorted[lo:hi] - 2.0 * math.pi * k,
+                                   np.stack([np.asarray(ds[n].values, float)[sel] for n in names]), grid, np.nan)
+        for i, n in enumerate(names):
+            values[n][k] = rows[i]
+    coords = {"revolution": ("revolution", np.arange(n_rev), {"long_name": "cam revolution from the start of the "
+                                                                        "first rise", "units": "1"}),
+              "phi1": ("phi1", grid, {"long_name": "cam angle from the start of the rise", "units": "rad"})}
+    data = {n: (("revolution", "phi1"), values[n], dict(ds[n].attrs)) for n in names}
+    out = xr.Dataset(data, coords=coords)
+    out.attrs.update({k: v for k, v in ds.attrs.items() if k not in ("history",)})
+    out.attrs["grid_points_per_revolution"] = int(grid_points)
+    return out

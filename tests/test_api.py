@@ -1,0 +1,79 @@
+"""labtool's Python API: the functions a notebook calls, checked against the library underneath and
+against independent facts (the cam-angle grid against a plain interpolation of the time series)."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import labtool
+from labtool.common.operating_point import PAPER_EXPERIMENT
+from labtool.units import MM, RPM
+
+
+def test_the_api_is_listed_and_importing_labtool_loads_nothing_heavy():
+    assert {"simulate", "process", "report", "fit", "OperatingPoint", "PAPER_EXPERIMENT"} <= set(dir(labtool))
+    code = ("import sys, labtool, labtool.common.units; "
+            "print(sorted(m for m in ('numpy', 'xarray', 'numba', 'scipy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+    with pytest.raises(AttributeError):
+        labtool.no_such_function
+
+
+def test_simulate_equals_the_models_own_run_and_its_cycles_are_on_the_measured_grid():
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import simulate as run
+
+    sim = labtool.simulate(PAPER_EXPERIMENT, model="rigid", cam_speed=300 * RPM, backlash=0.128 * MM, revolutions=2,
+                           rise_only=False, accuracy="fast")
+    ref = run(Scene.at(PAPER_EXPERIMENT, cam_speed=300 * RPM, backlash=0.128 * MM, revolutions=2.0, rise_only=False,
+                       accuracy="fast"), "rigid")
+    assert sim.model == "rigid" and sim.indicators == ref.indicators
+    np.testing.assert_array_equal(sim.dataset["omega2"].values, ref.dataset["omega2"].values)
+    assert sim.dataset["omega2"].attrs["units"] == "rad s-1"          # CF, as a measurement says it
+    cyc = sim.cycles
+    assert cyc.sizes == {"revolution": 2, "phi1": 720} and cyc["omega2"].attrs["units"] == "rad s-1"
+    np.testing.assert_allclose(np.diff(cyc["phi1"].values), 2 * math.pi / 720)
+    # revolution 1 on the grid against numpy's interpolation of the time series on the unwrapped angle
+    phi, om = sim.dataset["phi1"].values, sim.dataset["omega2"].values
+    expect = np.interp(cyc["phi1"].values + 2 * math.pi, phi, om)
+    np.testing.assert_allclose(cyc["omega2"].sel(revolution=1).values, expect, rtol=1e-10, atol=1e-10)
+
+
+def test_a_rise_only_run_leaves_the_rest_of_the_revolution_empty():
+    sim = labtool.simulate(model="rigid", accuracy="fast")
+    row = sim.cycles["omega2"].sel(revolution=0).values
+    phi = sim.cycles["phi1"].values
+    rise = float(sim.dataset["phi1"].max())
+    assert np.isfinite(row[phi <= rise]).all() and np.isnan(row[phi > rise + 1e-9]).all()
+
+
+def test_simulate_refuses_what_the_owner_refuses():
+    from labtool.common.errors import InputError
+    with pytest.raises(InputError, match=r"backlash j must be in \[0, 10\] mm"):
+        labtool.simulate(backlash=0.05)          # 50 mm: metres were meant as millimetres
+    with pytest.raises(TypeError):
+        labtool.simulate(rpm=300)                # SI names only: cam_speed in rad/s
+
+
+@pytest.mark.slow
+def test_process_and_report_equal_the_commands(tmp_path):
+    from labtool.cli import main
+
+    rec = tmp_path / "r.h5"
+    assert main(["acquire", "--device", "sim", "--fast", "--duration", "2", "--status-every", "0", "-o", str(rec)]) == 0
+    assert main(["process", str(rec), "-o", str(tmp_path / "cli.nc")]) == 0
+    measured = labtool.process(rec, tmp_path / "api.nc")
+    in_memory = labtool.process(rec)
+    import xarray as xr
+    with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli:
+        np.testing.assert_array_equal(measured["omega2"].values, cli["omega2"].values)
+        np.testing.assert_array_equal(in_memory["omega2"].values, cli["omega2"].values)
+    rep = labtool.report(tmp_path / "api.nc", tmp_path / "r.html", models=("kinematic",), omega1=("const",),
+                         json=tmp_path / "r.json")
+    assert (tmp_path / "r.html").exists() and (tmp_path / "r.json").exists()
+    assert rep.scene["cam_speed_rpm_source"].startswith("measured")
