@@ -11,10 +11,13 @@ So, before any h5py call:
 3. refuse the file if it is shorter than base address + stored end-of-file address.
 
 A file that a SWMR writer still holds open (or that was killed) passes these checks: its stored
-end-of-file address is never beyond the data already on disk. When the normal open fails and the
-SWMR open is the fallback, the SWMR open and the first metadata reads are first tried in a child
-process with a time bound (``probe_timeout_s``), so that a damage the checks above miss still ends
-with one line, never a hang.
+end-of-file address is never beyond the data already on disk.
+
+Then every piece of metadata a reader touches is walked in a child process with a time limit
+(``probe_metadata``), which also finds the open mode that works (normal, else SWMR): a flipped byte
+in an attribute heap or a chunk index can make the HDF5 library loop inside one C call, where no
+signal handler runs (100 % CPU, SIGTERM ignored). This process meanwhile only waits on a pipe, so a
+damaged file ends with one line and a signal always ends the command.
 
 Nothing here imports above ``common``; acquisition's calibration and processing's reader share it.
 """
@@ -143,48 +146,163 @@ def _parse(sb: bytes, p: Path) -> dict:
     return {"version": version, "base": base, "eof": eof, "consistency_flags": flags}
 
 
-_PROBE = r"""
-import sys, h5py
-with h5py.File(sys.argv[1], "r", swmr=True) as f:
-    dict(f.attrs)
-    for k in f:
-        node = f[k]
-        dict(node.attrs)
-        getattr(node, "shape", None)
-print("ok")
+MAX_WALK_OBJECTS = 10_000        # groups and datasets visited by the metadata walk (a recording has 2)
+SMALL_DATASET_BYTES = 64 << 20   # variable-length datasets up to this size are read in full by the walk
+FIXED_DATASET_BYTES = 1 << 20    # ... and fixed-size ones up to this (events; never the samples)
+
+
+def _has_vlen(dtype) -> bool:
+    import h5py
+    if dtype.names:
+        return any(_has_vlen(dtype.fields[n][0]) for n in dtype.names)
+    return h5py.check_vlen_dtype(dtype) is not None or h5py.check_string_dtype(dtype) is not None and \
+        h5py.check_string_dtype(dtype).length is None
+
+
+def walk_metadata(path, swmr: bool = False) -> None:
+    """Open ``path`` and touch every piece of metadata labtool's readers touch: every attribute of
+    every object, every dataset's shape, type and chunk index, and every small dataset in full
+    (events). Run by :func:`probe_metadata` in a child process: on damaged metadata the HDF5
+    library can loop for ever inside one C call, where no signal handler of this process runs."""
+    import h5py
+
+    with h5py.File(path, "r", swmr=swmr) as f:
+        seen = [0]
+
+        def touch(obj) -> None:
+            for k in obj.attrs:
+                obj.attrs[k]
+            if isinstance(obj, h5py.Dataset):
+                obj.shape, obj.dtype, obj.chunks, obj.compression
+                if obj.chunks is not None:
+                    obj.id.get_num_chunks()          # walks the whole chunk index
+                else:
+                    obj.id.get_storage_size()
+                # variable-length data (strings in the global heap) are where a damaged address
+                # loops: read them up to the bound; fixed-size data only when small (no 288 MB time axis)
+                limit = SMALL_DATASET_BYTES if _has_vlen(obj.dtype) else FIXED_DATASET_BYTES
+                if obj.size * obj.dtype.itemsize <= limit:
+                    obj[()]
+
+        def visit(_name, obj):
+            seen[0] += 1
+            touch(obj)
+            return True if seen[0] >= MAX_WALK_OBJECTS else None
+
+        touch(f)
+        f.visititems(visit)
+
+
+def _child_walk(path: str) -> str:
+    """'normal' or 'swmr' (the mode that opened the file and walked its metadata), else raises the
+    normal open's error."""
+    try:
+        walk_metadata(path, swmr=False)
+        return "normal"
+    except Exception as first:                       # noqa: BLE001 - reported, in one line, by the parent
+        try:
+            walk_metadata(path, swmr=True)
+            return "swmr"
+        except Exception:                            # noqa: BLE001
+            raise first from None
+
+
+_CHILD = r"""
+import os, sys
+os.environ["HDF5_USE_FILE_LOCKING"] = "FALSE"
+from labtool.common.hdf5 import _child_walk
+try:
+    print("ok " + _child_walk(sys.argv[1]))
+except Exception as exc:
+    print("error " + (" ".join(str(exc).split()) or type(exc).__name__)[:300])
 """
 
 
-def probe_in_child(path, timeout_s: float = PROBE_TIMEOUT_S) -> None:
-    """Open ``path`` in SWMR mode and read its top-level metadata in a child process, bounded in
-    time; FileFormatError if the child fails or does not finish."""
-    try:
-        r = subprocess.run([sys.executable, "-c", _PROBE, os.fspath(path)], capture_output=True, text=True,
-                           timeout=timeout_s, env=dict(os.environ, HDF5_USE_FILE_LOCKING="FALSE"))
-    except subprocess.TimeoutExpired:
-        raise FileFormatError(f"{path}: HDF5 file does not open within {timeout_s:g} s (damaged metadata); "
-                              "give an undamaged copy") from None
-    if r.returncode != 0 or "ok" not in r.stdout:
-        last = (r.stderr.strip().splitlines() or ["unknown error"])[-1]
-        raise FileFormatError(f"{path}: not a readable HDF5 file (truncated or corrupt?): {last}")
+def probe_metadata(path, timeout_s: float | None = None) -> str:
+    """Walk the file's metadata (:func:`walk_metadata`) in a child process bounded by ``timeout_s``
+    (default PROBE_TIMEOUT_S); 'normal' or 'swmr', the open mode that works.
+
+    FileFormatError when the walk fails or does not finish in time (the child is killed). This
+    process only waits on a pipe meanwhile, so SIGTERM and Ctrl-C reach it (and kill the child).
+    The child is forked when this process runs one thread (a few ms), else a fresh interpreter
+    (about 0.3 s): forking a process whose other threads may hold locks can deadlock the child.
+    """
+    import select
+    import signal
+    import threading
+
+    timeout_s = PROBE_TIMEOUT_S if timeout_s is None else timeout_s
+    path = os.fspath(path)
+    if hasattr(os, "fork") and threading.active_count() == 1:
+        rfd, wfd = os.pipe()
+        pid = os.fork()
+        if pid == 0:                                   # the child: walk, answer, leave without cleanup
+            try:
+                os.close(rfd)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
+                os.environ["HDF5_USE_FILE_LOCKING"] = "FALSE"
+                try:
+                    answer = "ok " + _child_walk(path)
+                except BaseException as exc:           # noqa: BLE001
+                    answer = "error " + (" ".join(str(exc).split()) or type(exc).__name__)[:300]
+                os.write(wfd, answer.encode("utf-8", "replace"))
+            finally:
+                os._exit(0)
+        os.close(wfd)
+        try:
+            ready, _, _ = select.select([rfd], [], [], timeout_s)
+            answer = os.read(rfd, 4096).decode("utf-8", "replace") if ready else None
+        finally:
+            os.close(rfd)
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            os.waitpid(pid, 0)
+    else:
+        try:
+            r = subprocess.run([sys.executable, "-c", _CHILD, path], capture_output=True, text=True,
+                               timeout=timeout_s)
+            answer = r.stdout.strip() or "error " + ((r.stderr.strip().splitlines() or ["unknown error"])[-1])
+        except subprocess.TimeoutExpired:
+            answer = None
+    if answer is None:
+        raise FileFormatError(f"{path}: HDF5 file's metadata cannot be read within {timeout_s:g} s (damaged "
+                              "file); give an undamaged copy")
+    if answer.startswith("ok "):
+        return answer[3:].strip()
+    raise FileFormatError(f"{path}: not a readable HDF5 file (truncated or corrupt?): {answer[6:] or 'unknown error'}")
 
 
-def open_file(path, probe_timeout_s: float = PROBE_TIMEOUT_S):
+def probe_in_child(path, timeout_s: float | None = None) -> None:
+    """The file's metadata walked in a child process bounded in time (:func:`probe_metadata`)."""
+    probe_metadata(path, timeout_s)
+
+
+def open_file(path, probe_timeout_s: float | None = None):
     """(h5py.File opened read-only, note) after the checks above; note says when the file was
-    opened in SWMR mode (still marked open by a writer), else ''. FileFormatError on damage."""
+    opened in SWMR mode (still marked open by a writer), else ''. FileFormatError on damage.
+
+    The superblock is checked in this process; then every piece of metadata a reader touches is
+    walked in a child process bounded in time (probe_metadata): a flipped byte in an attribute heap
+    made h5py loop for ever inside one C call, deaf to SIGTERM. The walk is deterministic, so the
+    same reads in this process then end too.
+    """
     import h5py
 
     check_superblock(path)
-    try:
-        return h5py.File(path, "r"), ""
-    except (OSError, ValueError, RuntimeError) as exc:
-        first = exc
+    mode = probe_metadata(path, probe_timeout_s)
+    if mode == "normal":
+        try:
+            return h5py.File(path, "r"), ""
+        except (OSError, ValueError, RuntimeError):
+            pass   # the writer may have marked it open since: the SWMR open below
     # a recorder writing in SWMR mode that is still running, or was killed, leaves the file's
     # consistency flags set: a SWMR reader may still open it and read what was flushed
-    probe_in_child(path, probe_timeout_s)
     try:
         f = h5py.File(path, "r", swmr=True)
-    except Exception:  # h5py raises OSError, ValueError or RuntimeError on damaged files
-        raise FileFormatError(f"{path}: not a readable HDF5 file (truncated or corrupt?): {first}") from None
+    except Exception as exc:  # h5py raises OSError, ValueError or RuntimeError on damaged files
+        raise FileFormatError(f"{path}: not a readable HDF5 file (truncated or corrupt?): {exc}") from None
     return f, (f"{path}: the file is still marked open for writing (recorder running or killed); "
                "read in SWMR mode, up to the last flushed block")

@@ -164,16 +164,26 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
     itacho = rec.channel_index(opts.tacho_channel) if rec.has_channel(opts.tacho_channel) else None
     rpm_hint = opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
     method = "tacho" if itacho is not None else "correlation"
-    found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint, warn, progress)
-    if method == "tacho" and sum(max(len(m) - 1, 0) for m in found[0]) < 1:
-        warn(f"tacho channel '{rec.channel_names[itacho]}' shows fewer than two pulses; "
-             "finding the cam angle by correlation with the kinematics instead")
-        method = "correlation"
-        found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint, warn,
-                            lambda k: None)
-    marks_by_seg, vmin, vmax, period_est = found
+    # what the search says on the way is said once the marks are found: before the error that ends
+    # the run it misleads ("cam speed from the data (1030.8 rpm)" for a 5 rpm run of 3 s)
+    said: list[str] = []
+    try:
+        found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint,
+                            said.append, progress)
+        if method == "tacho" and sum(max(len(m) - 1, 0) for m in found[0]) < 1:
+            said.append(f"tacho channel '{rec.channel_names[itacho]}' shows fewer than two pulses; "
+                        "finding the cam angle by correlation with the kinematics instead")
+            method = "correlation"
+            found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint,
+                                said.append, lambda k: None)
+        marks_by_seg, vmin, vmax, period_est = found
+        cam = speed.estimate(marks_by_seg, rec.sample_rate_hz, rpm_hint, rec.source, said.append)
+    except InputError:
+        _check_two_revolutions(rec, segs, rpm_hint, opts)   # the cause, when the stated speed shows it
+        raise
     fs = rec.sample_rate_hz
-    cam = speed.estimate(marks_by_seg, fs, rpm_hint, rec.source, warn)
+    for msg in said:
+        warn(msg)
     hist.add(H.CamAngle(method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
                         cam_speed_rpm_mean=cam.rpm, period_median_s=cam.period_samples / fs,
                         period_min_s=float(cam.periods.min()) / fs, period_max_s=float(cam.periods.max()) / fs,
@@ -181,6 +191,20 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
                         law=program.segments[0].law.name, mechanism=mech.name,
                         autocorrelation_period_s=period_est / fs if period_est else None))
     return {"by_segment": marks_by_seg, "vmin": vmin, "vmax": vmax, "method": method}, cam
+
+
+def _check_two_revolutions(rec, segs, rpm_hint, opts) -> None:
+    """When no revolutions were found: a recording whose longest contiguous stretch holds fewer than
+    two revolutions at the stated speed is refused saying so (the cause, not its symptoms)."""
+    if not (rpm_hint and math.isfinite(rpm_hint) and rpm_hint > 0):
+        return
+    longest = max(b - a for a, b in segs) / rec.sample_rate_hz
+    need = 2.0 * 60.0 / rpm_hint
+    if longest < need:
+        where = "--rpm" if opts.cam_speed_rpm else "the recording's cam_speed_rpm"
+        raise InputError(f"{shown(rec.source)}: its longest contiguous stretch lasts {longest:.3g} s, "
+                         f"{longest / need * 2:.2g} revolutions at the stated {rpm_hint:g} rpm ({where}); processing "
+                         f"needs two whole revolutions: record at least {math.ceil(need * 1.25):g} s at this speed")
 
 
 def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +22,9 @@ from labtool.common.operating_point import (FIELD, FIELDS, SOURCE_SUFFIX, Operat
                                              resolve)
 from labtool.common.units import RPM
 from labtool.processing.readers.base import as_text
+from labtool.processing.readers import recording_kind
 from labtool.reports import align, events, metrics
 from labtool.reports.thresholds import Thresholds, evaluate
-from labtool.common.units import RPM
 
 SIGNALS = ("omega2", "epsilon2")
 # the units (UDUNITS spelling) the comparison reads the measured file in; another stated unit is refused
@@ -94,11 +95,17 @@ def load_measured(path: Path) -> xr.Dataset:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"measured file {path} not found")
+    raw = recording_kind(path)
+    if raw:
+        raise InputError(f"{shown(str(path))} is a {raw}, not a measured file: run 'labtool process "
+                         f"{shown(str(path))} -o measured.nc' first and report measured.nc")
     try:
         # lazily and without the time index (a 1-hour recording's is 288 MB): the report reads only
         # the revolutions it uses (align.read_measured); the CF time ('seconds since <start>') kept
         # in seconds, as revolution_start_time and spike_time are
-        ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False, create_default_indexes=False)
+        with warnings.catch_warnings():   # h5netcdf's phony_dims notice for HDF5 that is not NetCDF
+            warnings.simplefilter("ignore")
+            ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False, create_default_indexes=False)
     except Exception as exc:   # h5py/xarray raise many types for a file that is not NetCDF4
         raise FileFormatError(f"{path} is not a NetCDF4 file written by 'labtool process' "
                               f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None

@@ -16,7 +16,7 @@ from labtool.processing.readers.base import Event, Recording
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 TDMS_SIGNATURE = b"TDSm"
 
-__all__ = ["open_recording", "Recording", "Event", "sniff"]
+__all__ = ["open_recording", "Recording", "Event", "sniff", "recording_kind"]
 
 
 def sniff(path) -> str:
@@ -47,6 +47,28 @@ def sniff(path) -> str:
     if "\x00" in text or not any(ch in text for ch in ",;\t\n"):
         raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)")
     return "lvm" if text.lstrip("\ufeff").startswith("LabVIEW Measurement") else "csv"
+
+
+def recording_kind(path) -> str | None:
+    """What kind of recording ``path`` is ('labtool recording', 'TDMS recording', 'LVM recording'),
+    or None for anything else (a measured NetCDF file, another HDF5 file, text, a missing file).
+    For commands that take processed files: a raw recording is named as such, with no h5py or
+    xarray warning on the way. HDF5 is opened through common.hdf5.open_file (bounded in time)."""
+    try:
+        kind = sniff(path)
+    except (FileFormatError, InputError):
+        return None
+    if kind == "tdms":
+        return "TDMS recording"
+    if kind == "lvm":
+        return "LVM recording"
+    if kind != "hdf5":
+        return None
+    from labtool.common.hdf5 import open_file
+    from labtool.processing.readers.base import as_text
+    f, _ = open_file(path)
+    with f:
+        return "labtool recording" if as_text(f.attrs.get("format", "")) == "labtool.recording" else None
 
 
 def open_recording(path, sample_rate_hz: float | None = None, group: str | None = None,

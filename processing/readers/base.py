@@ -61,6 +61,7 @@ class Recording:
     assumptions: list[str] = dataclasses.field(default_factory=list)     # what the reader assumed, in words
     read_raw: Callable[[int, int, np.ndarray], np.ndarray] | None = None
     raw_dtype: type = np.float64                                         # the dtype read_raw fills
+    left_out: list[str] = dataclasses.field(default_factory=list)        # the file's channels not read (side channels)
 
     def __post_init__(self):
         n = len(self.channel_names)
@@ -161,12 +162,34 @@ class Recording:
         unknown += len({e.index for e in self.events if e.kind == "overrun" and 0 < e.index < self.n_samples}
                        - gap_rows)
         order = np.argsort(rows, kind="stable")
-        return np.asarray(rows, dtype=np.int64)[order], np.asarray(lost, dtype=np.int64)[order], unknown
+        rows_a, lost_a = np.asarray(rows, dtype=np.int64)[order], np.asarray([min(x, 2**62) for x in lost],
+                                                                              dtype=np.int64)[order]
+        self._check_lost(rows_a, lost_a)
+        return rows_a, lost_a, unknown
+
+    def _check_lost(self, rows: np.ndarray, lost: np.ndarray) -> None:
+        """Samples lost at gaps that no run allows are refused: 9e17 lost samples wrote a time axis
+        of 9e13 s that xarray cannot decode, with exit 0. The bound: MAX_LOST_S in all (a device
+        lost for longer than that is a new run, not a gap). The wall clock (start_time_utc to
+        stop_time_utc) is no bound: the simulated stand records faster than real time."""
+        if not len(lost):
+            return
+        fs = self.sample_rate_hz
+        total = float(lost.sum(dtype=np.float64))
+        if total / fs > MAX_LOST_S:
+            k = int(np.argmax(lost))
+            raise FileFormatError(
+                f"{self.source}: its gap events claim {total:.0f} lost samples ({total / fs:.4g} s at {fs:g} Hz), "
+                f"more than one run can lose ({MAX_LOST_S:g} s); the events are damaged (the largest: "
+                f"missing_samples={int(lost[k])} at sample {int(rows[k])})")
 
     def clip_indices(self) -> np.ndarray:
         """Sample indices the recorder reported as clipped."""
         return np.array(sorted(e.index for e in self.events if e.kind == "clip" and 0 <= e.index < self.n_samples),
                         dtype=np.int64)
+
+
+MAX_LOST_S = 86400.0   # s: the most a run's gaps may lose in all (a device lost longer is a new run)
 
 
 def check_sample_rate(value, source: str) -> float:

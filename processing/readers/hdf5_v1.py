@@ -86,7 +86,7 @@ def _build(f: h5py.File, src: str) -> Recording:
         if not (math.isfinite(rpm) and rpm > 0):
             warns.append(f"{src}: ignoring unusable cam_speed_rpm {a['cam_speed_rpm']!r}")
             rpm = math.nan
-    events = _events(f, src, warns)
+    events = _events(f, src, warns, max_events=MAX_EVENTS_BASE + 2 * n)
     n = _written_rows(sig, src, warns)
 
     def read(start: int, stop: int) -> np.ndarray:
@@ -164,10 +164,18 @@ def _written_rows(sig: h5py.Dataset, src: str, warns: list[str]) -> int:
     return rows
 
 
-def _events(f: h5py.File, src: str, warns: list[str]) -> list[Event]:
+MAX_EVENTS_BASE = 100_000   # events beyond this plus two per sample: the dataset is damaged, not read
+
+
+def _events(f: h5py.File, src: str, warns: list[str], max_events: int) -> list[Event]:
     if "events" not in f:
         return []
     node = f["events"]
+    rows = node["index"].shape[0] if isinstance(node, h5py.Group) and "index" in node else \
+        (node.shape[0] if isinstance(node, h5py.Dataset) and node.ndim else 0)
+    if rows > max_events:   # read whole, 1e9 rows filled the memory before any check
+        raise FileFormatError(f"{src}: 'events' holds {rows} rows, more than a recorder writes for its samples "
+                              f"(at most {max_events}); the file is damaged")
     try:
         if isinstance(node, h5py.Group):  # lenient: a group of parallel datasets
             idx = np.asarray(node["index"][()]).reshape(-1)
