@@ -16,6 +16,7 @@ from labtool.common.errors import InputError
 
 IRREGULAR = 0.2          # relative deviation from the median period that makes a revolution irregular
 REFUSE_RATIO = 1.5       # measured / stated speed beyond this (either way): the rate is wrong
+PLAUSIBLE_RPM = (1.0, 3000.0)   # rpm: a measured cam speed outside is a wrong channel or rate, not a cam
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,6 +38,11 @@ def estimate(marks_by_seg, fs: float, rpm_hint, source: str, warn) -> CamSpeed:
     lo, hi = (1 - IRREGULAR) * period, period / (1 - IRREGULAR)
     regular = (periods > lo) & (periods < hi)
     rpm = 60.0 * fs / float(np.mean(periods[regular]))
+    if not PLAUSIBLE_RPM[0] <= rpm <= PLAUSIBLE_RPM[1]:
+        # noise on a channel taken for the tacho gave 632684 rpm, with exit 0
+        raise InputError(f"{source}: the revolution marks give {rpm:.6g} rpm at {fs:g} Hz, not a cam speed "
+                         f"({PLAUSIBLE_RPM[0]:g} to {PLAUSIBLE_RPM[1]:g} rpm): is the tacho channel a tacho (name it "
+                         "with --channels tacho=<channel>), is the sample rate right?")
     if rpm_hint and math.isfinite(rpm_hint):
         ratio = rpm / rpm_hint
         if not (1 / REFUSE_RATIO < ratio < REFUSE_RATIO):

@@ -54,7 +54,7 @@ def process(
     mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
     cal = read_calibrations(calibration) if calibration else None
     rec = open_recording(recording, sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
-                         decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
+                         decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), channels=mapping)
     try:
         rec.rename_channels(mapping)
     except Exception:

@@ -40,11 +40,16 @@ def sniff(path) -> str:
     try:
         text = head.decode("utf-8")
     except UnicodeDecodeError as exc:
-        # a multi-byte character cut at the 4096-byte boundary is still text
-        if exc.start < len(head) - 4:
-            raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)") from None
-        text = head[:exc.start].decode("utf-8")
-    if "\x00" in text or not any(ch in text for ch in ",;\t\n"):
+        # a multi-byte character cut at the 4096-byte boundary is still text; so is Latin-1 (LabVIEW
+        # on a Western Windows writes 'Press\xe3o' in its channel names)
+        text = head[:exc.start].decode("utf-8") if exc.start >= len(head) - 4 else head.decode("latin-1")
+    control = sum(1 for ch in text if (ord(ch) < 32 and ch not in "\t\r\n") or 0x7F <= ord(ch) < 0xA0)
+    if "\x00" in text or control > len(text) // 100 or not any(ch in text for ch in ",;\t\n"):
+        named = {".tdms": ("TDMS", "the lead-in 'TDSm'"), ".tdms_index": ("TDMS", "the lead-in 'TDSh'"),
+                 ".h5": ("HDF5", "the HDF5 signature"), ".hdf5": ("HDF5", "the HDF5 signature")}.get(p.suffix.lower())
+        if named:   # a damaged file, or another renamed: say what it is not, never npTDMS's struct.error
+            raise FileFormatError(f"{p}: not a recording: not {named[0]} (it does not start with {named[1]}); damaged, "
+                                  f"or a file of another format named {p.suffix}")
         raise FileFormatError(f"{p}: not a recording (not HDF5, TDMS or CSV text)")
     return "lvm" if text.lstrip("\ufeff").startswith("LabVIEW Measurement") else "csv"
 
@@ -73,12 +78,13 @@ def recording_kind(path) -> str | None:
 
 def open_recording(path, sample_rate_hz: float | None = None, group: str | None = None,
                    delimiter: str | None = None, decimal: str | None = None,
-                   time_unit_s: float | None = None) -> Recording:
+                   time_unit_s: float | None = None, channels: dict | None = None) -> Recording:
     """Open any supported recording.
 
     sample_rate_hz (Hz): used when the file states none (TDMS, CSV) or to override a text table's
-    time column; group: the TDMS group; delimiter, decimal, time_unit_s (s per unit of a time column):
-    overrides of what the text readers detect.
+    rate (header and time column); group: the TDMS group; delimiter, decimal, time_unit_s (s per
+    unit of a time column): overrides of what the text readers detect; channels: the ``--channels``
+    mapping (chain name: file's name), the channels an LVM file must give at one rate.
     """
     kind = sniff(path)
     if kind == "hdf5":
@@ -89,7 +95,7 @@ def open_recording(path, sample_rate_hz: float | None = None, group: str | None 
         rec = open_tdms(path, sample_rate_hz, group)
     elif kind == "lvm":
         from labtool.processing.readers.lvm import open_lvm
-        rec = open_lvm(path, sample_rate_hz, time_unit_s)
+        rec = open_lvm(path, sample_rate_hz, time_unit_s, list(channels.values()) if channels else None)
     else:
         from labtool.processing.readers.csv import open_csv
         rec = open_csv(path, sample_rate_hz, delimiter, decimal, time_unit_s)

@@ -97,8 +97,9 @@ class Recording:
         low = [c.lower() for c in self.channel_names]
         if name.lower() in low:
             return low.index(name.lower())
+        aside = f"; left out at another rate or length: {', '.join(self.left_out)}" if self.left_out else ""
         raise FileFormatError(
-            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'}); "
+            f"{self.source}: channel '{name}' is missing (channels: {', '.join(self.channel_names) or 'none'}{aside}); "
             f"name the file's channels with --channels {name}=<channel>")
 
     def rename_channels(self, mapping: dict[str, str]) -> None:

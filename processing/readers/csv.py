@@ -17,6 +17,9 @@ import re
 
 from labtool.common.errors import FileFormatError, InputError
 from labtool.processing.readers.text import Layout, find_time_column, open_table
+from labtool.processing.readers.units import signal_unit, time_unit
+
+COMMENT = "#"   # lines starting with it are skipped, before the table and between its rows
 
 DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab"}
 RATE_KEYS = {"sample_rate_hz": 1, "sample rate": 1, "samplerate": 1, "sampling rate": 1, "sample_rate": 1, "fs": 1,
@@ -65,6 +68,10 @@ def detect(path, delimiter: str | None = None, decimal: str | None = None) -> tu
         lines = lines[:-1]  # the last line may be cut at the read size
     body = [ln.rstrip("\r\n") for ln in lines]
     assumptions = []
+    sep_line = re.fullmatch(r'"?sep=(.)"?', body[0].strip()) if body else None
+    if sep_line:   # Excel's first line names the delimiter
+        delimiter = delimiter or sep_line.group(1)
+        body[0] = ""
     cands = [delimiter] if delimiter else list(DELIMITERS)
     found = None
     for d in cands:
@@ -73,7 +80,7 @@ def detect(path, delimiter: str | None = None, decimal: str | None = None) -> tu
             if start is None:
                 continue
             width = len(body[start].split(d))
-            tail = [ln for ln in body[start:start + 50] if ln.strip()]
+            tail = [ln for ln in body[start:start + 50] if ln.strip() and not ln.lstrip().startswith(COMMENT)]
             if all(len(ln.split(d)) == width and _data_like(ln.split(d), dec) for ln in tail):
                 found = (d, dec, start, width)
                 break
@@ -86,6 +93,12 @@ def detect(path, delimiter: str | None = None, decimal: str | None = None) -> tu
     if not delimiter:
         assumptions.append(f"delimiter {DELIMITERS.get(d, repr(d))} and decimal mark {dec!r} (detected)")
     header_i = next((i for i in range(start - 1, -1, -1) if body[i].strip() and not body[i].lstrip().startswith("#")), None)
+    units_row = None
+    if header_i is not None and _units_row(body[header_i].split(d)):
+        # DEWESoft and others write the units in a row under the names
+        units_row = [c.strip().strip('"').strip() for c in body[header_i].split(d)]
+        header_i = next((i for i in range(header_i - 1, -1, -1)
+                         if body[i].strip() and not body[i].lstrip().startswith("#")), None)
     if header_i is None or len(body[header_i].split(d)) != width:
         raise FileFormatError(f"{path}: the table has no row of column names ({width} names, "
                               f"{DELIMITERS.get(d, d)}-separated, just above the numbers)")
@@ -95,9 +108,29 @@ def detect(path, delimiter: str | None = None, decimal: str | None = None) -> tu
     meta = _header_block(body[:header_i], d)
     offset = bom + sum(len(ln.encode("utf-8")) for ln in lines[:start])
     lay = Layout(data_start=offset, delimiter=d, decimal=dec, columns=columns, time_col=find_time_column(columns),
-                 assumptions=assumptions)
+                 assumptions=assumptions, comment=COMMENT)
     lay.rate_hz, lay.units = _rate_from_meta(meta, path), {k[5:]: v for k, v in meta.items() if k.startswith("unit_")}
+    if units_row:
+        lay.units.update({c: u for c, u in zip(columns, units_row) if u})
+        lay.unit_sources.update({c: f"the units row ({u!r})" for c, u in zip(columns, units_row) if u})
+        if lay.time_col is not None and units_row[lay.time_col]:
+            lay.time_unit_s = time_unit(units_row[lay.time_col])
     return lay, meta
+
+
+def _units_row(cells) -> bool:
+    """Every cell a unit (of time, voltage or acceleration) or empty, and one at least not empty."""
+    vals = [c.strip().strip('"').strip() for c in cells]
+    if not any(vals):
+        return False
+    for v in vals:
+        if not v or time_unit(v) is not None:
+            continue
+        try:
+            signal_unit(v, "")
+        except InputError:
+            return False
+    return True
 
 
 def _header_block(lines, d) -> dict:

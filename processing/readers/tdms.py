@@ -67,9 +67,9 @@ def open_tdms(path, sample_rate_hz: float | None = None, group: str | None = Non
     with _nptdms_quiet() as messages:
         try:
             tf = TdmsFile.open(path)
-        except Exception as exc:  # npTDMS raises ValueError/KeyError/struct.error on damaged files
-            raise FileFormatError(f"{src}: not a readable TDMS file (truncated or corrupt?): "
-                                  f"{type(exc).__name__}: {exc}") from None
+        except Exception:  # npTDMS raises ValueError/KeyError/struct.error on damaged files
+            raise FileFormatError(f"{src}: not a readable TDMS file: its lead-in or metadata is cut or corrupt "
+                                  "(give an undamaged copy)") from None
         try:
             rec = _build(tf, src, sample_rate_hz, group)
         except (FileFormatError, InputError):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import math
+import re
 
 import numpy as np
 
@@ -36,6 +37,15 @@ class Layout:
     units: dict = dataclasses.field(default_factory=dict)   # column name -> unit text from the header block
     rate_hz: float | None = None    # a rate the header states
     assumptions: list = dataclasses.field(default_factory=list)
+    signal_cols: list | None = None   # the columns to read as channels (None: every column but time)
+    n_rows: int | None = None         # rows that hold the channels read (None: every row)
+    names_as_written: bool = False    # channel names as written, no unit taken from them (LVM)
+    unit_sources: dict = dataclasses.field(default_factory=dict)   # column name -> where its unit was read
+    rate_source: str = ""             # where rate_hz was read, in words
+    x0_s: float | None = None         # the time of the first row the header states (s)
+    comment: str | None = None        # lines starting with it are skipped anywhere (CSV: '#')
+    x_precision_s: float = 0.0        # half the last printed digit of the time column (s), found when read
+    left_out: list = dataclasses.field(default_factory=list)   # channel columns not read (side channels)
 
 
 def find_time_column(columns) -> int | None:
@@ -46,12 +56,14 @@ def find_time_column(columns) -> int | None:
     return None
 
 
-def _index_rows(path, start: int) -> tuple[list[int], int]:
+def _index_rows(path, start: int, comment: str | None = None) -> tuple[list[int], int]:
     """Byte offsets of rows 0, BLOCK, 2 BLOCK, ... from ``start``, and the number of data rows.
 
-    Blank lines are allowed at the end only (several tables in one file are refused)."""
+    Blank lines, and lines starting with ``comment``, are skipped wherever they are (exporters
+    write them between blocks of rows); pandas skips the same lines when it parses."""
     offsets: list[int] = []
-    n, blank_after, base, buf = 0, None, start, b""
+    n, base, buf = 0, start, b""
+    mark = ord(comment) if comment else -1
     with open(path, "rb") as fh:
         fh.seek(start)
         while True:
@@ -61,22 +73,15 @@ def _index_rows(path, start: int) -> tuple[list[int], int]:
                 buf += b"\n"
             nl = np.flatnonzero(np.frombuffer(buf, dtype=np.uint8) == 10)
             if len(nl):
+                arr = np.frombuffer(buf, np.uint8)
                 starts = np.concatenate([[0], nl[:-1] + 1])
                 length = nl - starts
-                blank = (length == 0) | ((length == 1) & (np.frombuffer(buf, np.uint8)[starts.clip(max=len(buf) - 1)] == 13))
+                first = arr[starts.clip(max=len(buf) - 1)]
+                blank = (length == 0) | ((length == 1) & (first == 13)) | (first == mark)
                 rows = np.flatnonzero(~blank)
-                if len(rows) and blank_after is not None:
-                    raise FileFormatError(f"{path}: blank line inside the data after row {blank_after}; the file "
-                                          "is damaged or holds several tables (give one table per file)")
-                if blank.any() and len(rows) and np.flatnonzero(blank)[0] < rows[-1]:
-                    raise FileFormatError(f"{path}: blank line inside the data after row "
-                                          f"{n + int((rows < np.flatnonzero(blank)[0]).sum())}; the file is damaged "
-                                          "or holds several tables (give one table per file)")
                 k = np.arange(n, n + len(rows))
                 offsets.extend((base + starts[rows[k % BLOCK == 0]]).tolist())
                 n += len(rows)
-                if blank.any() and (not len(rows) or np.flatnonzero(blank)[-1] > rows[-1]):
-                    blank_after = n
                 cut = int(nl[-1]) + 1
                 base += cut
                 buf = buf[cut:]
@@ -90,7 +95,10 @@ def _parse(path, offset: int, nrows: int, lay: Layout) -> "object":
     with open(path, "rb") as fh:
         fh.seek(offset)
         try:
+            # names for every column: a row without its trailing Comment cell, or with empty cells of
+            # a side channel that ended, is filled with NaN, not refused as short
             return pd.read_csv(fh, sep=lay.delimiter, decimal=lay.decimal, header=None, nrows=nrows,
+                               names=range(len(lay.columns)), comment=lay.comment,
                                engine="c", skip_blank_lines=True, dtype=str if nrows <= 8 else None,
                                encoding="utf-8", encoding_errors="replace")
         except (ValueError, pd.errors.ParserError) as exc:
@@ -101,17 +109,22 @@ def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | 
                warn_list: list) -> Recording:
     """A Recording over the table; ``sample_rate_hz``/``time_unit_s``: the user's overrides (or None)."""
     src = str(path)
-    offsets, n = _index_rows(path, lay.data_start)
+    offsets, n = _index_rows(path, lay.data_start, lay.comment)
+    if lay.n_rows is not None:
+        if lay.n_rows < n:
+            offsets = offsets[:(lay.n_rows - 1) // BLOCK + 1] if lay.n_rows else offsets[:1]
+        n = min(n, lay.n_rows)
     if n == 0:
         raise FileFormatError(f"{src}: the table holds no samples")
     head = _parse(path, offsets[0], min(n, 8), lay)
-    if head.shape[1] != len(lay.columns):
-        raise FileFormatError(f"{src}: rows have {head.shape[1]} values, the header names {len(lay.columns)} columns "
+    if head.iloc[:, -1].isna().all() and len(lay.columns) > 1 and lay.signal_cols is None:
+        raise FileFormatError(f"{src}: rows have fewer values than the header names columns ({len(lay.columns)}) "
                               f"(delimiter {lay.delimiter!r} right? give --delimiter)")
-    keep = [i for i in range(len(lay.columns)) if i != lay.time_col]
-    names, units, factors = [], [], []
+    keep = list(lay.signal_cols) if lay.signal_cols is not None else \
+        [i for i in range(len(lay.columns)) if i != lay.time_col]
+    names, units, factors, sources = [], [], [], []
     for i in keep:
-        name, unit = split_name_unit(lay.columns[i])
+        name, unit = (lay.columns[i], None) if lay.names_as_written else split_name_unit(lay.columns[i])
         unit = unit or lay.units.get(name) or lay.units.get(lay.columns[i])
         if unit is None:
             lay.assumptions.append(f"column '{name}' states no unit: read as volts")
@@ -120,6 +133,10 @@ def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | 
         names.append(name)
         units.append(kind)
         factors.append(f)
+        sources.append(lay.unit_sources.get(lay.columns[i], "column header") if unit != "V" or
+                       lay.columns[i] in lay.unit_sources else "column header")
+    if len(set(names)) != len(names):
+        raise FileFormatError(f"{src}: channel names {names} are repeated; name the ones to read with --channels")
     fs, t0, start_iso = _rate(src, path, offsets, n, lay, head, sample_rate_hz, time_unit_s)
     factors = np.asarray(factors)
 
@@ -144,7 +161,11 @@ def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | 
     rec = Recording(source=src, format=fmt, sample_rate_hz=fs, channel_names=names, n_samples=n, read=read,
                     ka_m_s2_per_v=ka, start_time_utc=start_iso or str(meta.get("start_time_utc", "")),
                     cam_speed_rpm=rpm if rpm > 0 else math.nan, attrs=attrs, channel_units=units,
-                    unit_sources=["column header" for _ in names], assumptions=list(lay.assumptions))
+                    unit_sources=sources, assumptions=list(lay.assumptions))
+    rec.left_out = [lay.columns[i] for i in lay.left_out]
+    said = [f"{nm} in {u}" for nm, u, f in zip(names, units, factors) if u != "V" or f != 1.0]
+    if said:   # the unit stated is used: say so, an acceleration gets no Ka
+        rec.assumptions.append("units as stated: " + ", ".join(said))
     rec.warnings.extend(f"{src}: assumed: {a}" for a in lay.assumptions)
     rec.warnings.extend(warn_list)
     return rec
@@ -192,10 +213,17 @@ def _rate(src, path, offsets, n, lay: Layout, head, given_fs, given_unit):
         lay.assumptions.append(f"time column '{name}' holds timestamps, taken as UTC")
     else:
         unit = given_unit or (time_unit(unit_text) if unit_text else None) or lay.time_unit_s
+        texts = first.astype(str).str.strip().str.replace(lay.decimal, ".", regex=False)
         try:
-            sec = first.astype(str).str.replace(lay.decimal, ".", regex=False).astype(float).to_numpy()
+            sec = texts.astype(float).to_numpy()
         except ValueError:
             raise FileFormatError(f"{src}: time column '{name}' holds values that are neither numbers nor timestamps")
+        if unit is None and given_fs:
+            # the user's rate stands; a time column of unknown unit is not checked against it
+            lay.assumptions.append(f"sample rate {given_fs:g} Hz from --sample-rate; time column '{name}' states no "
+                                   "unit and is not read")
+            lay.time_col = None
+            return check_sample_rate(given_fs, src), 0.0, None
         if unit is None:
             d = np.median(np.diff(sec)) if len(sec) > 1 else math.nan
             if not (d > 0 and 1.0 / d >= MIN_PLAUSIBLE_FS):
@@ -205,19 +233,55 @@ def _rate(src, path, offsets, n, lay: Layout, head, given_fs, given_unit):
             unit = 1.0
             lay.assumptions.append(f"time column '{name}' states no unit: read in seconds")
         lay.time_unit_s = unit
+        lay.x_precision_s = _printed_precision(texts) * unit
         sec = sec * unit
         start_iso = None
     if len(sec) < 2:
         raise FileFormatError(f"{src}: one row is not a recording")
-    dt = np.diff(sec)
-    d = float(np.median(dt))
+    d = float(np.median(np.diff(sec)))
     if not d > 0:
         raise InputError(f"{src}: time column '{name}' does not increase")
-    fs = given_fs if given_fs else 1.0 / d
-    if fs_header and abs(fs_header * d - 1) > 1e-3:
-        raise InputError(f"{src}: the header states {fs_header:g} Hz but the time column steps by {d:g} s "
-                         f"({1 / d:g} Hz); fix the file or give --sample-rate")
-    return check_sample_rate(fs, src), float(sec[0]) if iso is None else 0.0, start_iso
+    t0 = float(sec[0]) if iso is None else 0.0
+    if lay.x0_s is not None and abs(t0 - lay.x0_s) <= 2 * lay.x_precision_s + 1e-12:
+        t0 = lay.x0_s                     # the header's exact X0, which the column rounds
+    prec = lay.x_precision_s
+    if given_fs:
+        fs = given_fs
+        lay.assumptions.append(f"sample rate {fs:g} Hz from --sample-rate; the time column is checked against it")
+    elif fs_header and _agrees(sec, t0, fs_header, prec):
+        fs = fs_header
+        lay.assumptions.append(f"sample rate {fs:g} Hz from {lay.rate_source or 'the header'}; the time column "
+                               f"'{name}' agrees with it within its printed precision ({2 * prec:g} s)")
+    elif fs_header:
+        raise InputError(f"{src}: the header states {fs_header:g} Hz ({lay.rate_source or 'its rate'}) but the time "
+                         f"column '{name}' steps by {d:g} s ({1 / d:g} Hz), beyond its printed precision "
+                         f"({2 * prec:g} s); give --sample-rate with the rate the device ran at (Hz)")
+    else:
+        # a rounded column's median step is no rate (51.2 kHz printed to 1 us steps 19 or 20 us):
+        # the slope over the first rows, and a whole number of Hz where the rows agree with it
+        k = np.arange(len(sec))
+        fs = 1.0 / float(np.polyfit(k, sec, 1)[0])
+        if _agrees(sec, t0, round(fs), prec):
+            fs = float(round(fs))
+        lay.assumptions.append(f"sample rate {fs:g} Hz read from the time column '{name}'")
+    return check_sample_rate(fs, src), t0, start_iso
+
+
+def _printed_precision(texts) -> float:
+    """Half the last digit the time column prints ('0.000020' -> 5e-7 s, '1.953125E-5' -> 5e-12 s):
+    the finest among its first cells (a %g format drops trailing zeros, so '0' or '0.5' say less)."""
+    finest = math.inf
+    for t in list(texts[:200]):
+        m = isinstance(t, str) and re.fullmatch(r"[+-]?\d*(?:\.(\d*))?(?:[eE]([+-]?\d+))?", t)
+        if m:
+            finest = min(finest, 0.5 * 10.0 ** (int(m.group(2) or 0) - len(m.group(1) or "")))
+    return finest if math.isfinite(finest) else 0.0
+
+
+def _agrees(sec, t0: float, fs: float, prec: float) -> bool:
+    """Every time equals t0 + i / fs within the column's printed precision and 1 % of a step."""
+    expect = t0 + np.arange(len(sec)) / fs
+    return bool(np.all(np.abs(sec - expect) <= 0.01 / fs + 2 * prec + 1e-9 * np.abs(expect)))
 
 
 def _as_datetime(col):
@@ -253,7 +317,7 @@ def _check_time(src, col, start: int, fs: float, t0: float, lay: Layout) -> None
     else:
         t = col.astype(str).str.replace(lay.decimal, ".", regex=False).astype(float).to_numpy() * lay.time_unit_s
         expect = t0 + (start + np.arange(len(t))) / fs
-        bad = np.abs(t - expect) > 0.01 / fs + 1e-9 * np.abs(expect)
+        bad = np.abs(t - expect) > 0.01 / fs + 2 * lay.x_precision_s + 1e-9 * np.abs(expect)
     if bad.any():
         k = int(np.argmax(bad))
         raise FileFormatError(f"{src}: the time column is not uniform at row {start + k + 1} "
