@@ -17,6 +17,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))   # tests that import benchmarks/, as pytest run from the root finds it
 from conftest import HOSTILE_KINDS  # noqa: E402
 
 
