@@ -131,18 +131,10 @@ def acquire(plan, point, path: Path, ask=None, say=None, progress=None) -> dict:
 
 def process(plan, point, recording: Path, measured: Path, warn=None) -> dict:
     """recording -> measured.nc with the plan's calibration files (labtool.processing.pipeline)."""
-    from labtool.processing.calibration_file import read_calibrations
-    from labtool.processing.pipeline import ProcessOptions, process_recording
-    from labtool.processing.readers import open_recording
+    from labtool.processing.pipeline import ProcessOptions, process_file
 
-    cal = read_calibrations(plan.calibration_files) if plan.calibration_files else None
-    opts = ProcessOptions(calibration=cal, calibration_source="; ".join(str(p) for p in plan.calibration_files),
-                          law=point.law, cam_speed_rpm=point.rpm)
-    rec = open_recording(recording)
-    try:
-        summary = process_recording(rec, measured, opts, warn=warn)
-    finally:
-        rec.close()
+    summary = process_file(recording, measured, plan.calibration_files,
+                           options=ProcessOptions(law=point.law, cam_speed_rpm=point.rpm), warn=warn)
     return {k: summary[k] for k in ("cam_speed_rpm", "revolutions_averaged", "spikes", "clipped",
                                     "normal_check_rel_rms", "lowpass_hz", "phi1_method") if k in summary}
 

@@ -104,7 +104,7 @@ def process_file(recording: Path, output: Path, calibration_files=(), channels: 
     if calibration_files:
         opts = dataclasses.replace(opts, calibration=read_calibrations(list(calibration_files)),
                                    calibration_source="; ".join(str(c) for c in calibration_files))
-    rec = open_recording(recording, **reader_options)
+    rec = open_recording(recording, channels=channels or {}, **reader_options)
     try:
         rec.rename_channels(channels or {})
         if on_open is not None:

@@ -39,7 +39,7 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
     chunk_samples : int
         Samples per processing chunk: the memory bound [-].
     progress : callable, optional
-        ``progress(n)`` after every ``n`` samples of the two passes (2 x the recording's length).
+        ``progress(done, total)``: samples processed of the two passes over the recording [-].
     warn : callable, optional
         ``warn(text)`` for each warning (default: Python warnings, ProcessingWarning).
     **reader_options
@@ -62,14 +62,24 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
         raise InputError("chunk_samples must be at least 1024")
     opts = ProcessOptions(law=law, cam_speed_rpm=cam_speed_rpm, lowpass_hz=lowpass_hz, ac_tau_s=ac_tau_s,
                           chunk_samples=int(chunk_samples), mechanism=mechanism)
+    count = {"done": 0, "total": 0}
+
+    def on_open(rec):
+        count["total"] = 2 * rec.n_samples
+
+    def step(n):
+        count["done"] += n
+        progress(count["done"], count["total"])
+
+    reader_options.update(on_open=on_open, progress=step if progress is not None else None)
     if output is not None:
         output = Path(output)
         if output.resolve() == Path(recording).resolve():
             raise InputError("the output file must not be the recording itself")
-        process_file(recording, output, calibration, channels, opts, progress=progress, warn=warn, **reader_options)
+        process_file(recording, output, calibration, channels, opts, warn=warn, **reader_options)
         return xr.open_dataset(output, engine="h5netcdf")
     with tempfile.TemporaryDirectory(prefix="labtool-") as tmp:
         path = Path(tmp) / "measured.nc"
-        process_file(recording, path, calibration, channels, opts, progress=progress, warn=warn, **reader_options)
+        process_file(recording, path, calibration, channels, opts, warn=warn, **reader_options)
         with xr.open_dataset(path, engine="h5netcdf") as ds:
             return ds.load()

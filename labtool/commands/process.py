@@ -35,71 +35,54 @@ def process(
 ) -> None:
     """Recorded accelerations at E -> follower epsilon2 and omega2, cam angle, spectra, cycle
     averages and spikes, with every step in the processing history (docs/processing.md)."""
+    from labtool.api.processing import process as run
     from labtool.common.errors import InputError
-    from labtool.processing.calibration_file import read_calibrations
-    from labtool.processing.pipeline import ProcessOptions, process_recording
-    from labtool.processing.readers import open_recording
-
-    check_output_path(output, force)
-    if output.resolve() == recording.resolve():
-        raise InputError("the output file must not be the recording itself")
-    if chunk_samples < 1024:
-        raise InputError("--chunk-samples must be at least 1024")
-    for name, v in (("--rpm", rpm), ("--lowpass-hz", lowpass_hz), ("--sample-rate", sample_rate), ("--ac-tau", ac_tau)):
-        if v is not None and not (v > 0 and v < float("inf")):
-            raise InputError(f"{name} must be a positive number, got {v}")
     from labtool.models.mechanism import Mechanism
 
-    mapping = _channel_map(channels) if channels else {}
-    mech = Mechanism.from_toml(mechanism) if mechanism is not None else None
-    cal = read_calibrations(calibration) if calibration else None
-    rec = open_recording(recording, sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
-                         decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), channels=mapping)
-    try:
-        rec.rename_channels(mapping)
-    except Exception:
-        rec.close()
-        raise
-
-    def warn(msg: str) -> None:
-        typer.echo(f"labtool: warning: {msg}", err=True)
-
-    sources = "; ".join(str(c) for c in calibration or [])
-    opts = ProcessOptions(calibration=cal, calibration_source=sources, law=law, cam_speed_rpm=rpm,
-                          lowpass_hz=lowpass_hz, ac_tau_s=ac_tau, chunk_samples=chunk_samples,
-                          mechanism=mech)
-    try:
-        if sys.stderr.isatty():
-            from rich.progress import Progress
-            with Progress(transient=True) as bar:
-                task = bar.add_task(f"processing {recording.name}", total=2 * rec.n_samples)
-                summary = process_recording(rec, output, opts, progress=lambda k: bar.advance(task, k), warn=warn)
-        else:
-            summary = process_recording(rec, output, opts, warn=warn)
-    finally:
-        rec.close()
-    check = summary["normal_check_rel_rms"]
-    typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm']:.2f} rpm (phi1 by {summary['phi1_method']}), "
-               f"{summary['revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
-               f"{summary['spikes']} spikes, {summary['clipped']} clipped samples, "
-               f"|omega2| vs sqrt(aE_n/DE): {100 * check:.1f} % rms of peak")
-    typer.echo(_ka_line(summary.get("history", [])))
+    check_output_path(output, force)
+    if sample_rate is not None and not (0 < sample_rate < float("inf")):
+        raise InputError(f"--sample-rate must be a positive number, got {sample_rate}")
+    progress, bar = _progress(recording)
+    with bar:
+        measured = run(recording, output, calibration=calibration or (), channels=_channel_map(channels) if channels else None,
+                       law=law, cam_speed_rpm=rpm, lowpass_hz=lowpass_hz, ac_tau_s=ac_tau,
+                       mechanism=Mechanism.from_toml(mechanism) if mechanism is not None else None,
+                       chunk_samples=chunk_samples, progress=progress,
+                       warn=lambda msg: typer.echo(f"labtool: warning: {msg}", err=True),
+                       sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
+                       decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
+    summary = measured.attrs
+    measured.close()
+    typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm_measured']:.2f} rpm (phi1 by {summary['phi1_method']}), "
+               f"{summary['n_revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
+               f"{summary['n_spikes']} spikes, {summary['n_clipped_samples']} clipped samples, "
+               f"|omega2| vs sqrt(aE_n/DE): {100 * summary['omega2_normal_check_rel_rms']:.1f} % rms of peak")
+    typer.echo(_ka_line(summary))
 
 
-def _ka_line(history) -> str:
-    """'Ka: aE_t 864.39 +- 0.07 m/s^2/V (source), aE_n ...' from the apply_ka step of the history."""
+def _progress(recording):
+    """(progress callback, context) of a bar on a terminal; (None, a null context) when piped."""
+    import contextlib
+    if not sys.stderr.isatty():
+        return None, contextlib.nullcontext()
+    from rich.progress import Progress
+    bar = Progress(transient=True)
+    task = bar.add_task(f"processing {recording.name}", total=None)
+    return (lambda done, total: bar.update(task, completed=done, total=total)), bar
+
+
+def _ka_line(attrs) -> str:
+    """'Ka: aE_t 864.39 +- 0.07 m/s^2/V (source), aE_n ...' from the measured file's attributes."""
     from labtool.common.names import shown
 
-    step = next((h for h in history if isinstance(h, dict) and h.get("step") == "apply_ka"), {})
-    chans = step.get("channels") or step.get("parameters", {}).get("channels") or {}
     parts = []
     for ch in ("aE_t", "aE_n"):
-        c = chans.get(ch)
-        if not c:
+        ka = attrs.get(f"ka_{ch}_m_s2_per_v")
+        if ka is None:
             continue
-        u = c.get("uncertainty_m_s2_per_v")
-        unc = f" +- {u:.4g}" if isinstance(u, (int, float)) and u == u else " (uncertainty unknown)"
-        parts.append(f"{ch} {c['ka_m_s2_per_v']:.6g}{unc} m/s^2/V ({shown(str(c.get('source', '?')))})")
+        u = attrs.get(f"ka_{ch}_uncertainty_m_s2_per_v")
+        unc = f" +- {float(u):.4g}" if u is not None and u == u else " (uncertainty unknown)"
+        parts.append(f"{ch} {float(ka):.6g}{unc} m/s^2/V ({shown(str(attrs.get(f'ka_source_{ch}', '?')))})")
     return "Ka: " + ", ".join(parts)
 
 
