@@ -275,10 +275,6 @@ def probe_metadata(path, timeout_s: float | None = None) -> str:
     raise FileFormatError(f"{path}: not a readable HDF5 file (truncated or corrupt?): {answer[6:] or 'unknown error'}")
 
 
-def probe_in_child(path, timeout_s: float | None = None) -> None:
-    """The file's metadata walked in a child process bounded in time (:func:`probe_metadata`)."""
-    probe_metadata(path, timeout_s)
-
 
 def open_file(path, probe_timeout_s: float | None = None):
     """(h5py.File opened read-only, note) after the checks above; note says when the file was

@@ -51,9 +51,6 @@ class FreeParameter:
     start: float
     meaning: str
 
-    def to_si(self, edge: float) -> float:
-        return float(edge) * self.si_per_unit
-
     def to_edge(self, si: float) -> float:
         return float(si) / self.si_per_unit
 
@@ -180,13 +177,6 @@ class Space:
         lo, hi = float(self.lo[i]), float(self.hi[i])
         return lo * (hi / lo) ** u if self.params[i].log else lo + u * (hi - lo)
 
-    def d_edge_d_unit(self, u) -> np.ndarray:
-        """d(value)/du per parameter at u (edge units)."""
-        x = self.from_unit(u)
-        log = np.array([p.log for p in self.params])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d_log = x * np.log(self.hi / self.lo)
-        return np.where(log, d_log, self.hi - self.lo)
 
     def as_dict(self, edge) -> dict:
         return {p.name: float(v) for p, v in zip(self.params, np.asarray(edge, float))}

@@ -53,13 +53,6 @@ class CycleAccumulator:
         self.count += 1
         return True
 
-    def add_block(self, values: dict[str, np.ndarray]) -> None:
-        """Add several revolutions already on the grid: values[name] has shape (n_rev, n_grid)."""
-        for k in self.names:
-            v = np.asarray(values[k], dtype=float)
-            self.sum[k] += v.sum(axis=0)
-            self.sumsq[k] += (v * v).sum(axis=0)
-        self.count += len(np.asarray(values[self.names[0]]))
 
     def result(self) -> dict[str, np.ndarray]:
         """{name_mean, name_std} (std with n - 1; NaN if fewer than two revolutions)."""

@@ -144,12 +144,6 @@ def iso_corridor(measured, simulated, a0: float = 0.05, b0: float = 0.5, kz: flo
     return float(np.mean(s))
 
 
-def _pearson(a, b) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = math.sqrt(float(a @ a) * float(b @ b))
-    return float(a @ b) / den if den > 0 else 0.0
-
 
 def _shift_correlations(m: np.ndarray, c: np.ndarray, n_max: int) -> np.ndarray:
     """Pearson correlation of the overlapping parts for every lag k in [-n_max, n_max], rows at once.
@@ -193,15 +187,6 @@ def _pick_shift(rho: np.ndarray, n_max: int) -> tuple[np.ndarray, np.ndarray]:
             best_n = np.where(better, k, best_n)
     return best_n, best
 
-
-def best_shift(measured, simulated, max_shift: float = 0.2) -> tuple[int, float]:
-    """The shift n (samples) of the simulation that maximises the Pearson correlation of the
-    overlapping parts, |n| <= floor(max_shift*N); n > 0 means the simulation lags (it is late).
-    Returns (n, rho). Ties go to the smallest |n|."""
-    m, c = _pair(measured, simulated)
-    n_max = min(int(math.floor(max_shift * m.size)), m.size - 2)
-    n, r = _pick_shift(_shift_correlations(m[None], c[None], n_max), n_max)
-    return int(n[0]), float(r[0])
 
 
 def _shifted(m, c, n):

@@ -5,7 +5,6 @@ threshold failed; exit 2: bad input (one line on stderr), nothing written.
 """
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -85,7 +84,6 @@ def report(
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
     from labtool.output import ProgressLines, console
 
-    from labtool.common.errors import InputError
     from labtool.reports.align import Conditioning
     from labtool.reports.pipeline import build_report, headline, verdict_lines
     from labtool.reports.thresholds import load_thresholds

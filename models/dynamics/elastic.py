@@ -45,10 +45,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
-    import xarray as xr
 
 from labtool.common.datasets import dataset
 from labtool.common.errors import InputError, SolverError

@@ -105,9 +105,6 @@ class ResponseAnova:
     r2_reduced: float | None = None
     note: str = ""
 
-    @property
-    def error_ms(self) -> float:
-        return self.error_ss / self.error_df
 
     @property
     def significant(self) -> list[str]:

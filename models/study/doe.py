@@ -49,7 +49,6 @@ SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
 }
 
 _NAME_RE = re.compile(r"^[A-Z]$")
-_LEVEL_COL_RE = re.compile(r"^([A-Z])_([A-Za-z][A-Za-z0-9]*)_level$")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,17 +215,6 @@ def full_factorial(factors: list[Factor]):
     return pd.DataFrame(rows)
 
 
-def coded(levels: np.ndarray) -> np.ndarray:
-    """The paper's +-1 coding of a two-level column of level indices: level 1 -> +1, level 2 -> -1.
-
-    With this sign, an OLS coefficient is the effect *at level 1* (mean at level 1 minus the grand
-    mean), the number the paper prints first in each row vector of eqs (20)-(28).
-    """
-    levels = np.asarray(levels)
-    if set(np.unique(levels)) - {1, 2}:
-        raise InputError("+-1 coding needs level indices 1 and 2")
-    return np.where(levels == 1, 1.0, -1.0)
-
 
 def scene_for_run(base, factors: list[Factor], values: dict[str, float]):
     """The Scene of one run: ``base`` with each factor's field set to its value, converted to SI.
@@ -252,11 +240,6 @@ def scene_field(f: Factor) -> tuple[str, float, str]:
                          f"use one of {', '.join(repr(u) for u in units if u)}")
     return field, units[f.unit], text
 
-
-def parse_level_column(column: str) -> tuple[str, str] | None:
-    """``A_Fu_level`` -> ("A", "Fu"); None for any other column name."""
-    m = _LEVEL_COL_RE.match(column)
-    return (m.group(1), m.group(2)) if m else None
 
 
 # --------------------------------------------------------------------------------------------

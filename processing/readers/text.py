@@ -9,7 +9,6 @@ checks the time column in every block it reads, not only its first rows: a time 
 from __future__ import annotations
 
 import dataclasses
-import io
 import math
 import re
 

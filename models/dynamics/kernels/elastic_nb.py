@@ -16,8 +16,6 @@ from __future__ import annotations
 
 from collections import namedtuple
 
-import numpy as np
-
 from labtool.models.dynamics import events as ev_layout
 from labtool.models.dynamics.contact import normal_force, penetration_under
 from labtool.models.dynamics.jit import jit, kernel
