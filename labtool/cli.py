@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from labtool.invocation import running
+from labtool.common.invocation import running
 
 try:  # typer >= 0.29 vendors click; older typer uses the click package
     from typer._click import exceptions as click_exc

@@ -34,6 +34,7 @@ from labtool.common import history as H
 from labtool.common import recording_attrs
 from labtool.common.errors import InputError
 from labtool.common.files import atomic_write
+from labtool.common.invocation import command_line
 from labtool.common.names import shown
 from labtool.models.mechanism import Mechanism
 from labtool.models.mechanism.motion_laws import CamProgram
@@ -116,7 +117,8 @@ def process_file(recording: Path, output: Path, calibration_files=(), channels: 
 
 @dataclasses.dataclass
 class Chain:
-    """Everything the per-window chain needs, fixed before pass 2 (each part also in the history)."""
+    """Everything the per-window chain needs, fixed before pass 2; ``steps``: the history records of
+    the steps it runs, with the parameters they run with, added to the history once pass 2 has run."""
     fs: float
     ka: np.ndarray               # (2,) factor from the file's unit to m/s^2 of aE_t, aE_n
     sos: np.ndarray
@@ -128,6 +130,7 @@ class Chain:
     omega: H.Omega2
     DE: float
     tau: float | None
+    steps: list
 
 
 def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dict:
@@ -144,10 +147,12 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     program = CamProgram.for_mechanism(mech, law=law)
     ka = np.array([cal["aE_t"]["ka_m_s2_per_v"], cal["aE_n"]["ka_m_s2_per_v"]])
     marks, cam = _revolutions(rec, segs, opts, ka[0], mech, program, hist, warn, progress)
-    chain = _design(rec, opts, ka, cam, mech, program, hist)
+    chain = _design(rec, opts, ka, cam, mech, program)
     out = MeasuredWriter(tmp, rec.n_samples, rec.start_time_utc)
     try:
         state = _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress)
+        for step in chain.steps:            # recorded once they have run
+            hist.add(step)
         attrs = _finish(rec, segs, marks, cam, chain, opts, state, program, law, cal, hist, out, warn)
     except BaseException:
         out.abort()
@@ -207,15 +212,15 @@ def _check_two_revolutions(rec, segs, rpm_hint, opts) -> None:
                          f"needs two whole revolutions: record at least {math.ceil(need * 1.25):g} s at this speed")
 
 
-def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
-    """Filter, margins, tables: fixed before pass 2, each recorded as used."""
+def _design(rec, opts, ka, cam, mech, program) -> Chain:
+    """Filter, margins, tables: fixed before pass 2, each step's record made from what it uses."""
     fs = rec.sample_rate_hz
     cutoff = opts.lowpass_hz or filters.lowpass_cutoff_hz(cam.rpm, fs, opts.harmonics)
     sos = filters.lowpass_sos(fs, cutoff, opts.filter_order)
     margin = int(math.ceil(1.3 * 1.25 * cam.period_samples)) + filters.settle_samples(sos) + 8
-    hist.add(H.Lowpass(kind="butterworth", order=opts.filter_order, cutoff_hz=cutoff, zero_phase=True,
+    steps = [H.Lowpass(kind="butterworth", order=opts.filter_order, cutoff_hz=cutoff, zero_phase=True,
                        rule=f"{opts.harmonics:g} x cam frequency, at most 0.4 fs" if not opts.lowpass_hz else "given",
-                       chunk_samples=int(opts.chunk_samples), overlap_samples=margin))
+                       chunk_samples=int(opts.chunk_samples), overlap_samples=margin)]
     tau = opts.ac_tau_s if opts.ac_tau_s is not None else stated_number(rec.attrs, "ac_coupling_tau_s", rec.source,
                                                                          "--ac-tau")
     if tau is not None and not (math.isfinite(tau) and tau > 0):
@@ -227,15 +232,14 @@ def _design(rec, opts, ka, cam, mech, program, hist) -> Chain:
                          f"{1.0 / (2.0 * math.pi * tau):.3g} Hz, at or above half the sample rate ({fs / 2:g} Hz): "
                          f"nothing sampled would be left (--ac-tau, s)")
     if tau:
-        hist.add(H.UndoAcCoupling(tau_s=tau))
+        steps.append(H.UndoAcCoupling(tau_s=tau))
     tables = KinematicTables(mech, program)
-    hist.add(H.RemoveGravity(g_m_s2=mech.g, table_points=tables.N))
-    dwell = hist.add(H.DwellReference(middle_fraction=follower.DWELL_MIDDLE, min_dwell_samples=follower.DWELL_MIN_LEN))
-    hist.add(H.Epsilon2(DE_m=mech.DE))
-    omega = hist.add(H.Omega2(dwell_margin_deg=opts.dwell_margin_deg,
-                              dwell_margin_samples=max(1, int(round(opts.dwell_margin_deg / 360.0 * cam.period_samples)))))
+    dwell = H.DwellReference(middle_fraction=follower.DWELL_MIDDLE, min_dwell_samples=follower.DWELL_MIN_LEN)
+    omega = H.Omega2(dwell_margin_deg=opts.dwell_margin_deg,
+                     dwell_margin_samples=max(1, int(round(opts.dwell_margin_deg / 360.0 * cam.period_samples))))
+    steps += [H.RemoveGravity(g_m_s2=mech.g, table_points=tables.N), dwell, H.Epsilon2(DE_m=mech.DE), omega]
     return Chain(fs=fs, ka=ka, sos=sos, zi=filters.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
-                 tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau)
+                 tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau, steps=steps)
 
 
 @dataclasses.dataclass
@@ -360,7 +364,7 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, 
     # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
     # from a synthetic one; the file and the command are in source_file and history
     attrs = cf.global_attrs("labtool measured follower motion", source="recording",
-                            history=f"labtool process {shown(rec.source)}")
+                            history=command_line(f"labtool.process({shown(rec.source)!r})"))
     values = {
         "source_file": shown(rec.source), "source_format": rec.format, "start_time_utc": rec.start_time_utc,
         "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm_measured": cam.rpm,

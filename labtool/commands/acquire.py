@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 from typing import List, Optional
 
@@ -11,7 +10,7 @@ import typer
 from labtool.acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
 from labtool.common.errors import InputError
 from labtool.common.files import check_output_path
-from labtool.common.names import shown
+from labtool.common.invocation import command_line
 from labtool.common.operating_point import FIELD, schema_field
 from labtool.common.schema import Integer, Number, String, Table, load_toml
 from labtool.options import op_option
@@ -162,7 +161,7 @@ def acquire(
 
     dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
                                 iepe_excitation, meta_given, motor_setting)
-    attrs["command"] = "labtool acquire " + " ".join(map(shown, sys.argv[2:])) if sys.argv[1:2] == ["acquire"] else "labtool acquire"
+    attrs["command"] = command_line("labtool acquire")
     _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
 
 

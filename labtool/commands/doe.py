@@ -14,6 +14,7 @@ from typing import List, Optional
 import typer
 
 from labtool.common.files import atomic_write, check_output_path
+from labtool.common.invocation import command_line
 from labtool.common.names import shown
 
 doe_app = typer.Typer(
@@ -93,9 +94,7 @@ def run(
     design = Design(tuple(fset), base, model)
     design.validate()
     n_runs = len(design)
-    history = (f"labtool doe run --model {model} --law {law} --omega1 {omega1} --accuracy {accuracy}"
-               + (f" --elastic-gap {elastic_gap}" if model == "elastic" else "")
-               + (f" --factors {factors}" if factors else ""))
+    history = command_line()
 
     from labtool.output import terminal_console
     from labtool.execution.progress import BarProgress, LineProgress

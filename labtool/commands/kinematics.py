@@ -98,13 +98,11 @@ def kinematics(
         ds.attrs.update(mechanism_attributes(mech), labtool_version=labtool_version(), points=points)
         from labtool.common import cf
 
-        command = " ".join([
-            f"labtool kinematics --law {law} --rpm {rpm!r} --fu {fu!r} --jt-factor {jt_factor!r}",
-            f"--rise-deg {rise_deg!r} --stroke-deg {stroke_deg!r} --points {points}",
-            *([f"--mechanism {mechanism}"] if mechanism else []), f"-o {output}"])
+        from labtool.common.invocation import command_line
+
         # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
         cf.apply(ds, title="labtool kinematic analysis", source="labtool kinematics (motion law and linkage)",
-                 history=command)
+                 history=command_line())
     # one output set: both files, or neither (a full disk left a truncated groove CSV)
     with OutputSet() as out:
         if groove_csv is not None:

@@ -18,7 +18,7 @@ import typer
 
 from labtool.common import budget
 from labtool.common.files import check_output_path, write_netcdf
-from labtool.invocation import command_line
+from labtool.common.invocation import command_line
 from labtool.options import given, op_option
 
 PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
