@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= demo_out
 
-.PHONY: demo test install bench clean
+.PHONY: demo test install docs bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,17 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n auto
 
+# the documentation site: docs/_build/html/index.html; every warning is an error, and the examples
+# of docs/examples/ run through the API on the simulated stand
+DOCS_STAMP := $(VENV)/.docs-installed
+$(DOCS_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/pip install -q -e '.[docs]'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	MPLBACKEND=Agg $(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	@echo "docs: docs/_build/html/index.html"
+
 bench: $(STAMP)
 	@$(BIN)/python -c "import numbalsoda" 2>/dev/null || $(BIN)/pip install -q -e '.[bench]' || \
 	  echo "bench: numbalsoda could not be built (it needs gfortran and cmake: apt-get install -y gfortran cmake); its peers are skipped"
@@ -31,4 +42,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_doe.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache
+	rm -rf $(VENV) $(OUT) .pytest_cache docs/_build docs/auto_examples docs/sg_execution_times.rst

@@ -187,20 +187,53 @@ MODEL_OPTIONS = tuple(f.name for f in FIELDS if not f.stated)
 
 @dataclasses.dataclass(frozen=True)
 class OperatingPoint:
-    """The operating point and the model options (SI; FIELDS gives each one's unit and default).
+    """The operating point and the model options, in SI.
 
-    law              motion law name
-    cam_speed        nominal cam speed n1 [rad/s] (``cam_speed_rpm`` in rpm)
-    Fu               load at point N [N], opposing the rod's sliding
-    backlash         groove backlash j [m]
-    jt_factor        inertia factor of the follower side Jt [-] (the paper's 1 or 4)
-    omega1_mode      "const" (the cam as input) or "var" (the motor's characteristic, eq. 3)
-    restitution      Newton's restitution coefficient k of the rigid model's impacts [-]
-    contact_damping  Hunt-Crossley damping of the elastic contact [s/m]
-    contact_length   roller-groove contact length lw [m] (Kc = 8.05e4 lw^(8/9))
-    kc_factor        multiplier of the contact stiffness Kc [-]
-    elastic_gap      "physical" (the follower crosses the gap j) or "closed" (the paper's Table 3)
-    accuracy         solver preset: fast, standard or reference
+    Every field has a default (labtool's: the simulated stand's, ``labtool.DEFAULT``) and is
+    checked when the point is made: a value out of its bounds raises
+    :class:`labtool.common.errors.InputError` naming the field, its unit and its bounds.
+    ``FIELDS`` gives each field's unit, its name and unit at the edges, its bounds and why its
+    default is what it is. Make one with the fields you change, in SI
+    (``OperatingPoint(cam_speed=300 * RPM, backlash=0.05 * MM)``), or change another with
+    ``point.replace(...)``.
+
+    Parameters
+    ----------
+    law : str
+        Motion law of the rise and return: sine (the default), cosine, poly345, poly4567, modtrap
+        or modsine (``labtool.models.mechanism.motion_laws.LAWS``).
+    cam_speed : float
+        Nominal cam speed n1 [rad/s] (``180 * RPM``; the property ``cam_speed_rpm`` gives rpm).
+    Fu : float
+        Load at point N [N], opposing the rod's sliding.
+    backlash : float
+        Groove backlash j [m] (``0.128 * MM``).
+    jt_factor : float
+        Inertia factor of the follower side Jt [-] (the paper's 1 or 4).
+    omega1_mode : {"const", "var"}
+        ``const``: the cam as input at ``cam_speed``; ``var``: the cam driven through the motor's
+        characteristic (the paper's eq. 3).
+    restitution : float
+        Newton's restitution coefficient k of the rigid model's impacts [-], in [0, 1].
+    contact_damping : float
+        Hunt-Crossley damping of the elastic model's contact [s/m].
+    contact_length : float
+        Roller-groove contact length lw [m] (Kc = 8.05e4 lw^(8/9)).
+    kc_factor : float
+        Multiplier of the contact stiffness Kc [-].
+    elastic_gap : {"physical", "closed"}
+        How the backlash enters the elastic model: ``physical`` (the follower crosses the gap j)
+        or ``closed`` (the convention of the paper's Table 3).
+    accuracy : {"fast", "standard", "reference"}
+        Solver preset; each one's error and cost are measured (docs/performance.md).
+
+    Examples
+    --------
+    >>> from labtool import OperatingPoint
+    >>> from labtool.units import RPM, MM
+    >>> p = OperatingPoint(cam_speed=300 * RPM, backlash=0.05 * MM)
+    >>> round(p.cam_speed_rpm, 6), p.restitution
+    (300.0, 0.2)
     """
 
     law: str = FIELD["law"].default
@@ -231,6 +264,7 @@ class OperatingPoint:
         return self.cam_speed
 
     def replace(self, **changes):
+        """A copy with ``changes`` (fields by name, SI), checked as a new point is."""
         return dataclasses.replace(self, **changes)
 
     def point(self) -> "OperatingPoint":
@@ -313,9 +347,49 @@ def stated_in(attrs: Mapping, name: str, where: str) -> Any | None:
 def resolve(given: Mapping[str, Any] | None = None, attrs: Mapping | None = None, *,
             where: str = "the file", base: OperatingPoint = DEFAULT,
             option_source: Callable[[Field], str] | None = None) -> Sourced:
-    """The operating point from, in this order: ``given`` (SI values by field name; None = not
-    given), the file attributes ``attrs`` (edge units; each ``<attr>_source`` kept in the source),
-    then ``base``'s values (the defaults). Each value checked; ``where`` names the file."""
+    """The operating point from given values, a file's attributes and the defaults, with where
+    each value came from.
+
+    Each field is taken from, in this order: ``given``, then ``attrs``, then ``base``; every
+    value is checked against the field's bounds.
+
+    Parameters
+    ----------
+    given : mapping, optional
+        Values by field name, in SI (``{"cam_speed": 300 * RPM}``); None means "not given".
+    attrs : mapping, optional
+        A file's attributes, in edge units (``cam_speed_rpm`` [rpm], ``backlash_mm`` [mm],
+        ``Fu_N`` [N], ...: ``labtool.common.operating_point.FIELDS`` names them); each
+        ``<attr>_source`` attribute is kept in the value's source.
+    where : str
+        What ``attrs`` came from, named in the messages (a file name).
+    base : OperatingPoint
+        The values of the fields neither ``given`` nor ``attrs`` states: ``labtool.DEFAULT``
+        (the simulated stand's) or ``labtool.PAPER_EXPERIMENT``.
+    option_source : callable, optional
+        ``option_source(field) -> str``: how a given value's source is named (default
+        ``"option --rpm"`` and so on).
+
+    Returns
+    -------
+    Sourced
+        ``point`` (the :class:`OperatingPoint`), ``sources`` (field name -> where its value came
+        from: an option, a file attribute, a default and why) and ``notes``.
+
+    Raises
+    ------
+    labtool.common.errors.InputError
+        A value out of its field's bounds, naming the field, the file and the option to use.
+
+    Examples
+    --------
+    >>> import labtool
+    >>> s = labtool.resolve({"Fu": 65.0}, {"cam_speed_rpm": 300.0}, where="run.h5")
+    >>> s.point.cam_speed_rpm, s.point.Fu
+    (300.0, 65.0)
+    >>> s.sources["cam_speed"]
+    'file attribute cam_speed_rpm'
+    """
     given = {k: v for k, v in (given or {}).items() if v is not None}
     unknown = set(given) - set(FIELD)
     if unknown:

@@ -7,10 +7,32 @@ RPM = 2.0 * math.pi / 60.0     # rad/s per rpm
 
 
 def rpm_to_rad_s(n_rpm: float) -> float:
-    """Cam speed in rpm -> angular velocity in rad/s."""
+    """A speed in rpm as an angular velocity in rad/s.
+
+    Parameters
+    ----------
+    n_rpm : float
+        Speed [rpm].
+
+    Returns
+    -------
+    float
+        Angular velocity [rad/s].
+    """
     return n_rpm * RPM
 
 
 def rad_s_to_rpm(omega_rad_s: float) -> float:
-    """Angular velocity in rad/s -> rpm."""
+    """An angular velocity in rad/s as a speed in rpm.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular velocity [rad/s].
+
+    Returns
+    -------
+    float
+        Speed [rpm].
+    """
     return omega_rad_s / RPM

@@ -12,7 +12,7 @@ def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str
     Parameters
     ----------
     measured : path
-        measured.nc (``labtool.process``).
+        measured.nc (``labtool.process``): the measurement the models are fitted to.
     model : {"rigid", "elastic"}
         The model whose parameters are identified.
     free : str
@@ -34,8 +34,10 @@ def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str
         Also search from the scan's best points when a start is given.
     max_runs : int
         Model runs the search may use [-].
-    ka_gain, delay_ms : float
-        The chain's gain [-] and delay [ms] when they are not free.
+    ka_gain : float
+        The measuring chain's gain on the calibrated Ka [-], when it is not free.
+    delay_ms : float
+        The measuring chain's delay [ms], when it is not free.
     progress : callable, optional
         ``progress(text)`` before each long step.
     **changes

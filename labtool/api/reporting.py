@@ -14,13 +14,19 @@ def report(measured, output=None, *, models=("rigid", "elastic"), omega1=("const
     measured : path
         measured.nc (``labtool.process``).
     output : path, optional
-        The HTML page to write (self-contained); ``pdf`` and ``json`` the PDF and the JSON summary.
-        The files are written as one set, or none.
+        The HTML page to write (self-contained). The files asked for (``output``, ``pdf``,
+        ``json``) are written as one set, or none.
     models : sequence of {"rigid", "elastic", "kinematic"}
+        The models compared.
     omega1 : sequence of {"const", "var"}
-        The models and cam speed modes compared.
+        The cam speed modes each model runs in: ``const`` (the cam as input) or ``var`` (the
+        motor's characteristic).
     thresholds : path, optional
         A TOML file of limits on the metrics (``Report.passed`` says whether they hold).
+    pdf : path, optional
+        The PDF report to write beside ``output``.
+    json : path or "-", optional
+        The JSON summary to write ("-": standard output).
     accuracy : {"fast", "standard", "reference"}
         The models' solver preset.
     revolutions : int
@@ -28,8 +34,10 @@ def report(measured, output=None, *, models=("rigid", "elastic"), omega1=("const
         else the cycle statistics of revolutions 2..N.
     robustness : bool
         Also rate at the other preset and half the length: whether the verdict holds.
-    harmonics, grid_points : int
-        Low-pass of both sides (harmonics of the cam frequency kept) and cam-angle grid points.
+    harmonics : int
+        Low-pass of both sides: the harmonics of the cam frequency kept [-].
+    grid_points : int
+        Points per revolution of the cam-angle grid both sides are compared on [-].
     fits : sequence of paths
         ``labtool fit`` results: each identified model compared as '<model> (fitted)'.
     progress : callable, optional

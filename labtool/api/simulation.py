@@ -17,21 +17,33 @@ CYCLE_VARIABLES = ("phi2", "omega2", "epsilon2", "omega1", "MR13D", "aE_t", "aE_
 
 @dataclasses.dataclass
 class Simulation:
-    """A simulation's results.
+    """A simulation's results, as :func:`labtool.simulate` returns them.
 
-    dataset     the time series (CF: UDUNITS units and a long name on every variable; the scene,
-                the mechanism's source and labtool's version as attributes; ``time`` in s from
-                the start of the first rise, not uniform: the solver's steps and events)
-    cycles      the same variables on the uniform cam-angle grid a measurement uses
-                (``labtool.process``: ``grid_points`` per revolution, ``phi1`` in rad from the
-                start of the rise), one row per simulated whole revolution (dimension
-                ``revolution``); NaN where the run does not cover the angle (a rise-only run)
-    indicators  the paper's indicators (Tables 2-3 keys: ``MR13D_max_Nm``, ``jumps``, ...; None
-                where the level does not compute one)
-    model       the level that ran (kinematic, rigid, elastic), ``reason`` why
-    warnings    what the model doubts about its own validity, one sentence each
-    scene       the Scene that ran (an OperatingPoint with revolutions, rise_only, mechanism)
-    wall_s      wall time of the model run [s]
+    Attributes
+    ----------
+    dataset : xarray.Dataset
+        The time series (CF: UDUNITS units and a long name on every variable; the scene, the
+        mechanism's source and labtool's version as attributes). ``time`` [s] runs from the start
+        of the first rise and is not uniform: the solver's steps and events.
+    cycles : xarray.Dataset
+        The same variables on the uniform cam-angle grid a measurement uses (``labtool.process``:
+        ``grid_points`` per revolution, ``phi1`` [rad] from the start of the rise), one row per
+        simulated whole revolution (dimension ``revolution``); NaN where the run does not cover
+        the angle (a rise-only run).
+    indicators : dict
+        The paper's indicators, keys with their units as in Tables 2-3 (``MR13D_max_Nm`` [N m],
+        ``dphi2_max_deg`` [deg], ``jumps`` [-], ...); None where the level does not compute one.
+    model : str
+        The level that ran: kinematic, rigid or elastic.
+    reason : str
+        Why that level ran (``model="auto"`` picks the cheapest the point needs).
+    warnings : list of str
+        What the model doubts about its own validity, one sentence each.
+    scene : labtool.models.dynamics.scene.Scene
+        The scene that ran: an :class:`~labtool.OperatingPoint` with ``revolutions``,
+        ``rise_only`` and the mechanism.
+    wall_s : float
+        Wall time of the model run [s].
     """
 
     dataset: xr.Dataset
@@ -75,7 +87,7 @@ def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolu
     Examples
     --------
     >>> import labtool
-    >>> from labtool.common.units import RPM
+    >>> from labtool.units import RPM
     >>> sim = labtool.simulate(model="rigid", cam_speed=300 * RPM, revolutions=3, rise_only=False)
     >>> sim.cycles["omega2"].sel(revolution=2)          # doctest: +SKIP
     """
