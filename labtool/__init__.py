@@ -1,6 +1,7 @@
 """labtool: the software of the STB-216 cam-follower test stand.
 
-A library first, with a command line over it: every command calls one of these functions.
+A library first, with a command line over it: these functions and the commands of the same names
+are two thin layers over the same library calls (docs/architecture.md, "The API layer").
 
 >>> import labtool
 >>> from labtool.units import RPM
