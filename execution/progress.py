@@ -3,7 +3,7 @@
 On a terminal (rich) the bar shows items done, elapsed time and the time remaining; written to a
 pipe, a file or a CI log it prints one line every ``interval_s`` seconds (and none at all for work
 that ends sooner), so a log shows that the work goes on and when it should end. The ETA is the
-items left over the rate of this session (items resumed from an earlier run do not count).
+items left over the rate of this run (items resumed from an earlier run do not count).
 """
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """The arrays of one processing window, allocated once for the longest window and reused.
 
-Every window of pass 2 used to allocate some 25 MB of fresh arrays (the Ka-scaled channels, the
-filter's extension, the chain's outputs, ...); glibc hands allocations that large back to the
-kernel on free, so each window paid page faults again: 0.4 s of system time on a 1-hour
+Allocated per window, pass 2's arrays would be some 25 MB of fresh memory each time (the Ka-scaled
+channels, the filter's extension, the chain's outputs, ...); glibc hands allocations that large back
+to the kernel on free, so each window would pay page faults again: 0.4 s of system time on a 1-hour
 recording. Here they are made once (about 20 MB for the default 2^17-sample chunks) and every
 kernel writes into views of them, as nidaqmx's stream readers read into preallocated arrays.
 """

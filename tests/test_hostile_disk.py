@@ -1,5 +1,5 @@
 """Hostile disks: a real full tmpfs and a read-only mount, labtool in a child process
-(HDF5 used to segfault there). Each command ends with one line saying what was kept, and leaves
+(HDF5 itself can segfault there). Each command ends with one line saying what was kept, and leaves
 no output, no truncated file under a final name and no temporary behind."""
 from __future__ import annotations
 

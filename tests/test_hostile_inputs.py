@@ -1,4 +1,4 @@
-"""Hostile inputs: TOML files, option values and file names that used to raise a
+"""Hostile inputs: TOML files, option values and file names that could raise a
 traceback, hang, be ignored or give a silent wrong answer. Each ends with one line and exit 2, or
 works. The kind of each test is its ``hostile`` marker."""
 from __future__ import annotations

@@ -275,7 +275,7 @@ def test_a_motor_that_cannot_drive_the_load_ends_in_a_solver_error():
 @pytest.mark.slow
 @pytest.mark.parametrize("rpm", [180, 500])
 def test_the_stands_fast_preset_against_the_reference(rpm):
-    """The truth's own accuracy (docs/twin.md, measured 2026-12-01): the 'fast' preset the stand
+    """The truth's own accuracy (docs/twin.md): the 'fast' preset the stand
     uses has the reference preset's events, one for one, within 5e-5 s, and omega2 within 1e-4 away
     from them (measured 1.2e-5 / 4.2e-5 s and 1.4e-5 / 3.3e-5 at 180 / 500 rpm)."""
     T = 60.0 / rpm

@@ -47,15 +47,15 @@ _MODULES = {"rigid": rigid, "elastic": elastic}
 REFERENCE_RTOL = 1e-12
 REFERENCE_METHOD = "DOP853"
 
-# worst case over Table 1's 16 runs (omega1 variable, sine law), written by
-# benchmarks/work_precision.py on 2026-11-22 (benchmarks/results/work_precision_summary.json;
-# docs/performance.md). ``tolerances``: the model's preset at the time of the measurement; the
+# worst case over Table 1's 16 runs (omega1 variable, sine law), measured with
+# benchmarks/work_precision.py and accuracy.compare over Table 1 (benchmarks/results/work_precision_summary.json;
+# docs/performance.md, "Measured presets"). ``tolerances``: the model's preset at the time of the measurement; the
 # tests fail when a model's preset changes, so that the figures are measured again.
 MEASURED: dict = {
     "rigid": {
-        # step caps relaxed (2026-12-02, accuracy.compare over Table 1, docs/performance.md):
-        # fast rise/250 -> rise/50 (was 3.8e-6, 5.9e-13, 2.6e-11 s), standard rise/1000 -> rise/20
-        # (was 1.5e-8, 4.4e-13, 6.0e-11 s); the indicators' error is the output sampling, unchanged
+        # step caps set to what the stated accuracy needs: fast rise/50 (3.8e-6, 5.9e-13, 2.6e-11 s
+        # at rise/250), standard rise/20 (1.5e-8, 4.4e-13, 6.0e-11 s at rise/1000); the indicators'
+        # error is the output sampling, the same at every cap
         "fast": dict(tolerances=dict(method="RK45", rtol=1e-6, max_step=1 / 50, samples=1000),
                      err_omega2=6.1e-6, err_MR13D=8.6e-10, err_event_time=8.7e-9, d_events=0, err_indicators=2.3e-3),
         "standard": dict(tolerances=dict(method="RK45", rtol=1e-9, max_step=1 / 20, samples=4000),
@@ -66,9 +66,9 @@ MEASURED: dict = {
                           err_omega2=5e-10, err_MR13D=1e-12, err_event_time=2e-11, d_events=0, err_indicators=1e-6),
     },
     "elastic": {
-        # flights no longer capped at the contact's step (2026-12-02, accuracy.compare over
-        # Table 1, docs/performance.md): 12 % fewer steps; fast was 2.2e-3, 9.0e-2, 5.1e-5 s, 7.9e-4,
-        # standard 2.6e-5, 5.2e-4, 4.0e-7 s, 1.0e-4 (the same run, flights capped)
+        # flights not capped at the contact's step: 12 % fewer steps than with the cap, at about
+        # the same errors (capped: fast 2.2e-3, 9.0e-2, 5.1e-5 s, 7.9e-4; standard 2.6e-5, 5.2e-4,
+        # 4.0e-7 s, 1.0e-4, measured in the same run)
         "fast": dict(tolerances=dict(rtol=1e-6, atol=1e-5, steps_per_period=4.0, cap_flight=False),
                      err_omega2=2.3e-3, err_MR13D=9.0e-2, err_event_time=5.1e-5, d_events=0, err_indicators=7.9e-4),
         "standard": dict(tolerances=dict(rtol=1e-8, atol=1e-7, steps_per_period=8.0, cap_flight=False),

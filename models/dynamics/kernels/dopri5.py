@@ -197,8 +197,8 @@ def register(model_class, rhs_fn, event_fn, n_events_fn, direction_fn, state_siz
 # The pieces called at every step are inlined into their caller by numba (inline="always"): numba
 # calls another compiled function through a pointer, with every array argument (and every array
 # inside a struct) spread into seven to nine machine words, and LLVM does not inline across
-# them. Inlining these generic pieces took the elastic loop from ~0.55 to ~0.42 ms (Table 1 run
-# 1, 2026-12-02). The model hooks are not inlined: numba's inlining of an ``overload`` gives
+# them. Inlining these generic pieces takes the elastic loop from ~0.55 to ~0.42 ms (Table 1 run
+# 1). The model hooks are not inlined: numba's inlining of an ``overload`` gives
 # another 10 % but warns of broken IR assumptions (numba issues 7802, 9489), and a result is not
 # worth that risk.
 
@@ -436,8 +436,8 @@ def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, spa
 
     The controls come as scalars, not as the ``Controls`` tuple: a tuple that holds arrays,
     passed into the per-step functions, made the elastic loop 35-40 % slower (an unused extra
-    array in it measured so, 2026-12-02; perhaps a slow episode of the VM, docs/performance.md);
-    the events' old and new values are one array (2 % of the elastic loop, 2026-12-04)."""
+    array in it measured so once; perhaps a slow episode of the VM); the events' old and new values
+    are one array (2 % of the elastic loop)."""
     nfev = 0
     while t < t_bound:
         if nst >= max_steps:
