@@ -21,8 +21,10 @@ from pathlib import Path
 
 work = Path(tempfile.mkdtemp(prefix="labtool-example-"))
 recording = work / "run.h5"
-subprocess.run([sys.executable, "-m", "labtool", "acquire", "--device", "sim", "--rpm", "180",
-                "--duration", "2", "--fast", "--seed", "1", "-o", str(recording)], check=True)
+done = subprocess.run([sys.executable, "-m", "labtool", "acquire", "--device", "sim", "--rpm", "180",
+                       "--duration", "2", "--fast", "--seed", "1", "-o", str(recording)],
+                      check=True, capture_output=True, text=True)
+print(done.stdout.strip())
 
 # %%
 # Process: volts to the follower's motion
@@ -30,7 +32,7 @@ subprocess.run([sys.executable, "-m", "labtool", "acquire", "--device", "sim", "
 # ``labtool.process`` returns the processed measurement as an xarray Dataset (and writes it when
 # given a file). Every variable carries its unit; the operating point the recording states comes
 # with it, each value with its source. Without a calibration file the Ka the recording states is
-# used (the simulated chain's true one), with a warning saying so.
+# used (the simulated chain's true one), and the processing history says where each Ka came from.
 import labtool
 
 measured = labtool.process(recording, work / "measured.nc")
