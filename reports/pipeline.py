@@ -23,7 +23,7 @@ from labtool.common.operating_point import (FIELD, FIELDS, SOURCE_SUFFIX, Operat
 from labtool.common.units import RPM
 from labtool.processing.readers.base import as_text
 from labtool.processing.readers import recording_kind
-from labtool.reports import align, events, metrics
+from labtool.reports import align, events, metrics, verdict
 from labtool.reports.thresholds import Thresholds, evaluate
 
 SIGNALS = ("omega2", "epsilon2")
@@ -82,6 +82,7 @@ class Report:
     time_filter: align.TimeFilter | None = None   # the processing low-pass, re-applied to the simulations
     measured_events: dict | None = None            # labtool.reports.events.measured
     robustness: list = dataclasses.field(default_factory=list)   # rows: preset, revolutions, closest, grades
+    verdict: dict | None = None        # labtool.reports.verdict.judge, with its ``sentence``
 
     @property
     def passed(self) -> bool:
@@ -318,7 +319,7 @@ def event_table(measured: dict | None, sims: list) -> list[dict]:
 def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Thresholds | None = None,
                  overrides: dict | None = None, accuracy: str = "standard", revolutions: float = DEFAULT_REVOLUTIONS,
                  cond: align.Conditioning | None = None, progress=None, stand_in_on_failure: bool = False,
-                 robustness: bool = True, fitted: list | None = None) -> Report:
+                 robustness: bool = True, fitted: list | None = None, discriminate: bool = True) -> Report:
     """Everything the report shows. ``progress(msg)`` is called before each long step.
 
     ``stand_in_on_failure`` (the demo): a model that fails is replaced by the kinematic level with a
@@ -326,7 +327,9 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     ``robustness``: also the verdict at the other preset and at half the simulated length.
     ``fitted``: identified models (``labtool fit``) shown beside the nominal ones, each a dict with
     ``model``, ``omega1``, ``operating_point`` (the report's keys, edge units, with the fitted
-    values and any ``ka_gain``/``delay_ms``) and ``note`` (what was identified, from where)."""
+    values and any ``ka_gain``/``delay_ms``) and ``note`` (what was identified, from where).
+    ``discriminate``: when the measurement cannot tell the closest models apart, look for the cam
+    speed that would (labtool.reports.discrimination, a few cheap simulations)."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
     cond = cond or align.Conditioning()
@@ -375,13 +378,42 @@ def build_report(measured_path: Path, models=MODELS, modes=MODES, thresholds: Th
     if robustness and any(r.model != "kinematic" for r in sims):
         say("checking the verdict at the other preset and half the length")
         rep.robustness = robustness_rows(rep, accuracy, revolutions, say)
-        verdict = robust_verdict(rep.robustness)
-        if verdict is not None and not verdict["robust"]:
-            notes.append("the verdict is NOT robust: the closest model changes with the solver preset or the simulated "
-                         "length (" + "; ".join(f"{r['accuracy']}, {r['revolutions']:g} rev: {r['closest']}"
-                                                 for r in rep.robustness) + ")")
+    rep.verdict = verdict.judge(headline(rep), rep.comparisons, rep.robustness, same_motion_labels(sims))
+    if discriminate and rep.verdict is not None and rep.verdict["cannot_tell_apart"]:
+        say("looking for the cam speed that would tell the models apart")
+        rep.verdict["discrimination"] = discrimination_for(rep, rep.verdict)
+    if rep.verdict is not None:
+        rep.verdict["sentence"] = verdict.sentence(rep.verdict)
     rep.wall_s = time.perf_counter() - t0
     return rep
+
+
+def same_motion_labels(sims: list) -> dict[str, str]:
+    """label -> the label of the earlier run whose motion it repeats (simulated once, _same_motion)."""
+    first, out = {}, {}
+    for run in sims:
+        key = id(run.cycle)
+        if key in first:
+            out[run.label] = first[key]
+        else:
+            first[key] = run.label
+    return out
+
+
+def discrimination_for(rep: "Report", v: dict) -> dict | None:
+    """Where the runs the measurement cannot tell apart (the closest's group, else the first group)
+    would differ most (labtool.reports.discrimination), as plain data; None when fewer than two of
+    them are nominal models (a fitted model has its own operating point)."""
+    from labtool.reports.discrimination import discriminate
+
+    groups = v["cannot_tell_apart"]
+    group = next((g for g in groups if v["closest"] in g), groups[0])
+    runs = {r.label: r for r in rep.sims if r.op is None}
+    cands = [(lab, runs[lab].model, runs[lab].omega1) for lab in group if lab in runs]
+    if len(cands) < 2:
+        return None
+    scatter = {s: rep.cycles.std(s) for s in SIGNALS}
+    return discriminate(rep.scene, cands, scatter, rep.cycles.cam_speed_rpm, cond=rep.conditioning).as_dict()
 
 
 def fitted_run(fit: dict, accuracy: str, revolutions: float, cond, time_filter) -> SimRun:
@@ -493,19 +525,11 @@ def _ratings(cycles, cycle) -> dict:
     return out
 
 
-TIE = 0.005   # mean ISO ratings closer than this to the best are "as close" (the ratings' own spread)
-
-
-def _mean_rating(r: dict) -> float:
-    return 0.5 * (r["omega2_iso_rating"] + r["epsilon2_iso_rating"])
-
-
 def _variant_row(accuracy, revolutions, entries) -> dict:
-    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings, ``tied``
-    every label within TIE of it."""
-    best = max(entries, key=lambda e: _mean_rating(e[1]))
-    tied = [lab for lab, r in entries if _mean_rating(r) >= _mean_rating(best[1]) - TIE]
-    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0], "tied": tied,
+    """entries: [(label, ratings)]; the closest is the best mean of the two ISO ratings (whether
+    the measurement tells it from the others is labtool.reports.verdict's)."""
+    best = max(entries, key=lambda e: verdict.mean_rating(e[1]))
+    return {"accuracy": accuracy, "revolutions": float(revolutions), "closest": best[0],
             "models": [{"label": lab, **r} for lab, r in entries]}
 
 
@@ -546,15 +570,15 @@ def robustness_rows(rep: Report, accuracy: str, revolutions: float, say) -> list
 
 
 def verdict_lines(report: "Report") -> list[str]:
-    """The verdict in plain lines (console, demo, PDF): the closest model, whether that is robust,
-    and the measured events with their detectability."""
+    """The verdict in plain lines (console, demo): the closest model, what the measurement can
+    tell (labtool.reports.verdict.sentence, the same text as the page, the PDF and the JSON), and
+    the measured events with their detectability."""
     lines = []
     best = closest(report)
     if best is not None:
         lines.append(f"closest to the measurement: {best['label']} (mean of the omega2 and epsilon2 ISO ratings)")
-    sentence = robustness_sentence(report.robustness)
-    if sentence is not None:
-        lines.append(sentence)
+    if report.verdict is not None and report.verdict.get("sentence"):
+        lines.append(report.verdict["sentence"])
     m = report.measured_events
     if m is not None and m.get("impacts_per_rev") is not None:
         first = "-" if m["first_impact_deg"] is None else f"{m['first_impact_deg']:.1f} deg"
@@ -570,27 +594,14 @@ def verdict_lines(report: "Report") -> list[str]:
     return lines
 
 
-def robustness_sentence(rows: list[dict]) -> str | None:
-    """One line for the console, the demo and the PDF: robust, or which model wins where."""
-    verdict = robust_verdict(rows)
-    if verdict is None:
-        return None
-    tied = [t for t in rows[0].get("tied", []) if t != rows[0]["closest"]]
-    also = f" ({', '.join(tied)} within {TIE:g} of its mean ISO rating)" if tied else ""
-    if verdict["robust"]:
-        return (f"verdict robust: {rows[0]['closest']} is the closest{also} at both presets and both simulated "
-                "lengths")
-    return "verdict NOT robust: " + "; ".join(f"{r['accuracy']} {r['revolutions']:g} rev -> {r['closest']}" for r in rows)
-
-
 def robust_verdict(rows: list[dict]) -> dict | None:
-    """Whether the first row's closest model is the closest, or within TIE of it, in every
-    robustness row (None without rows)."""
+    """Whether the first row's closest model is the closest in every robustness row (None without
+    rows); the verdict itself (labtool.reports.verdict) also asks whether it is ahead by more than
+    the measurement resolves."""
     names = [r["closest"] for r in rows if r.get("closest") is not None]
     if not names:
         return None
-    first = rows[0].get("closest")
-    robust = len(names) == len(rows) and all(first == r["closest"] or first in r.get("tied", ()) for r in rows)
+    robust = len(names) == len(rows) and len(set(names)) == 1
     return {"robust": robust, "closest": sorted(set(names))}
 
 

@@ -10,7 +10,10 @@ periodic or not, revolutions, note, wall time, indicators, and for a model ident
 signal: ``overall`` metrics on the cycle average, with ``band_overlap`` and ``scatter_ratio``, and
 ``per_revolution``), ``headline``, ``closest`` (the simulation with the best mean ISO rating of
 omega2 and epsilon2), ``robustness`` (``rows``: preset, revolutions, closest, every model's grades;
-``robust``), ``events`` (per simulation: the predicted ``impacts_per_rev`` (all contacts of the
+``robust``, the verdict's), ``verdict`` (labtool.reports.verdict.judge: ``closest``, ``ranking``,
+``margin``, ``resolution`` and its ``scatter`` and ``spread``, ``cannot_tell_apart``, ``pairs``,
+``robust``, ``discrimination`` (labtool.reports.discrimination) and ``sentence``, the words every
+output shows), ``events`` (per simulation: the predicted ``impacts_per_rev`` (all contacts of the
 model's record), ``detectable_impacts_per_rev`` (those the chain shows, same threshold and
 resolution as the measurement), ``jumps_per_rev``, ``first_impact_deg``, ``impact_angles_deg``
 (of the visible ones), and the model's own indicators), ``thresholds`` (rows with ``passed``),
@@ -142,7 +145,10 @@ def build_summary(report: Report) -> dict:
         "comparisons": comps,
         "headline": headline(report),
         "closest": None if closest(report) is None else closest(report)["label"],
-        "robustness": {"rows": report.robustness, **(robust_verdict(report.robustness) or {"robust": None})},
+        "robustness": {"rows": report.robustness, **(robust_verdict(report.robustness) or {"robust": None}),
+                       # robust = the verdict's: the closest everywhere AND ahead by more than the measurement resolves
+                       "robust": None if report.verdict is None else report.verdict["robust"]},
+        "verdict": report.verdict,
         "events": event_rows(report),
         "thresholds": {"file": report.thresholds_source, "rows": report.threshold_rows},
         "passed": report.passed,
