@@ -119,7 +119,7 @@ def discriminate(op: dict, candidates: Sequence[tuple[str, str, str]], scatter: 
     """
     from labtool.models.mechanism import Mechanism
     from labtool.reports import align
-    from labtool.reports.pipeline import no_load_factor, run_simulation
+    from labtool.reports.simulation import no_load_factor, run_simulation
 
     cond = cond or align.Conditioning()
     top = Mechanism.default().max_cam_speed_rpm
