@@ -180,7 +180,8 @@ def write_point_outputs(report, folder: Path, names: dict) -> None:
 
 def cycles_dataset(report) -> xr.Dataset:
     """What the campaign page overlays: the measured cycle average and scatter of omega2 and
-    epsilon2 on the report's cam-angle grid, and each simulation's steady revolution on it."""
+    epsilon2 on the report's cam-angle grid (and every whole revolution read, for 'labtool
+    export'), and each simulation's steady revolution on it."""
     from labtool.reports.pipeline import SIGNALS
 
     cyc = report.cycles
@@ -191,6 +192,11 @@ def cycles_dataset(report) -> xr.Dataset:
         ds[f"measured_{s}_mean"] = ("phi1", cyc.mean(s), {"units": units[s], "long_name": f"measured {s}, cycle average"})
         ds[f"measured_{s}_std"] = ("phi1", cyc.std(s), {"units": units[s],
                                                          "long_name": f"measured {s}, standard deviation over the revolutions"})
+    ds = ds.assign_coords(revolution=("revolution", np.asarray(cyc.revolutions, dtype=int),
+                                      {"long_name": "measured cam revolution number"}))
+    for s in SIGNALS:
+        ds[f"measured_{s}_revolutions"] = (("revolution", "phi1"), cyc.signals[s],
+                                           {"units": units[s], "long_name": f"measured {s}, each whole revolution"})
     runs = report.sims
     ds = ds.assign_coords(sim=("sim", np.arange(len(runs))))
     for name in ("label", "requested", "model", "omega1"):

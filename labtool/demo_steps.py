@@ -52,7 +52,7 @@ def run_demo(out: Path, shown_as: Path | None = None):
         console.print(f"\n[bold]demo done[/bold] in {elapsed:.0f} s: kinematics {escape(str(final(kin_path)))}, "
                       f"Table 1 comparison {escape(str(final(table_path)))}")
         console.print(f"[bold]report: {escape(str(final(html).resolve()))}[/bold]  (open it in a browser; "
-                      "summary.json and report.pdf beside it)", soft_wrap=True)
+                      "summary.json, report.pdf and the curves report_curves.csv, .nc beside it)", soft_wrap=True)
         for line in rows:
             console.print("  " + line, highlight=False, markup=False, soft_wrap=True)
     return announce
@@ -130,24 +130,16 @@ def step_process(out: Path, console: Console, recording: Path) -> Path:
 
 def step_report(out: Path, console: Console, measured: Path, recording: Path) -> tuple[Path, list[str]]:
     """The report: both models, both omega1 modes, 'fast' preset, with the robustness check."""
-    from labtool.common.files import atomic_write
-    from labtool.reports.figures import all_figures, render
-    from labtool.reports.html import render_html
-    from labtool.reports.pdf import write_pdf
+    from labtool.reports.outputs import write_report
     from labtool.reports.pipeline import build_report, headline, verdict_lines
-    from labtool.reports.summary import to_json
 
     html_path, json_path, pdf_path = out / "report.html", out / "summary.json", out / "report.pdf"
     console.print(f"[bold]report[/bold]: {escape(measured.name)} against the rigid and elastic models, omega1 constant and "
                   "variable, with labtool's default model options")
     rep = build_report(measured, ("rigid", "elastic"), ("const", "var"), accuracy="fast",
                        progress=lambda msg: console.print(f"  {msg}", highlight=False), stand_in_on_failure=True)
-    figs = render(all_figures(rep))
-    html = render_html(rep, figs)
-    atomic_write(html_path, lambda tmp: tmp.write_text(html, encoding="utf-8"))
-    text = to_json(rep)
-    atomic_write(json_path, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
-    atomic_write(pdf_path, lambda tmp: write_pdf(rep, tmp, figs))
+    # the page, the PDF, the JSON and the curves (report_curves.csv, .nc) as one set
+    write_report(rep, html_path, pdf_path, json_path)
     rows = [f"measured: {len(rep.cycles.revolutions)} whole revolutions at {rep.cycles.cam_speed_rpm:.1f} rpm "
             f"({rep.measured.attrs.get('source', 'recording')})"]
     for h in headline(rep):

@@ -1,17 +1,23 @@
-"""``labtool export``: a measured.nc (from ``labtool process``) as CSV tables for other tools.
+"""``labtool export``: labtool's results as files for other tools.
 
-Two files next to ``--output`` (default: the input's name): ``<stem>_cycles.csv``, the cycle
-statistics on the cam-angle grid (phi1 in rad and deg, means and standard deviations over the
-revolutions, the ideal kinematics), and ``<stem>_series.csv``, the per-sample time series (time in
-s from the first sample, then aE_t, aE_n, epsilon2, omega2, phi1, revolution, clipped). Column names
-carry the units (``omega2 [rad/s]``). Written with pandas, in chunks (bounded memory), each file
-atomically; both or neither.
+``--format csv,netcdf,mat``: the curves on the cam-angle grid (labtool.reports.curves), one file per
+format, ``<prefix>_curves.<ext>``: of a measured.nc (the measured mean, standard deviation and every
+whole revolution, read as the report reads them), a simulation (``labtool simulate -o``: its cycle),
+a report's ``_curves.nc``, or a campaign folder (every finished point: the measured revolutions and
+each model, ``<prefix>_<point>_curves.<ext>``).
+
+``--csv`` (a measured.nc): two tables next to ``--output`` (default: the input's name):
+``<stem>_cycles.csv``, the cycle statistics ``labtool process`` wrote on its cam-angle grid (phi1 in
+rad and deg, means and standard deviations over the revolutions, the ideal kinematics), and
+``<stem>_series.csv``, the per-sample time series (time in s from the first sample, then aE_t, aE_n,
+epsilon2, omega2, phi1, revolution, clipped). Column names carry the units (``omega2 [rad/s]``).
+Written with pandas, in chunks (bounded memory), each file atomically; all or none.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -24,19 +30,29 @@ def register(app: typer.Typer) -> None:
 
 
 def export(
-    measured: Path = typer.Argument(..., help="measured.nc written by 'labtool process'"),
-    csv: bool = typer.Option(False, "--csv", help="write CSV tables (the only format for now)"),
+    measured: Path = typer.Argument(..., help="measured.nc ('labtool process'), a simulation .nc ('labtool simulate "
+                                    "-o'), a report's _curves.nc, or a campaign folder (--format)"),
+    csv: bool = typer.Option(False, "--csv", help="a measured.nc's cycle statistics and time series as CSV tables"),
+    formats: Optional[List[str]] = typer.Option(None, "--format", help="the curves on the cam-angle grid, one file "
+                                                "per format: csv, netcdf, mat (comma-separated or repeated); omega2 "
+                                                "in rad/s, epsilon2 in rad/s², phi1 in deg and rad"),
     output: Optional[Path] = typer.Option(None, "-o", "--output",
-                                          help="path prefix of the tables (default: the input without .nc)"),
-    series: bool = typer.Option(True, help="also write the per-sample time series (large for long recordings)"),
-    force: bool = typer.Option(False, help="overwrite existing tables"),
+                                          help="path prefix of the files (default: the input without .nc)"),
+    series: bool = typer.Option(True, help="with --csv, also the per-sample time series (large for long recordings)"),
+    grid: int = typer.Option(720, help="--format: cam-angle grid points per revolution [-] (the report's)"),
+    harmonics: int = typer.Option(60, help="--format: low-pass, harmonics of the cam frequency kept [-] (the report's)"),
+    force: bool = typer.Option(False, help="overwrite existing files"),
 ) -> None:
-    """Cycle statistics and time series of a measured file as CSV (units in the column names)."""
+    """Curves on the cam-angle grid (CSV, NetCDF, MATLAB) and a measured file's tables as CSV."""
     from labtool.common.errors import InputError
     from labtool.common.files import check_output_path
 
+    if formats:
+        _export_curves(measured, formats, output, grid, harmonics, force)
+        if not csv:
+            return
     if not csv:
-        raise InputError("say which format to export: --csv")
+        raise InputError("say what to export: --format csv,netcdf,mat (the curves) or --csv (a measured file's tables)")
     prefix = _prefix(output, measured)
     targets = {"cycles": Path(f"{prefix}_cycles.csv"), "series": Path(f"{prefix}_series.csv")}
     if not series:
@@ -50,6 +66,32 @@ def export(
         ds.close()
     for name, (path, rows) in written.items():
         typer.echo(f"wrote {path}: {rows} rows ({name})")
+
+
+def _export_curves(source: Path, formats, output, grid: int, harmonics: int, force: bool) -> None:
+    """Write the curves of ``source`` in each format, all files as one set (labtool.reports.curves)."""
+    from labtool.common.files import OutputSet, check_outputs
+    from labtool.reports.align import Conditioning
+    from labtool.reports.curves import check_formats, curve_paths, write_curves
+
+    fmts = check_formats(formats)
+    cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
+    if source.is_dir() and (source / "points").is_dir():
+        from labtool.campaign.export import campaign_curves
+        sets = campaign_curves(source)
+        base = _prefix(output, source) if output is not None else str(source).rstrip("/")
+        planned = [(curve_paths(f"{base}_{name}", fmts), ds) for name, ds in sets]
+    else:
+        from labtool.reports.export import curves_of
+        planned = [(curve_paths(_prefix(output, source), fmts), ds) for _, ds in curves_of(source, cond)]
+    check_outputs({f"{p}": p for paths, _ in planned for p in paths.values()}, force)
+    with OutputSet(kept="the input is untouched") as out:
+        for paths, ds in planned:
+            write_curves(ds, paths, out)
+    for paths, ds in planned:
+        n_curves = sum(1 for v in ds.data_vars.values() if v.dims[-1:] == ("phi1",)) - 1
+        for p in paths.values():
+            typer.echo(f"wrote {p}: {ds.sizes['phi1']} grid points, {n_curves} curves")
 
 
 def _prefix(output, measured: Path) -> str:

@@ -12,7 +12,7 @@ from typing import List, Optional
 import typer
 
 from labtool.common import budget
-from labtool.common.files import OutputSet, check_outputs
+from labtool.common.files import check_outputs
 from labtool.options import given, op_option
 
 PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no estimate needed
@@ -76,6 +76,10 @@ def report(
     grid: int = typer.Option(720, help="cam-angle grid points per revolution [-]"),
     fit: Optional[List[Path]] = typer.Option(None, "--fit", help="a 'labtool fit' result (fit.json): the identified "
                                             "model is compared beside the nominal ones, as '<model> (fitted)'; repeatable"),
+    curves: bool = typer.Option(True, help="also write the compared curves beside the page: <name>_curves.csv and "
+                                "<name>_curves.nc (measured mean, std and each revolution, every model; rad/s, rad/s²)"),
+    discriminate: bool = typer.Option(True, help="when the measurement cannot tell models apart, simulate them at a "
+                                      "few cam speeds (fast preset) and name the speed [rpm] that would"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
     max_seconds: float = typer.Option(budget.DEFAULT_MAX_SECONDS, help="refuse (on a terminal: ask) when the "
                                       "estimated run time of many --revolutions is longer [s]"),
@@ -88,7 +92,11 @@ def report(
     from labtool.reports.pipeline import build_report, headline, verdict_lines
     from labtool.reports.thresholds import load_thresholds
 
-    check_outputs({"-o": output, "--pdf": pdf, "--json": json_path}, force)
+    from labtool.reports.outputs import curves_beside, write_report
+
+    curve_paths = curves_beside(output) if curves else {}
+    check_outputs({"-o": output, "--pdf": pdf, "--json": json_path,
+                   **{f"curves ({f})": p for f, p in curve_paths.items()}}, force)
     budget.check_limit(max_seconds)
     if revolutions > PROBE_ABOVE_REVOLUTIONS:
         _check_budget(_split(models), _split(omega1), accuracy, revolutions, robustness, max_seconds)
@@ -105,24 +113,10 @@ def report(
     quiet = json_path is not None and str(json_path) == "-"
     with (err.status("report") if err.is_terminal else ProgressLines(sys.stderr, "report")) as status:
         rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
-                           progress=lambda msg: status.update(msg), robustness=robustness, fitted=fitted)
-        status.update("drawing the figures")
-        from labtool.reports.figures import all_figures, render
-        from labtool.reports.html import render_html
-        from labtool.reports.summary import to_json
-        figs = render(all_figures(rep))          # drawn once, for the page and the PDF
-        html = render_html(rep, figs)
-        # the HTML, PDF and JSON are one set: all written, or none (a full disk, Ctrl-C)
-        with OutputSet() as out:
-            out.write_text(output, html, "-o")
-            if pdf is not None:
-                from labtool.reports.pdf import write_pdf
-                status.update("writing the PDF")
-                out.write(pdf, lambda tmp: write_pdf(rep, tmp, figs), "--pdf")
-            if json_path is not None:
-                text = to_json(rep)
-                if str(json_path) != "-":
-                    out.write_text(json_path, text + "\n", "--json")
+                           progress=lambda msg: status.update(msg), robustness=robustness, fitted=fitted,
+                           discriminate=discriminate)
+        # the HTML, PDF, JSON and curves are one set: all written, or none (a full disk, Ctrl-C)
+        text = write_report(rep, output, pdf, json_path, progress=lambda msg: status.update(msg), curves=curve_paths)
         if json_path is not None and str(json_path) == "-":
             typer.echo(text)
     if not quiet:
@@ -133,7 +127,8 @@ def report(
             typer.echo(line)
         for n in rep.notes:
             typer.echo(f"note: {n}")
-        typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else ""))
+        typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else "")
+                   + "".join(f", {p}" for p in curve_paths.values()))
     failed = [r for r in rep.threshold_rows if not r["passed"]]
     if failed:
         typer.echo(f"labtool: {len(failed)} of {len(rep.threshold_rows)} threshold checks failed "
