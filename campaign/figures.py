@@ -1,6 +1,7 @@
 """The cross-point figures (matplotlib object API), in the report's colours and labels
-(labtool.reports.figures): omega1 constant blue, variable red (thinner, on top: a var run that is the
-const motion shows both); the elastic model solid, rigid dashed, kinematic dotted.
+(labtool.reports.figures): each model and omega1 mode its own colour-blind-safe colour (Okabe-Ito),
+thin lines, omega1 var dashed (a var run that is the const motion shows both); the measurement black,
+drawn on top of a visible ±2σ band.
 
 - ISO/TS 18571 rating of omega2 and epsilon2 against the cam speed, per model and omega1 mode,
   the grade bands shaded and the closest model of each point ringed;
@@ -18,20 +19,18 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from labtool.reports.figures import COLORS, SIGNAL_LABEL, plain
+from labtool.reports.figures import MODEL_LW, SIGNAL_LABEL, STYLES, plain, run_color
 from labtool.reports.metrics import ISO_GRADES
 
-LINESTYLE = {"elastic": "-", "rigid": "--", "kinematic": ":"}
 MARKERS = "osD^vP*X"
 GRADE_SHADE = {"excellent": "#e3f4e3", "good": "#eef7e0", "fair": "#fff4d6", "poor": "#fbe9e9"}
 
 
 def _style(model: str, omega1: str) -> dict:
-    # omega1 var thinner and on top: where it is the const motion (elastic, kinematic: the report
+    # omega1 var dashed and on top: where it is the const motion (elastic, kinematic: the report
     # reuses that run) both curves still show
     var = omega1 == "var"
-    return {"color": COLORS.get(omega1, "k"), "ls": LINESTYLE.get(model, "-."), "lw": 1.0 if var else 2.4,
-            "zorder": 3 if var else 2}
+    return {"color": run_color(model, omega1), "ls": STYLES.get(omega1, "-"), "lw": MODEL_LW, "zorder": 4 if var else 3}
 
 
 def _series(df: pd.DataFrame):
@@ -114,12 +113,14 @@ def fig_overlays(records):
             sym, unit = SIGNAL_LABEL[sig]
             mean = np.asarray(ds[f"measured_{sig}_mean"].values, dtype=float)
             sd = np.asarray(ds[f"measured_{sig}_std"].values, dtype=float)
-            ax.fill_between(deg, mean - 2 * sd, mean + 2 * sd, color="0.85", label="measured ±2σ")
-            ax.plot(deg, mean, color="k", lw=1.4, label="measured (cycle average)")
+            span = float(np.nanmax(mean + 2 * sd) - np.nanmin(mean - 2 * sd)) or 1.0
+            half = np.maximum(2 * sd, 0.004 * span)      # at least a line wide: a small scatter still shows
+            ax.fill_between(deg, mean - half, mean + half, color="0.45", alpha=0.45, lw=0, label="measured ±2σ", zorder=2)
             for k in range(ds.sizes.get("sim", 0)):
                 model, mode = str(ds["sim_requested"].values[k]), str(ds["sim_omega1"].values[k])
                 ax.plot(deg, np.asarray(ds[f"sim_{sig}"].values[k], dtype=float),
                         label=plain(str(ds["sim_label"].values[k])), **_style(model, mode))
+            ax.plot(deg, mean, color="k", lw=1.2, label="measured (cycle average)", zorder=6)
             ax.set_xlim(0, 360)
             ax.set_ylabel(f"{sym} [{unit}]")
             ax.grid(True, alpha=0.3)
