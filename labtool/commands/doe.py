@@ -138,7 +138,8 @@ def run(
     if n_runs <= 64:  # the table itself, as in the paper; large designs only get the summary line
         import pandas as pd
         gap_note = f", gap {elastic_gap}" if model == "elastic" else ""
-        _print_results(pd.read_csv(output), f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}")
+        _print_results(pd.read_csv(output), f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}",
+                       fset)
     per_run = "" if result.cost_s is None else f", {result.cost_s * 1e3:.3g} ms per run"
     resumed = f"; {result.resumed} runs resumed from {folder}" if result.resumed else ""
     typer.echo(f"wrote {output} and {nc_path}: {n_runs} runs of the {model} model "
@@ -152,11 +153,25 @@ def run(
                           f"(run {first}: {result.failures[first]})")
 
 
-def _print_results(table, title: str) -> None:
+def in_units(table, factors):
+    """The result table with each level column (``A_Fu_level``: 1, 2) shown as the factor's value
+    in its unit (``Fu [N]``: 0, 65); the file keeps the level indices (the paper's tables)."""
+    table = table.copy()
+    for f in factors:
+        if f.column in table:
+            at = table.columns.get_loc(f.column)
+            values = table.pop(f.column).map(lambda k, f=f: f.levels[int(k) - 1] if k == k and 1 <= k <= len(f.levels)
+                                              else float("nan"))
+            table.insert(at, f.heading, values)
+    return table
+
+
+def _print_results(table, title: str, factors=()) -> None:
     from rich.table import Table
 
     from labtool.output import console
 
+    table = in_units(table, factors)
     t = Table(title=title, title_justify="left")
     for c in table.columns:
         t.add_column(c, justify="right")
@@ -175,6 +190,9 @@ def analyze(
     json_out: bool = typer.Option(False, "--json", help="print one JSON object: response -> term -> "
                                                         "{coefficient, F, p, significant}"),
     plot: Optional[Path] = typer.Option(None, "-o", "--plot", help="main-effects and interaction plot (PNG)"),
+    factors: Optional[Path] = typer.Option(None, help="factor file of the design (CSV or TOML, as 'doe run' takes), "
+                                           "so that levels show as values in N, mm, rpm; default Table 1 when the "
+                                           "table's factors are Table 1's"),
     digits: int = typer.Option(7, help="significant digits of the printed coefficients"),
     force: bool = typer.Option(False, help="overwrite an existing plot file"),
 ) -> None:
@@ -187,29 +205,59 @@ def analyze(
     if plot is not None:
         check_output_path(plot, force)
     data = anova.read_results(results)
+    physical = physical_factors(data, factors)
     out = anova.analyze(data, alpha=alpha, max_order=max_order, responses=response)
     if plot is not None:
-        atomic_write(plot, lambda tmp: plot_effects(data, out, tmp))
+        atomic_write(plot, lambda tmp: plot_effects(data, out, tmp, physical))
     if json_out:
         typer.echo(json.dumps(anova.to_json(out)))
         return
-    _print_text(data, out, digits)
+    _print_text(data, out, digits, physical)
     if plot is not None:
         typer.echo(f"wrote {plot}")
 
 
-def _print_text(data, out, digits: int) -> None:
+def physical_factors(data, path: Optional[Path]) -> list:
+    """The design's factors with their values and units (labtool.models.study.doe.Factor), in the
+    table's order: from ``path``, else Table 1's when the table's letters, symbols and level counts
+    are Table 1's; a factor not found keeps its level numbers (None in the list)."""
+    from labtool.common.errors import InputError
+    from labtool.models.study.doe import read_factors, table1_factors
+
+    given = read_factors(path) if path is not None else table1_factors()
+    by = {(f.name, f.symbol): f for f in given}
+    out = [by.get((d.name, d.symbol)) for d in data.factors]
+    out = [f if f is not None and len(f.levels) == len(d.levels) else None for f, d in zip(out, data.factors)]
+    if path is not None and not any(out):
+        raise InputError(f"{path}: none of its factors ({', '.join(f'{f.name} = {f.symbol}' for f in given)}) is a "
+                         f"factor of the table ({', '.join(f'{d.name} = {d.symbol}' for d in data.factors)})")
+    return out
+
+
+def _heading(d, f) -> str:
+    return f.heading if f is not None else f"{d.symbol} [level]"
+
+
+def _level(d, f, k: int) -> str:
+    return f.level_text(k) if f is not None else f"{d.symbol} level {k}"
+
+
+def _print_text(data, out, digits: int, physical=None) -> None:
     from rich.table import Table
 
     from labtool.output import console
     from labtool.models.study.anova import matrix_form
 
     con = console()
-    names = ", ".join(f"{f.name} = {f.symbol} ({len(f.levels)} levels)" for f in data.factors)
+    physical = physical or [None] * len(data.factors)
+    names = ", ".join(f"{d.name} = {_heading(d, f)}: " + (", ".join(f"{v:g}" for v in f.levels) if f is not None else
+                                                          f"{len(d.levels)} levels") for d, f in zip(data.factors, physical))
     con.print(f"{data.source}: {len(data.frame)} runs, full factorial of {names}, "
-              f"{data.replicates} run(s) per level combination", highlight=False, soft_wrap=True)
-    con.print("Coding: effect at level 1 = mean at level 1 - grand mean (the paper's +-1 coding, level 1 -> +1); "
-              "A_X is the level-indicator vector of factor X.", highlight=False, soft_wrap=True)
+              f"{data.replicates} run(s) per level combination", highlight=False, markup=False, soft_wrap=True)
+    con.print("Coding: effect at level 1 = mean at level 1 - grand mean (the paper's +-1 coding, level 1 -> +1: "
+              + ", ".join(_level(d, f, 1) for d, f in zip(data.factors, physical))
+              + "); A_X is the level-indicator vector of factor X.",
+              highlight=False, soft_wrap=True)
     for res in out.values():
         con.print()
         t = Table(title=f"{res.response}: ANOVA, Fisher's F test at alpha = {res.alpha:g}", title_justify="left")
@@ -233,9 +281,10 @@ def _print_text(data, out, digits: int) -> None:
         con.print(matrix_form(res, digits), highlight=False, markup=False, soft_wrap=True)
 
 
-def plot_effects(data, out, path: Path) -> None:
+def plot_effects(data, out, path: Path, physical=None) -> None:
     """One row per response: main effects (mean at each level of each factor, Minitab style) and
-    one interaction panel per pair of factors (cell means); significant terms are drawn solid."""
+    one interaction panel per pair of factors (cell means); significant terms are drawn solid.
+    Levels are shown as values in their units where ``physical`` (physical_factors) has them."""
     import itertools
 
     import matplotlib
@@ -244,8 +293,12 @@ def plot_effects(data, out, path: Path) -> None:
     import numpy as np
 
     from labtool.models.study.anova import RESPONSE_UNITS, cell_means
+    from labtool.reports.figures import OKABE_ITO as PALETTE
+
+    OKABE_ITO = [PALETTE[k] for k in ("blue", "vermillion", "green", "purple", "orange", "sky")]
 
     factors = data.factors
+    physical = physical or [None] * len(factors)
     pairs = list(itertools.combinations(range(len(factors)), 2))
     ncol = 1 + len(pairs)
     nrow = len(out)
@@ -259,12 +312,13 @@ def plot_effects(data, out, path: Path) -> None:
             means = m.mean(axis=other) if other else m
             xs = np.arange(x0, x0 + len(f.levels))
             sig = res.terms[f.name].significant
-            ax.plot(xs, means, "o-" if sig else "o--", color=f"C{i}", label=f"{f.name} ({f.symbol})")
+            ax.plot(xs, means, "o-" if sig else "o--", color=OKABE_ITO[i % len(OKABE_ITO)], lw=1.0,
+                    label=f"{f.name}: {_heading(f, physical[i])}")
             ticks += list(xs)
-            labels += [f"{f.name}{k + 1}" for k in range(len(f.levels))]
+            labels += [_level(f, physical[i], k + 1).replace(" = ", " ") for k in range(len(f.levels))]
             x0 += len(f.levels) + 1
         ax.axhline(res.mean, color="0.5", lw=0.8)
-        ax.set_xticks(ticks, labels, fontsize=6)
+        ax.set_xticks(ticks, labels, fontsize=6, rotation=90)
         ax.set_ylabel(f"{resp} [{RESPONSE_UNITS.get(resp, '')}]", fontsize=8)
         ax.set_title("main effects (solid: significant)", fontsize=8)
         ax.legend(fontsize=6, loc="best")
@@ -276,9 +330,12 @@ def plot_effects(data, out, path: Path) -> None:
             term = res.terms.get(name)
             style = "-" if term is not None and term.significant else "--"
             for lb in range(cm.shape[1]):
-                ax.plot(np.arange(1, cm.shape[0] + 1), cm[:, lb], "o" + style, label=f"{factors[b].name}{lb + 1}")
-            ax.set_xticks(np.arange(1, cm.shape[0] + 1))
-            ax.set_xlabel(f"{factors[a].name} ({factors[a].symbol}) level", fontsize=7)
+                ax.plot(np.arange(1, cm.shape[0] + 1), cm[:, lb], "o" + style, color=OKABE_ITO[lb % len(OKABE_ITO)],
+                        lw=1.0, label=_level(factors[b], physical[b], lb + 1))
+            pa = physical[a]
+            ax.set_xticks(np.arange(1, cm.shape[0] + 1),
+                          [f"{v:g}" for v in pa.levels] if pa is not None else [str(k) for k in range(1, cm.shape[0] + 1)])
+            ax.set_xlabel(f"{factors[a].name}: {_heading(factors[a], pa)}", fontsize=7)
             ax.set_title(f"{name}" + (" (pooled)" if term is not None and term.pooled else
                                       " *" if term is not None and term.significant else ""), fontsize=8)
             ax.tick_params(labelsize=6)

@@ -84,6 +84,24 @@ class Factor:
         """Name of the level column in a result table (``A_Fu_level``)."""
         return f"{self.name}_{self.symbol}_level"
 
+    @property
+    def unit_shown(self) -> str:
+        """The unit as tables and plots print it ('' for a factor of the nominal value)."""
+        return "" if self.unit in ("", "-", "factor_of_nominal") else self.unit
+
+    @property
+    def heading(self) -> str:
+        """A table heading in physical units: ``Fu [N]``, ``Jt [x nominal]``."""
+        unit = "x nominal" if self.unit == "factor_of_nominal" else (self.unit_shown or "-")
+        return f"{self.symbol} [{unit}]"
+
+    def level_text(self, level: int) -> str:
+        """Level ``level`` (1-based) with its value and unit: ``Fu = 65 N``, ``Jt = 4 x``."""
+        v = self.levels[level - 1]
+        if self.unit == "factor_of_nominal":
+            return f"{self.symbol} = {v:g} x"
+        return f"{self.symbol} = {v:g}" + (f" {self.unit_shown}" if self.unit_shown else "")
+
 
 def table1_factors() -> list[Factor]:
     """The paper's Table 1: A = Fu [N], B = j [mm], C = n1 [rpm], D = Jt [factor of nominal]."""
