@@ -16,13 +16,10 @@ import numpy as np
 
 from labtool.reports.figures import all_figures, render
 from labtool.reports.align import PERIODIC_TOL
-from labtool.reports.pipeline import Report, closest, headline, point_rows, robust_verdict
+from labtool.reports.pipeline import Report
 from labtool.reports.summary import build_summary
 
 TEMPLATES = Path(__file__).with_name("templates")
-METRIC_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_magnitude", "sg_phase",
-                  "sg_comprehensive", "nrmse", "peak_max_error", "peak_min_error", "peak_max_shift_deg",
-                  "peak_min_shift_deg", "lag_deg", "band_overlap", "scatter_ratio")
 PER_REV_COLUMNS = ("iso_rating", "iso_corridor", "iso_phase", "iso_magnitude", "iso_slope", "sg_comprehensive", "nrmse",
                    "lag_deg")
 
@@ -52,34 +49,23 @@ def environment() -> jinja2.Environment:
     return env
 
 
-def _attr_text(v, limit: int = 400) -> str:
-    s = np.array2string(v, threshold=8) if isinstance(v, np.ndarray) else str(v)
-    return s if len(s) <= limit else s[:limit] + " …"
-
-
 def render_html(report: Report, rendered=None, dpi: int = 100) -> str:
-    """The report page as a string. ``rendered``: figures.Rendered list (drawn once, shared with
-    the PDF); default all of the report's figures drawn at ``dpi``."""
+    """The report page as a string, from the page's content (labtool.reports.page, the same the PDF
+    typesets). ``rendered``: figures.Rendered list (drawn once, shared with the PDF); default all
+    of the report's figures drawn at ``dpi``."""
+    from labtool.reports.page import build_page
+
     rendered = render(all_figures(report), dpi) if rendered is None else rendered
-    figs = [{"title": r.title, "png_b64": base64.b64encode(r.png).decode("ascii"), "width": int(r.rgba.shape[1]),
-             "height": int(r.rgba.shape[0])} for r in rendered]
+    page = build_page(report, rendered)
+    figs = [{"number": f.number, "caption": f.caption, "png_b64": base64.b64encode(f.rendered.png).decode("ascii"),
+             "width": int(f.rendered.rgba.shape[1]), "height": int(f.rendered.rgba.shape[0])} for f in page.figures]
     summary = build_summary(report)
     ds = report.measured
     variables = [{"name": str(n), "dims": ", ".join(map(str, ds[n].dims)), "units": str(ds[n].attrs.get("units", "")),
                   "long_name": str(ds[n].attrs.get("long_name", ""))} for n in ds.variables]
-    attributes = [(str(k), _attr_text(v)) for k, v in ds.attrs.items() if k != "processing_history"]
-    rows = report.threshold_rows
     context = {
-        "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "measured": summary["measured"], "op": report.scene, "op_rows": point_rows(report.scene), "notes": report.notes,
-        "headline": headline(report), "closest": closest(report), "comparisons": report.comparisons,
-        "metric_columns": METRIC_COLUMNS, "per_rev_columns": PER_REV_COLUMNS, "periodic_tol": PERIODIC_TOL,
-        "metrics_by_signal": [(s, [c for c in report.comparisons if c["signal"] == s]) for s in ("omega2", "epsilon2")],
-        "robustness": {"rows": report.robustness, "robust": (robust_verdict(report.robustness) or {}).get("robust"),
-                       "labels": [m["label"] for m in report.robustness[0]["models"]] if report.robustness else []},
-        "events": report.events, "mev": summary["measured"]["events"], "simulations": summary["simulations"], "conditioning": summary["conditioning"],
-        "thresholds": {"file": report.thresholds_source, "rows": rows}, "passed": report.passed,
-        "failed": [r for r in rows if not r["passed"]], "figures": figs,
-        "variables": variables, "attributes": attributes,
+        "generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "page": page,
+        "comparisons": report.comparisons, "per_rev_columns": PER_REV_COLUMNS, "periodic_tol": PERIODIC_TOL,
+        "mev": summary["measured"]["events"], "figures": figs, "variables": variables,
     }
     return environment().get_template("report.html.j2").render(**context)
