@@ -147,6 +147,7 @@ def summary(rep: CampaignReport, files: dict | None = None) -> dict:
                            "cam_speed_rpm_nominal", "cam_speed_rpm_measured", "ka_m_s2_per_v", "ka_source",
                            "whole_revolutions", "partial_revolutions_left_out")},
                        "closest": s.get("closest"), "closest_model": collect.closest_family(r),
+                       "verdict": (s.get("verdict") or {}).get("sentence"),
                        "passed": s.get("passed"), "thresholds": s.get("thresholds"), "notes": s.get("notes", [])})
     table = rep.table.astype(object).where(rep.table.notna(), None).to_dict(orient="records")
     return _clean({"format": FORMAT, "format_version": FORMAT_VERSION, "campaign": {"name": rep.name,
@@ -188,7 +189,8 @@ def render_html(rep: CampaignReport, files: dict | None = None, dpi: int = 90) -
     grades = {}
     for row in s["table"]:
         grades.setdefault(row["point"], []).append(row)
-    context = {"generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "s": s,
+    models = ", ".join(dict.fromkeys(str(row.get("label")) for row in s["table"])) or "—"
+    context = {"generated": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "s": s, "models": models,
                "css": _stylesheet(), "figures": figs, "rows_by_point": grades, "files": files or {},
                "finite": lambda v: isinstance(v, (int, float)) and math.isfinite(v)}
     return env.get_template("campaign.html.j2").render(**context)
