@@ -31,6 +31,8 @@ EXPERIMENT_RPM = 180.0
 EXPERIMENT_BACKLASH_MM = 0.128
 EXPERIMENT_FU_N = 0.0
 RECORD_SECONDS = 3.0           # 9 cam revolutions at 180 rpm
+DEMO_TEST_ID = "DEMO-180"      # what the report's title block and the curves' header show
+DEMO_OPERATOR = "labtool demo"
 
 
 def run_demo(out: Path, shown_as: Path | None = None):
@@ -116,7 +118,8 @@ def step_acquire(out: Path, console: Console) -> Path:
                   f"j = {EXPERIMENT_BACKLASH_MM} mm, {EXPERIMENT_RPM:g} rpm, {RECORD_SECONDS:g} s at 10 kHz (--fast)")
     _cli(["acquire", "--device", "sim", "--rpm", f"{EXPERIMENT_RPM:g}", "--duration", f"{RECORD_SECONDS:g}",
           "--fast", "--seed", "1", "--law", "sine", "--fu", f"{EXPERIMENT_FU_N:g}",
-          "--backlash-mm", f"{EXPERIMENT_BACKLASH_MM:g}", "-o", str(path)], "acquire")
+          "--backlash-mm", f"{EXPERIMENT_BACKLASH_MM:g}", "--test-id", DEMO_TEST_ID, "--operator", DEMO_OPERATOR,
+          "-o", str(path)], "acquire")
     return path
 
 

@@ -98,9 +98,12 @@ def judge(headline: list[dict], comparisons: list[dict], rows: list[dict], same_
            "margin": first["margin"] if first else None, "scatter": first["scatter"] if first else None,
            "spread": first["spread"] if first else None, "resolution": first["resolution"] if first else None,
            "cannot_tell_apart": groups, "pairs": pairs, "failed_rows": [r.get("error", "") for r in failed],
-           "presets_checked": bool(ok_rows), "same_motion": dict(same_motion), "discrimination": None}
+           "same_motion": dict(same_motion), "discrimination": None}
     ahead_of_all = all(p["told_apart"] for p in pairs if p["ahead"] == best)
-    out["robust"] = (ahead_of_all and not failed) if rows else None
+    # robust needs the other preset's rows; a failed row says NOT robust, no rows 'not checked'
+    checked = len({r["accuracy"] for r in ok_rows}) >= 2
+    out["presets_checked"] = checked
+    out["robust"] = False if failed else (ahead_of_all if checked else None)
     return out
 
 

@@ -12,7 +12,7 @@ def test_demo_runs_the_whole_pipeline_and_prints_where_the_report_is(tmp_path, c
     assert main(["demo", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     for name in ("kinematics_180rpm.nc", "table1_kinematic_vs_table3.csv", "recording_180rpm.h5", "measured_180rpm.nc",
-                 "report.html", "summary.json", "report.pdf"):
+                 "report.html", "summary.json", "report.pdf", "report_curves.csv", "report_curves.nc"):
         assert (out / name).exists(), name
     assert f"report: {(out / 'report.html').resolve()}" in printed
     summary = json.loads((out / "summary.json").read_text())
@@ -30,7 +30,14 @@ def test_demo_runs_the_whole_pipeline_and_prints_where_the_report_is(tmp_path, c
     rows = summary["robustness"]["rows"]
     assert {(r["accuracy"], r["revolutions"]) for r in rows} == {("fast", 6.0), ("fast", 3.0), ("standard", 6.0),
                                                                   ("standard", 3.0)}
-    assert "verdict robust" in printed or "verdict NOT robust" in printed
+    # what the measurement can tell: the verdict names the runs it cannot tell apart (the rigid model's two
+    # omega1 modes rate within 0.0003 of each other on the twin's recording) and the speed that would
+    verdict = summary["verdict"]
+    assert verdict["sentence"] in printed
+    assert verdict["cannot_tell_apart"] and "cannot tell" in verdict["sentence"]
+    for group in verdict["cannot_tell_apart"]:
+        assert all(lab in verdict["sentence"] for lab in group)
+    assert verdict["discrimination"]["best_rpm"] > 0 and "rpm" in verdict["discrimination"]["sentence"]
     # measured events with the summary's keys, and the same keys predicted per model
     ev = summary["measured"]["events"]
     for key in ("impacts_per_rev", "jumps_per_rev", "first_impact_deg", "impact_angles_deg", "threshold_rad_s"):
