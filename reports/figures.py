@@ -358,9 +358,10 @@ def fig_drawing(report) -> tuple[str, Figure] | None:
     if angle is None:
         pred = [r.events["first_impact_deg"] for r in report.sims if r.events and r.events.get("first_impact_deg") is not None]
         angle, what = (pred[0], "the first predicted impact") if pred else (0.0, "the start of the rise")
+    from labtool.common.errors import LabtoolError
     try:
         program = cam_program(report.scene)
-    except Exception:      # a law the default mechanism does not know: no drawing, the rest stands
+    except (LabtoolError, ValueError):   # a law the default mechanism does not know: no drawing, the rest stands
         return None
     return fig_mechanism(Mechanism.default(), program, math.radians(angle), report.scene["backlash_mm"] * 1e-3, what)
 
