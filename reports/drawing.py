@@ -81,11 +81,11 @@ def fig_mechanism(mech, program, phi1: float, backlash: float = 0.0, what: str =
     hi = np.maximum(pts.max(axis=1), reach * mm) + 10
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")     # the limits kept, the box fitted to them
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     ax.grid(True, alpha=0.25)
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=7, loc="lower right")
     why = f" ({what})" if what else ""
     ax.set_title(f"Cam, groove (backlash j = {backlash * mm:g} mm) and follower at φ1 = {math.degrees(phi1):.1f}°{why}\n"
                  f"follower angle φ2 = {math.degrees(p['phi2']):.1f}°; the cam turns as the arrow shows", fontsize=9)
