@@ -37,7 +37,7 @@ CHAINS = {
     "lvm_read_short.lvm": [
         ([], "--channels"),
         (["--channels", "aE_t=Response (Trigger)"], "--channels aE_n=")],
-    "lvm_read_with_comments.lvm": [([], "neither a voltage nor an acceleration")],
+    "lvm_read_with_comments.lvm": [([], "none of its channels is in a unit of voltage or acceleration")],
     "lvm_read_with_empty_fields.lvm": [
         ([], "--channels"),
         (["--channels", "aE_t=Dev0/Ai0,aE_n=Dev0/Ai2", "--rpm", "300"], "revolutions at the stated 300 rpm")],

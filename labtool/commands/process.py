@@ -25,6 +25,8 @@ def process(
     lowpass_hz: Optional[float] = typer.Option(None, help="low-pass corner [Hz] (default: 100 x cam frequency)"),
     ac_tau: Optional[float] = typer.Option(None, help="AC-coupling time constant of the sensor chain [s], undone if given"),
     channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=Dev1/ai2'"),
+    units: Optional[str] = typer.Option(None, help="the unit of channels whose file states none usable, e.g. "
+                                        "'aE_t=V,aE_n=V' (V, mV, m/s^2, g; a unit the file states is replaced)"),
     group: Optional[str] = typer.Option(None, help="TDMS group holding the samples (default: the only group with samples)"),
     delimiter: Optional[str] = typer.Option(None, help="text tables: column delimiter, 'comma', 'semicolon' or 'tab' (default: detected)"),
     decimal: Optional[str] = typer.Option(None, help="text tables: decimal mark, '.' or ',' (default: detected)"),
@@ -50,7 +52,7 @@ def process(
                        chunk_samples=chunk_samples, progress=progress,
                        warn=lambda msg: typer.echo(f"labtool: warning: {msg}", err=True),
                        sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
-                       decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
+                       decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), units=_unit_map(units))
     summary = measured.attrs
     measured.close()
     typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm_measured']:.2f} rpm (phi1 by {summary['phi1_method']}), "
@@ -84,6 +86,21 @@ def _ka_line(attrs) -> str:
         unc = f" +- {float(u):.4g}" if u is not None and u == u else " (uncertainty unknown)"
         parts.append(f"{ch} {float(ka):.6g}{unc} m/s^2/V ({shown(str(attrs.get(f'ka_source_{ch}', '?')))})")
     return "Ka: " + ", ".join(parts)
+
+
+def _unit_map(text) -> dict | None:
+    """--units 'aE_t=V,ai1=g' -> {"aE_t": "V", "ai1": "g"}; None when not given; InputError on anything else."""
+    from labtool.common.errors import InputError
+
+    if text is None:
+        return None
+    pairs = {}
+    for part in text.split(","):
+        name, sep, unit = part.partition("=")
+        if not sep or not name.strip() or not unit.strip():
+            raise InputError(f"--units: '{part}' is not CHANNEL=UNIT (e.g. aE_t=V)")
+        pairs[name.strip()] = unit.strip()
+    return pairs
 
 
 def _channel_map(text: str) -> dict[str, str]:
