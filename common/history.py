@@ -93,6 +93,12 @@ class CamAngle(Step):
     law: str
     mechanism: str
     autocorrelation_period_s: float | None = None
+    search_rpm: list | None = None       # [lo, hi] rpm searched by the correlation, and why
+    search_reason: str | None = None
+    search_averaged_samples: int | None = None   # samples averaged into one for the search (slow cams)
+    cam_speed_rpm_min: float | None = None       # per revolution, the regular ones
+    cam_speed_rpm_max: float | None = None
+    cam_speed_trend: float | None = None         # relative change over the recording of a line through them
 
 
 @dataclasses.dataclass(frozen=True)
@@ -203,9 +209,9 @@ class Spikes(Step):
     stored: int
 
 
-STEPS: dict[str, type[Step]] = {c.name: c for c in (Read, ApplyKa, CamAngle, Lowpass, UndoAcCoupling, RemoveGravity,
-                                                    DwellReference, Epsilon2, Omega2, TimeAxis, Clipping, CheckNormal,
-                                                    CycleAverage, Spectra, Spikes)}
+STEPS: dict[str, type[Step]] = {c.name: c for c in (Read, ApplyKa, CamAngle, Lowpass, UndoAcCoupling,
+                                                    RemoveGravity, DwellReference, Epsilon2, Omega2, TimeAxis, Clipping,
+                                                    CheckNormal, CycleAverage, Spectra, Spikes)}
 
 
 class History:

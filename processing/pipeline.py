@@ -96,7 +96,7 @@ def process_file(recording: Path, output: Path, calibration_files=(), channels: 
     ``calibration_files``: calibration TOML files (labtool calibrate), merged; ``channels``: the
     file's channel for each of aE_t, aE_n, tacho (``{"aE_t": "ai0"}``); ``options``: processing
     parameters (their calibration is replaced by the files'); ``reader_options``: what the reader
-    of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, ...);
+    of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, units, ...);
     ``on_open(recording)`` is called once the file is open (a progress bar sized on it)."""
     from labtool.processing.calibration_file import read_calibrations
     from labtool.processing.readers import open_recording
@@ -167,7 +167,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
 def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
     """Pass 1 (marks, extremes) and the cam speed; falls back to correlation without tacho pulses."""
     itacho = rec.channel_index(opts.tacho_channel) if rec.has_channel(opts.tacho_channel) else None
-    rpm_hint = opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
+    rpm_hint = _rpm_hint(rec, opts)
     method = "tacho" if itacho is not None else "correlation"
     # what the search says on the way is said once the marks are found: before the error that ends
     # the run it misleads ("cam speed from the data (1030.8 rpm)" for a 5 rpm run of 3 s)
@@ -181,7 +181,11 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
             method = "correlation"
             found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint,
                                 said.append, lambda k: None)
-        marks_by_seg, vmin, vmax, period_est = found
+        marks_by_seg, vmin, vmax, period_est, (search, q) = found
+        if method == "correlation" and not _stated(rpm_hint) and sum(max(len(m) - 1, 0) for m in marks_by_seg) < 1:
+            raise InputError(f"{shown(rec.source)}: no whole cam revolution found in aE_t by correlation (searched "
+                             f"{search.why}) and no tacho recorded: give the speed the cam turned at with --rpm "
+                             f"(rpm; it is then searched within a factor {cam_angle.STATED_FACTOR:g} of it)")
         cam = speed.estimate(marks_by_seg, rec.sample_rate_hz, rpm_hint, rec.source, said.append)
     except InputError:
         _check_two_revolutions(rec, segs, rpm_hint, opts)   # the cause, when the stated speed shows it
@@ -194,8 +198,20 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
                         period_min_s=float(cam.periods.min()) / fs, period_max_s=float(cam.periods.max()) / fs,
                         irregular_revolutions=cam.n_irregular, irregular_tolerance=speed.IRREGULAR,
                         law=program.segments[0].law.name, mechanism=mech.name,
-                        autocorrelation_period_s=period_est / fs if period_est else None))
+                        autocorrelation_period_s=period_est / fs if period_est else None,
+                        search_rpm=[search.rpm_lo, search.rpm_hi] if search else None,
+                        search_reason=search.why if search else None, search_averaged_samples=q if search else None,
+                        cam_speed_rpm_min=cam.rpm_min, cam_speed_rpm_max=cam.rpm_max, cam_speed_trend=cam.drift))
     return {"by_segment": marks_by_seg, "vmin": vmin, "vmax": vmax, "method": method}, cam
+
+
+def _stated(rpm) -> bool:
+    return bool(rpm and math.isfinite(rpm) and rpm > 0)
+
+
+def _rpm_hint(rec, opts):
+    """The stated cam speed (rpm): --rpm, else the recording's (NaN when it states none)."""
+    return opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
 
 
 def _check_two_revolutions(rec, segs, rpm_hint, opts) -> None:
@@ -369,6 +385,7 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, 
         "source_file": shown(rec.source), "source_format": rec.format, "start_time_utc": rec.start_time_utc,
         "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm_measured": cam.rpm,
         "phi1_method": method, "lowpass_hz": lp.cutoff_hz, "DE_m": chain.DE,
+        "cam_speed_rpm_min": cam.rpm_min, "cam_speed_rpm_max": cam.rpm_max, "cam_speed_drift": cam.drift,
         "omega2_normal_check_rel_rms": st.normal.value, "n_revolutions_averaged": st.cycles.count,
         "n_clipped_samples": st.clip.flagged, "n_segments": n_segs, "n_spikes": st.spikes.seen,
         "n_samples_lost": st.time.samples_lost, H.ATTRIBUTE: hist.to_json(),
@@ -423,10 +440,9 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
     it = rec.channel_index("aE_t")
     vmin = np.full(rec.n_channels, np.inf)
     vmax = np.full(rec.n_channels, -np.inf)
-    period_est = None
+    period_est, q, search = None, 1, None
     if method == "correlation":
-        a0, b0 = max(segs, key=lambda s: s[1] - s[0])
-        period_est = cam_angle.estimate_period(rec.read(a0, min(b0, a0 + int(20 * fs)))[:, it], fs)
+        period_est, q, search = cam_angle.period_by_correlation(rec, segs, it, rpm_hint, mech, chunk)
         if rpm_hint and math.isfinite(rpm_hint) and abs(period_est / (fs * 60.0 / rpm_hint) - 1) > 0.2:
             warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
                  f"{rpm_hint:g} rpm by more than 20 %; using the data")
@@ -442,15 +458,16 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
                 marks.extend(det.feed(a, block[:, itacho]))
                 progress(len(block))
         else:
-            corr = cam_angle.CorrelationEdges(mech, program, period_est)
+            corr = cam_angle.CorrelationEdges(mech, program, period_est, fs, q)
             for a in range(a_seg, b_seg, chunk):
                 b = min(a + chunk, b_seg)
-                block = rec.read(a, min(b + corr.n + 2, b_seg))
+                block = rec.read(a, min(b + corr.span, b_seg))
                 _scan(rec, block[: b - a], a, vmin, vmax)
                 marks.extend(corr.feed(a, block[:, it] * ka_t, a, b))
+                corr.retune(marks)          # a drifting speed: the template follows the latest revolutions
                 progress(b - a)
         marks_by_seg.append(np.asarray(marks, dtype=float))
-    return marks_by_seg, vmin, vmax, period_est
+    return marks_by_seg, vmin, vmax, period_est, (search, q)
 
 
 def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:

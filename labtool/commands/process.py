@@ -60,6 +60,9 @@ def process(
                f"{summary['n_spikes']} spikes, {summary['n_clipped_samples']} clipped samples, "
                f"|omega2| vs sqrt(aE_n/DE): {100 * summary['omega2_normal_check_rel_rms']:.1f} % rms of peak")
     typer.echo(_ka_line(summary))
+    speeds = _speed_line(summary)
+    if speeds:
+        typer.echo(speeds)
 
 
 def _progress(recording):
@@ -86,6 +89,17 @@ def _ka_line(attrs) -> str:
         unc = f" +- {float(u):.4g}" if u is not None and u == u else " (uncertainty unknown)"
         parts.append(f"{ch} {float(ka):.6g}{unc} m/s^2/V ({shown(str(attrs.get(f'ka_source_{ch}', '?')))})")
     return "Ka: " + ", ".join(parts)
+
+
+def _speed_line(attrs) -> str | None:
+    """The per-revolution speed range when it is wider than speed.DRIFT_SAID of the mean, else None."""
+    from labtool.processing.speed import DRIFT_SAID
+
+    lo, hi, mean = (attrs.get(k) for k in ("cam_speed_rpm_min", "cam_speed_rpm_max", "cam_speed_rpm_measured"))
+    if lo is None or hi is None or not mean or (hi - lo) <= DRIFT_SAID * mean:
+        return None
+    return (f"cam speed: {lo:.2f} to {hi:.2f} rpm per revolution (drift {100 * float(attrs.get('cam_speed_drift', 0)):+.1f} "
+            "% over the recording): the cycle statistics span these speeds")
 
 
 def _unit_map(text) -> dict | None:
