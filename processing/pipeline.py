@@ -38,7 +38,7 @@ from labtool.common.invocation import command_line
 from labtool.common.names import shown
 from labtool.models.mechanism import Mechanism
 from labtool.models.mechanism.motion_laws import CamProgram
-from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, speed, spectra
+from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, orientation, speed, spectra
 from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from labtool.processing.ka import ka_for_channels
 from labtool.processing.readers import Recording
@@ -68,6 +68,7 @@ class ProcessOptions:
     dwell_margin_deg: float = 10.0
     spike_k_sigma: float = events.DEFAULT_K_SIGMA
     tacho_channel: str = "tacho"
+    invert: tuple = ()                  # chain names (aE_t, aE_n) of channels whose sensor reads the other way round
     ac_tau_s: float | None = None       # sensor chain's AC-coupling time constant (s), undone if given
     mechanism: object | None = None     # labtool.models.mechanism.Mechanism; default: the paper's STB-216
 
@@ -89,19 +90,25 @@ def process_recording(rec: Recording, output: Path, options: ProcessOptions | No
 
 def process_file(recording: Path, output: Path, calibration_files=(), channels: dict | None = None,
                  options: ProcessOptions | None = None, progress: Callable[[int], None] | None = None,
-                 warn: Callable[[str], None] | None = None, on_open: Callable | None = None,
+                 warn: Callable[[str], None] | None = None, on_open: Callable | None = None, invert=(),
                  **reader_options) -> dict:
     """A recording file -> ``output`` (measured.nc, written atomically); returns the summary dict.
 
     ``calibration_files``: calibration TOML files (labtool calibrate), merged; ``channels``: the
     file's channel for each of aE_t, aE_n, tacho (``{"aE_t": "ai0"}``); ``options``: processing
-    parameters (their calibration is replaced by the files'); ``reader_options``: what the reader
-    of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, units, ...);
+    parameters (their calibration is replaced by the files'); ``invert``: aE_t and/or aE_n, channels
+    whose sensor reads the other way round (after ``channels``); ``reader_options``: what the
+    reader of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, units, ...);
     ``on_open(recording)`` is called once the file is open (a progress bar sized on it)."""
     from labtool.processing.calibration_file import read_calibrations
     from labtool.processing.readers import open_recording
 
     opts = options or ProcessOptions()
+    if invert:
+        opts = dataclasses.replace(opts, invert=tuple(invert))
+    bad = [c for c in opts.invert if c not in orientation.CHANNELS]
+    if bad:
+        raise InputError(f"--invert: {bad[0]!r} is not one of {', '.join(orientation.CHANNELS)}")
     if calibration_files:
         opts = dataclasses.replace(opts, calibration=read_calibrations(list(calibration_files)),
                                    calibration_source="; ".join(str(c) for c in calibration_files))
@@ -141,12 +148,21 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     hist.add(H.Read(source=rec.source, format=rec.format, sample_rate_hz=rec.sample_rate_hz, n_samples=rec.n_samples,
                     channels=rec.channel_names, complete=rec.complete, start_time_utc=rec.start_time_utc,
                     segments=[[a, b] for a, b in segs], assumptions=list(rec.assumptions)))
-    cal = hist.add(ka_for_channels(rec, opts.calibration, opts.calibration_source, warn)).channels
     mech = opts.mechanism or Mechanism.default()
     law = opts.law or (rec.attrs.get("law") if isinstance(rec.attrs.get("law"), str) else None)
     program = CamProgram.for_mechanism(mech, law=law)
-    ka = np.array([cal["aE_t"]["ka_m_s2_per_v"], cal["aE_n"]["ka_m_s2_per_v"]])
+    # before Ka, so Ka follows a channel the check renames; what it says is said once the marks are
+    # found (before an error that ends the run, it is not the news)
+    check_said: list[str] = []
+    check, signs = orientation.check_recording(rec, segs, mech, program, _rpm_hint(rec, opts), opts.invert,
+                                               opts.tacho_channel, check_said.append)
+    hist.add(check)
+    cal = hist.add(ka_for_channels(rec, opts.calibration, opts.calibration_source, warn)).channels
+    # a channel's sign (--invert, or the check's correction) rides on its Ka: every later step sees it
+    ka = np.array([cal["aE_t"]["ka_m_s2_per_v"], cal["aE_n"]["ka_m_s2_per_v"]]) * np.asarray(signs, dtype=float)
     marks, cam = _revolutions(rec, segs, opts, ka[0], mech, program, hist, warn, progress)
+    for msg in check_said:
+        warn(msg)
     chain = _design(rec, opts, ka, cam, mech, program)
     out = MeasuredWriter(tmp, rec.n_samples, rec.start_time_utc)
     try:
@@ -191,6 +207,12 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
         _check_two_revolutions(rec, segs, rpm_hint, opts)   # the cause, when the stated speed shows it
         raise
     fs = rec.sample_rate_hz
+    assumption = None
+    if method == "correlation" and orientation.mirror_symmetric(program):
+        assumption = ("without a tacho the cam angle comes from aE_t, and this cam's return mirrors its rise half a "
+                      "turn later, so an aE_t of the other sign gives the same marks half a turn on: phi1 and the "
+                      "sign of omega2 assume aE_t reads positive along the rise")
+        said.append(f"{assumption} (a sensor mounted the other way round: give --invert aE_t; a tacho settles it)")
     for msg in said:
         warn(msg)
     hist.add(H.CamAngle(method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
@@ -201,7 +223,8 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
                         autocorrelation_period_s=period_est / fs if period_est else None,
                         search_rpm=[search.rpm_lo, search.rpm_hi] if search else None,
                         search_reason=search.why if search else None, search_averaged_samples=q if search else None,
-                        cam_speed_rpm_min=cam.rpm_min, cam_speed_rpm_max=cam.rpm_max, cam_speed_trend=cam.drift))
+                        cam_speed_rpm_min=cam.rpm_min, cam_speed_rpm_max=cam.rpm_max, cam_speed_trend=cam.drift,
+                        assumption=assumption))
     return {"by_segment": marks_by_seg, "vmin": vmin, "vmax": vmax, "method": method}, cam
 
 
@@ -377,6 +400,7 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
 def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, opts) -> dict:
     """Numbers as numbers; an unknown value is left out, never written as text."""
     lp = hist.find(H.Lowpass)
+    check = hist.find(H.CheckChannels)
     # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
     # from a synthetic one; the file and the command are in source_file and history
     attrs = cf.global_attrs("labtool measured follower motion", source="recording",
@@ -386,6 +410,8 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, 
         "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm_measured": cam.rpm,
         "phi1_method": method, "lowpass_hz": lp.cutoff_hz, "DE_m": chain.DE,
         "cam_speed_rpm_min": cam.rpm_min, "cam_speed_rpm_max": cam.rpm_max, "cam_speed_drift": cam.drift,
+        "channel_check": check.verdict, "channel_check_finding": check.finding,
+        "channels_inverted": " ".join(check.inverted),
         "omega2_normal_check_rel_rms": st.normal.value, "n_revolutions_averaged": st.cycles.count,
         "n_clipped_samples": st.clip.flagged, "n_segments": n_segs, "n_spikes": st.spikes.seen,
         "n_samples_lost": st.time.samples_lost, H.ATTRIBUTE: hist.to_json(),

@@ -62,10 +62,11 @@ def make_references() -> None:
 
 # what processing records that the frozen version did not: written into the references from the
 # current code's output (everything else in them stays the frozen version's)
-NEW_ATTRS = ("cam_speed_rpm_min", "cam_speed_rpm_max", "cam_speed_drift")
-NEW_STEPS = ()
+NEW_ATTRS = ("cam_speed_rpm_min", "cam_speed_rpm_max", "cam_speed_drift", "channel_check", "channel_check_finding",
+             "channels_inverted")
+NEW_STEPS = ("check_channels",)
 NEW_FIELDS = {"cam_angle": ("search_rpm", "search_reason", "search_averaged_samples", "cam_speed_rpm_min",
-                            "cam_speed_rpm_max", "cam_speed_trend")}
+                            "cam_speed_rpm_max", "cam_speed_trend", "assumption")}
 
 
 def add_new_metadata() -> None:
