@@ -164,6 +164,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     for msg in check_said:
         warn(msg)
     chain = _design(rec, opts, ka, cam, mech, program)
+    _say_ac_coupling(rec, chain, cam, warn)
     out = MeasuredWriter(tmp, rec.n_samples, rec.start_time_utc)
     try:
         state = _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress)
@@ -279,6 +280,23 @@ def _design(rec, opts, ka, cam, mech, program) -> Chain:
     steps += [H.RemoveGravity(g_m_s2=mech.g, table_points=tables.N), dwell, H.Epsilon2(DE_m=mech.DE), omega]
     return Chain(fs=fs, ka=ka, sos=sos, zi=filters.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
                  tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau, steps=steps)
+
+
+AC_BEND = 10.0   # a stated AC-coupling corner within this factor of the cam frequency bends the motion
+
+
+def _say_ac_coupling(rec, chain, cam, warn) -> None:
+    """A chain's AC coupling (the recording's ``highpass_hz``, first order) not undone and within
+    AC_BEND of the cam frequency: said, with the --ac-tau that undoes it (on the simulated stand at
+    30 rpm, 0.1 Hz: omega2 2.8 % and epsilon2 14 % off; undone 0.2 % and 0.8 %)."""
+    hp = _float_attr(rec.attrs.get("highpass_hz"))
+    f1 = cam.rpm / 60.0
+    if chain.tau or not (hp and math.isfinite(hp) and hp > 0) or f1 >= AC_BEND * hp:
+        return
+    warn(f"the chain's AC coupling (highpass_hz = {hp:g} Hz, the recording states) lies within a factor "
+         f"{AC_BEND:g} of the cam frequency {f1:.3g} Hz and bends the motion: give --ac-tau {1 / (2 * math.pi * hp):.3g} "
+         "(s) to undo it" + (" (below the corner little is left to undo: record with a DC-coupled chain)"
+                             if f1 < hp else ""))
 
 
 @dataclasses.dataclass
