@@ -9,7 +9,7 @@ Evidence: over a span of whole revolutions at the start of the longest segment, 
 reading is averaged per cam angle (BINS angles; the noise averages out) and kept to the first
 HARMONICS harmonics of the cam frequency, where the motion law's acceleration lies (the impacts in
 the groove's backlash and the follower's bending mode lie above: with them the tangential reading of
-the simulated stand's twin correlated only 0.6-0.7 with the ideal one, without them 0.99), and
+the simulated stand's twin correlates only 0.6-0.7 with the ideal one, without them 0.99), and
 compared with what an ideal sensor at E reads at the measured speed, kept to the same harmonics
 (docs/architecture.md's signs; follower.py's gravity):
 
