@@ -14,6 +14,14 @@ The cache directory is numba's usual choice (``NUMBA_CACHE_DIR`` if set, else ``
 beside the source, else the user-wide cache); only the stamp changes. Where numba's cache machinery
 is not the one this was written against, caching is off (always correct, slower first calls):
 ``CACHING`` says which.
+
+A cache entry that cannot be read is compiled again, never an error: numba unpickles an index
+before it compares the stamp, and a cached function's environment imports its module by the name
+it had when it was compiled, so a cache left by a labtool laid out otherwise (the same source
+files under other module names) or by a damaged write raised ModuleNotFoundError or an unpickling
+error at the first call. Every function compiled through ``jit`` reads its cache tolerantly
+(``_TolerantCache``); the processing and report kernels use ``jit`` too, for that alone (their
+stamp stays numba's: the file itself, for they call no compiled code of another file).
 """
 from __future__ import annotations
 
@@ -117,6 +125,11 @@ def _install_locator() -> bool:
         def get_disambiguator(self):
             return self._inner.get_disambiguator()
 
+        def __getattr__(self, name):                   # numba's other reads (_py_file in a warning)
+            if name == "_inner":
+                raise AttributeError(name)
+            return getattr(self._inner, name)
+
         @classmethod
         def from_function(cls, py_func, py_file):
             try:
@@ -133,15 +146,69 @@ def _install_locator() -> bool:
     return True
 
 
-CACHING = not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES") and _install_locator()
+def _tolerant_classes():
+    """(cache class, cache file class): numba's, with every failure to read an entry taken as a
+    miss; None if numba's internals are not the ones this was written against."""
+    try:
+        from numba.core import caching
+        cache_base, file_base = caching.FunctionCache, caching.IndexDataCacheFile
+        cache_base.load_overload, file_base._load_index       # noqa: B018  (the methods overridden)
+    except (ImportError, AttributeError):
+        return None
+
+    class TolerantCacheFile(file_base):
+        """An index that cannot be unpickled here (written by another layout of the modules, cut
+        short) reads as empty: the function compiles and its save replaces the index."""
+
+        def _load_index(self):
+            try:
+                return super()._load_index()
+            except Exception:                       # noqa: BLE001  (any unreadable index: a miss)
+                return {}
+
+    class TolerantCache(cache_base):
+        """An entry that cannot be loaded (its environment imports a module that is not there,
+        its data is damaged) is a miss: numba compiles the function and saves it over the entry."""
+
+        def load_overload(self, sig, target_context):
+            try:
+                return super().load_overload(sig, target_context)
+            except Exception:                       # noqa: BLE001  (any unloadable entry: a miss)
+                return None
+
+    return TolerantCache, TolerantCacheFile
+
+
+_TOLERANT = _tolerant_classes()
+CACHING = not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES") and _TOLERANT is not None and _install_locator()
+
+
+def _tolerant(dispatcher):
+    """``dispatcher`` with its cache read tolerantly (module doc); its cache is off if the cache
+    object is not numba's usual one (correct, slower first calls)."""
+    cache = getattr(dispatcher, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache is None:
+        return dispatcher
+    if _TOLERANT is None:                       # numba's internals differ: no cache, rather than a fragile one
+        from numba.core.caching import NullCache
+        dispatcher._cache = NullCache()
+        return dispatcher
+    if type(cache) is _TOLERANT[0].__base__ and type(cache_file) is _TOLERANT[1].__base__:
+        cache.__class__, cache_file.__class__ = _TOLERANT
+    elif not isinstance(cache, _TOLERANT[0]) and cache_file is not None:
+        from numba.core.caching import NullCache
+        dispatcher._cache = NullCache()
+    return dispatcher
 
 
 def jit(fn=None, **options):
-    """``numba.njit`` with the on-disk cache (stamped as above) when CACHING, else without."""
+    """``numba.njit`` with the on-disk cache (stamped as above, read tolerantly) when CACHING, else
+    without."""
     options.setdefault("cache", CACHING)
     if fn is None:
-        return njit(**options)
-    return njit(**options)(fn)
+        return lambda f: jit(f, **options)
+    return _tolerant(njit(**options)(fn)) if options["cache"] else njit(**options)(fn)
 
 
 def kernel(fn=None, **options):
