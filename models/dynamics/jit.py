@@ -20,7 +20,7 @@ before it compares the stamp, and a cached function's environment imports its mo
 it had when it was compiled, so a cache left by a labtool laid out otherwise (the same source
 files under other module names) or by a damaged write raised ModuleNotFoundError or an unpickling
 error at the first call. Every function compiled through ``jit`` reads its cache tolerantly
-(``_TolerantCache``); the processing and report kernels use ``jit`` too, for that alone (their
+(``_tolerant``); the processing and report kernels use ``jit`` too, for that alone (their
 stamp stays numba's: the file itself, for they call no compiled code of another file).
 """
 from __future__ import annotations
@@ -37,8 +37,10 @@ from numba import njit
 # in a wheel (labtool.models.x lives in <_ROOT>/models/x.py either way)
 _ROOT = Path(__file__).resolve().parents[2]
 _SEED = "from labtool.models.dynamics.jit import"          # a module that compiles code (jit or kernel)
-_IMPORT = re.compile(r"^\s*(?:from\s+(labtool\.(?:models|common)(?:\.\w+)*)\s+import\s+([\w\s,()]+)"
-                     r"|import\s+(labtool\.(?:models|common)(?:\.\w+)*))", re.MULTILINE)
+# the names imported: in parentheses (over lines) or to the end of the line; an import group that
+# ran on to the next line swallowed the import there (its module was left out of the stamp)
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(labtool\.(?:models|common)(?:\.\w+)*)[ \t]+import[ \t]+(\([^)]*\)|[\w \t,]+)"
+                     r"|import[ \t]+(labtool\.(?:models|common)(?:\.\w+)*))", re.MULTILINE)
 
 
 def _module_file(name: str) -> Path | None:
