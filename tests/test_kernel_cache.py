@@ -30,11 +30,11 @@ print(json.dumps(dict(nfev=stats["nfev"], hits=sum(loop.stats.cache_hits.values(
 
 
 def _run(tree: Path, cache: Path) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(tree))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(tree), LABTOOL_COMPILE_NOTICES="1")
     out = subprocess.run([sys.executable, "-c", PROBE], cwd=tree, env=env, capture_output=True,
                          text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return dict(json.loads(out.stdout.strip().splitlines()[-1]), stderr=out.stderr)
 
 
 @pytest.mark.slow
@@ -47,9 +47,12 @@ def test_an_edited_kernel_constant_is_recompiled_not_loaded_stale(tmp_path):
     cache = tmp_path / "numba_cache"
     first = _run(tree, cache)
     assert first["caching"] is True
+    # an empty cache: the compilation is announced, once (labtool.models.dynamics.compiling)
+    assert first["stderr"].count("labtool: compiling the elastic model for this machine (about ") == 1
     again = _run(tree, cache)
     assert again["hits"] >= 1 and again["misses"] == 0            # loaded from the disk cache
     assert again["nfev"] == first["nfev"]
+    assert "compil" not in again["stderr"]                        # nothing compiled: nothing said
 
     driver = tree / "labtool" / DRIVER
     text = driver.read_text()

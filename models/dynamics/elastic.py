@@ -49,6 +49,7 @@ import numpy as np
 from labtool.common.datasets import dataset
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics import events, validity
+from labtool.models.dynamics.compiling import announces
 from labtool.models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
 from labtool.models.dynamics.kernels import dopri5 as dp
 from labtool.models.dynamics.kernels import elastic_nb as eq
@@ -559,6 +560,7 @@ def _landing_impulses(rows, row, times, v, tg, mass, drive, tab_t, tab_arm, frac
 
 
 # ---------------------------------------------------------------- the model
+@announces("the elastic model")
 
 def simulate(scene: Scene, reading: str = "consistent", solver: str | None = None, preset: dict | None = None,
              stats: dict | None = None) -> SimulationResult:
@@ -578,6 +580,7 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     ds.attrs["validity_warnings"] = validity.attribute(warnings)
     return SimulationResult(ds, ind, "elastic", warnings=warnings)
 
+@announces("the elastic model")
 
 def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str | None = None,
                         preset: dict | None = None, stats: dict | None = None) -> dict:

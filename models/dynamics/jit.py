@@ -33,6 +33,8 @@ from pathlib import Path
 import numba
 from numba import njit
 
+from labtool.models.dynamics import compiling
+
 # the folder that holds models/ and common/: the repository in a source tree, site-packages/labtool
 # in a wheel (labtool.models.x lives in <_ROOT>/models/x.py either way)
 _ROOT = Path(__file__).resolve().parents[2]
@@ -51,6 +53,11 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
+# imported by compiled modules, but no compiled code reaches it (it watches numba compile): an edit of
+# it must not invalidate every cached loop
+_NOT_COMPILED = {"labtool.models.dynamics.compiling"}
+
+
 def _first_party_imports(text: str) -> set[str]:
     out = set()
     for m in _IMPORT.finditer(text):
@@ -61,7 +68,7 @@ def _first_party_imports(text: str) -> set[str]:
         for name in re.split(r"[\s,()]+", m.group(2)):     # 'from labtool.models.dynamics import contact'
             if name:
                 out.add(f"{m.group(1)}.{name}")
-    return out
+    return out - _NOT_COMPILED
 
 
 def kernel_sources() -> list[Path]:
@@ -183,6 +190,7 @@ def _tolerant_classes():
 
 _TOLERANT = _tolerant_classes()
 CACHING = not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES") and _TOLERANT is not None and _install_locator()
+compiling.listen()          # a compilation of labtool's code is never silent (labtool.models.dynamics.compiling)
 
 
 def _tolerant(dispatcher):

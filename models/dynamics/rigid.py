@@ -47,6 +47,7 @@ if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator pa
 from labtool.common.datasets import dataset
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics import events, validity
+from labtool.models.dynamics.compiling import announces
 from labtool.models.dynamics.contact import contact_stiffness
 from labtool.models.dynamics.kernels import dopri5 as dp
 from labtool.models.dynamics.kernels import rigid_nb as eq
@@ -275,6 +276,7 @@ def _dense_states(phases: list[Phase], times, idx, Y) -> None:
 def _in_rise(program: CamProgram, phi1):
     return np.mod(phi1, TWO_PI) < program.rise_angle
 
+@announces("the rigid model")
 
 def simulate(scene: Scene, solver: str | None = None, preset: dict | None = None, stats: dict | None = None,
              integrate_with=None) -> SimulationResult:
@@ -292,6 +294,7 @@ def simulate(scene: Scene, solver: str | None = None, preset: dict | None = None
     ds.attrs.update(wall_s_model=_time.perf_counter() - t_start, validity_warnings=validity.attribute(warnings))
     return SimulationResult(ds, ind, "rigid", warnings=warnings)
 
+@announces("the rigid model")
 
 def simulate_indicators(scene: Scene, solver: str | None = None, preset: dict | None = None, stats: dict | None = None) -> dict:
     """The indicators of ``simulate`` (Table 2's, result.INDICATORS and the event counts), the same
