@@ -187,10 +187,12 @@ def test_dense_output_is_continuous_across_steps():
 
 
 def test_kernels_are_compiled_with_an_on_disk_cache():
+    from numba.core.caching import FunctionCache
+
     from labtool.models.dynamics.jit import CACHING
     assert CACHING
     for fn in (dopri5.run, dopri5.error_norm, rigid.eq.contact_terms, elastic.eq.rhs):
-        assert fn._cache.__class__.__name__ == "FunctionCache", fn
+        assert isinstance(fn._cache, FunctionCache), fn     # numba's, read tolerantly (jit._TolerantCache)
 
 
 def test_start_on_a_flank_at_a_later_time_continues_the_run():

@@ -127,7 +127,7 @@ def mass_factor(Db1: float, Db2: float, arm: float) -> tuple:
     return c1, 4.0 / (Db2 * Db2), rho, 1.0 / arm
 
 
-_mass_factor = kernel(inline="always")(mass_factor)
+_mass_factor = kernel(mass_factor, inline="always", internal=True)
 
 
 @kernel
@@ -144,7 +144,7 @@ def mass_factors(Db1, Db2, arm) -> tuple:
     return tuple(out)
 
 
-@kernel(inline="always")
+@kernel(inline="always", internal=True)
 def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
     """M1, M2, M (kg) of eq. (16) at one angle: M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2,
     M = M1 M2/(M1+M2) = M2 / (1 + M2/M1), with M2/M1 = (Jfollower/Jcam) Db1^2/Db2^2 (J kg m^2;
@@ -154,9 +154,9 @@ def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
     return J_cam * c1, M2, M2 / (1.0 + J_follower * inv_J_cam * rho)
 
 
-_point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
-_pitch = kernel(inline="always")(pitch_geometry)        # the groove's geometry, compiled
-_load_arm = kernel(inline="always")(load_arm)
+_point = kernel(operating_point, inline="always", internal=True)     # the mechanism's combination, compiled
+_pitch = kernel(pitch_geometry, internal=True)       # the groove's geometry, compiled
+_load_arm = kernel(load_arm, internal=True)
 
 
 @kernel
@@ -334,7 +334,7 @@ def step_caps(contact_cap: float, cap_flight: bool = True) -> np.ndarray:
     return caps
 
 
-@jit
+@jit(internal=True)
 def _nan_min(a, b):
     """np.minimum of two floats (NaN if either is)."""
     if a != a or b != b:
@@ -394,7 +394,7 @@ def bounce_time(kc: float, m: float, v: float) -> float:
     return 2.0 * p_max / v * _BOUNCE_INTEGRAL
 
 
-_bounce_time = kernel(inline="always")(bounce_time)
+_bounce_time = kernel(bounce_time, internal=True)
 
 
 def contact_gap(scene: Scene) -> float:
@@ -461,7 +461,7 @@ def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tab
     return rows
 
 
-@kernel(inline="always")
+@kernel(internal=True)
 def _interp(x, xp, fp):
     """np.interp(x, xp, fp) at one float x (xp increasing): numpy's own arithmetic (the slope of
     the interval, then from its right end where the left one gives NaN), compiled without numba's
@@ -1070,7 +1070,7 @@ def _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, direction, phi2_0, knots,
     return True
 
 
-@kernel(inline="always")
+@kernel(internal=True)
 def _cubic(coeffs, interval, column, s):
     """A PPoly cubic's value at s (rad) into its interval: scipy's evaluate_poly1 (the powers of s
     accumulated, the highest-order coefficient first in coeffs)."""

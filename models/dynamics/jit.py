@@ -212,13 +212,38 @@ def _tolerant(dispatcher):
     return dispatcher
 
 
-def jit(fn=None, **options):
+def _one_type_per_value_kind(dispatcher):
+    """``dispatcher`` compiled for the plain type of an argument that compiled code passes as a
+    constant (numba would compile it once for ``Literal[int](0)``, once for ``Literal[int](1)``
+    ... and once more for int64): a table lookup called with its columns 0..7 compiled 8 times,
+    the driver's inner loop twice (a counter starting at the constant 0, then int64). A call from
+    Python is not concerned (it passes values, not constants)."""
+    from numba.core import types
+
+    base = dispatcher.get_call_template
+
+    def get_call_template(args, kws):
+        return base(tuple(types.unliteral(a) for a in args), {k: types.unliteral(v) for k, v in kws.items()})
+    dispatcher.get_call_template = get_call_template
+    return dispatcher
+
+
+def jit(fn=None, internal: bool = False, **options):
     """``numba.njit`` with the on-disk cache (stamped as above, read tolerantly) when CACHING, else
-    without."""
+    without; compiled once per argument type, not per constant (``_one_type_per_value_kind``).
+
+    Nothing is compiled that no caller uses: no C callback wrapper (labtool passes no compiled
+    function as a value), and with ``internal`` (a function called from compiled code only) no
+    CPython wrapper either: unboxing a model struct of arrays is long code, and the wrappers were
+    ~10 % of a model's first compilation. An ``internal`` function called from Python raises."""
     options.setdefault("cache", CACHING)
+    options.setdefault("no_cfunc_wrapper", True)
+    if internal:
+        options["no_cpython_wrapper"] = True
     if fn is None:
         return lambda f: jit(f, **options)
-    return _tolerant(njit(**options)(fn)) if options["cache"] else njit(**options)(fn)
+    dispatcher = _one_type_per_value_kind(njit(**options)(fn))
+    return _tolerant(dispatcher) if options["cache"] else dispatcher
 
 
 def kernel(fn=None, **options):
