@@ -89,9 +89,6 @@ def _sos_pass(sos, zi, x, out, reverse):
     """sos_pass_state from the steady state of the first sample in the pass's direction (zi * x0)."""
     ns = sos.shape[0]
     m, nch = x.shape
-    if ns == 2 and nch == 2:
-        _sos_pass_2x2(sos, zi, x, x, -1, out, reverse)
-        return
     z = np.empty((nch, ns, 2))
     i0 = m - 1 if reverse else 0
     for c in range(nch):
@@ -101,35 +98,64 @@ def _sos_pass(sos, zi, x, out, reverse):
     sos_pass_state(sos, z, x, out, reverse)
 
 
-@jit(nogil=True)
 def sosfiltfilt_into(sos, zi, x, padlen, ext, out):
     """scipy.signal.sosfiltfilt(sos, x, axis=0, padtype='odd', padlen=padlen) for x (n, nch) into
-    ``out`` (n, nch); ``ext`` (>= n + 2 padlen, 2 nch) scratch. zi: sosfilt_zi(sos) (n_sections, 2)."""
-    n, nch = x.shape
-    m = n + 2 * padlen
-    e = ext[:m, :nch]
-    f = ext[:m, nch:2 * nch]
-    for c in range(nch):
-        x0, x1 = x[0, c], x[n - 1, c]
-        for k in range(padlen):  # odd extension at both ends
-            e[k, c] = 2.0 * x0 - x[padlen - k, c]
-            e[padlen + n + k, c] = 2.0 * x1 - x[n - 2 - k, c]
-    if sos.shape[0] == 2 and nch == 2:  # the middle read from x and written to out, not copied
-        _sos_pass_2x2(sos, zi, e, x, padlen, f, False)
-        _sos_pass_2x2(sos, zi, f, f, -1, out, True, padlen)
-        return
-    e[padlen:padlen + n] = x
-    _sos_pass(sos, zi, e, f, False)
-    _sos_pass(sos, zi, f, e, True)
-    out[:, :] = e[padlen:padlen + n]
+    ``out`` (n, nch); ``ext`` (2, >= n + 2 padlen, nch) scratch. zi: sosfilt_zi(sos) (n_sections, 2).
+
+    Two compiled kernels, chosen here: the chain's case (2 sections, 2 channels, ``_filtfilt_2x2``)
+    and any other (``_filtfilt_any``), so that a process compiles the one it runs."""
+    if sos.shape[0] == 2 and x.shape[1] == 2:
+        _filtfilt_2x2(sos, zi, x, padlen, ext, out)
+    else:
+        _filtfilt_any(sos, zi, x, padlen, ext, out)
 
 
 @jit(nogil=True)
+def _odd_extension(x, padlen, e):
+    """e[:n + 2 padlen] = x with its odd extension of padlen samples at both ends (the middle
+    rows left as they are: the caller writes or reads them itself)."""
+    n, nch = x.shape
+    for c in range(nch):
+        x0, x1 = x[0, c], x[n - 1, c]
+        for k in range(padlen):
+            e[k, c] = 2.0 * x0 - x[padlen - k, c]
+            e[padlen + n + k, c] = 2.0 * x1 - x[n - 2 - k, c]
+
+
+@jit(nogil=True)
+def _filtfilt_2x2(sos, zi, x, padlen, ext, out):
+    """sosfiltfilt_into for 2 sections and 2 channels: the middle read from x and written to out,
+    not copied (``_sos_pass_2x2``)."""
+    m = x.shape[0] + 2 * padlen
+    e, f = ext[0, :m], ext[1, :m]
+    _odd_extension(x, padlen, e)
+    _sos_pass_2x2(sos, zi, e, x, padlen, f, False, 0)
+    _sos_pass_2x2(sos, zi, f, f, -1, out, True, padlen)
+
+
+@jit(nogil=True)
+def _filtfilt_any(sos, zi, x, padlen, ext, out):
+    """sosfiltfilt_into for any number of sections and channels (element loops: a slice copy
+    compiles numba's shape checks and their messages, a second or more of a first run)."""
+    n, nch = x.shape
+    m = n + 2 * padlen
+    e, f = ext[0, :m], ext[1, :m]
+    _odd_extension(x, padlen, e)
+    for i in range(n):
+        for c in range(nch):
+            e[padlen + i, c] = x[i, c]
+    _sos_pass(sos, zi, e, f, False)
+    _sos_pass(sos, zi, f, e, True)
+    for i in range(n):
+        for c in range(nch):
+            out[i, c] = e[padlen + i, c]
+
+
 def sosfiltfilt(sos, zi, x, padlen):
     """sosfiltfilt_into with its own arrays."""
     n, nch = x.shape
     out = np.empty((n, nch))
-    sosfiltfilt_into(sos, zi, x, padlen, np.empty((n + 2 * padlen, 2 * nch)), out)
+    sosfiltfilt_into(sos, zi, x, padlen, np.empty((2, n + 2 * padlen, nch)), out)
     return out
 
 
@@ -192,15 +218,25 @@ def _subtract_dwell_baseline(acc, moving, middle, min_len, starts, stops):
     """follower.dwell_baseline(acc, ~moving, middle, min_len), subtracted from acc in place."""
     n, nch = acc.shape
     st, sp = _runs(moving, False, starts, stops)
-    full = (st > 0) & (sp < n) & (sp - st >= min_len)
-    use = full if full.any() else (sp - st >= min_len)
-    st, sp = st[use], sp[use]
-    nr = st.shape[0]
+    # the dwells long enough, inside the window if any is (element loops, not numpy's masks: their
+    # broadcasting checks compile numba's error messages, ~1 s of a first run)
+    inside = False
+    for r in range(st.shape[0]):
+        inside = inside or (st[r] > 0 and sp[r] < n and sp[r] - st[r] >= min_len)
+    nr = 0
+    for r in range(st.shape[0]):
+        if sp[r] - st[r] >= min_len and (not inside or (st[r] > 0 and sp[r] < n)):
+            st[nr], sp[nr] = st[r], sp[r]           # in place: the kept runs keep their order
+            nr += 1
     if nr == 0:
         for c in range(nch):
-            acc[:, c] -= acc[:, c].mean()
+            mean = acc[:, c].mean()
+            for i in range(n):
+                acc[i, c] -= mean
         return
-    centres = 0.5 * (st + sp - 1)
+    centres = np.empty(nr)
+    for r in range(nr):
+        centres[r] = 0.5 * (st[r] + sp[r] - 1)
     levels = np.empty((nr, nch))
     for r in range(nr):
         cut = int((sp[r] - st[r]) * (1.0 - middle) / 2.0)
