@@ -144,7 +144,7 @@ def mass_factors(Db1, Db2, arm) -> tuple:
     return tuple(out)
 
 
-@kernel(inline="always", internal=True)
+@kernel(inline="always")
 def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
     """M1, M2, M (kg) of eq. (16) at one angle: M1 = 4 Jcam/Db1^2, M2 = 4 Jfollower/Db2^2,
     M = M1 M2/(M1+M2) = M2 / (1 + M2/M1), with M2/M1 = (Jfollower/Jcam) Db1^2/Db2^2 (J kg m^2;
@@ -461,7 +461,7 @@ def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tab
     return rows
 
 
-@kernel(internal=True)
+@kernel
 def _interp(x, xp, fp):
     """np.interp(x, xp, fp) at one float x (xp increasing): numpy's own arithmetic (the slope of
     the interval, then from its right end where the left one gives NaN), compiled without numba's

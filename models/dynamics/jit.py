@@ -235,15 +235,40 @@ def jit(fn=None, internal: bool = False, **options):
     Nothing is compiled that no caller uses: no C callback wrapper (labtool passes no compiled
     function as a value), and with ``internal`` (a function called from compiled code only) no
     CPython wrapper either: unboxing a model struct of arrays is long code, and the wrappers were
-    ~10 % of a model's first compilation. An ``internal`` function called from Python raises."""
+    ~10 % of a model's first compilation. An ``internal`` function called from Python raises a
+    TypeError (``_compiled_only_class``)."""
     options.setdefault("cache", CACHING)
     options.setdefault("no_cfunc_wrapper", True)
     if internal:
         options["no_cpython_wrapper"] = True
     if fn is None:
-        return lambda f: jit(f, **options)
+        return lambda f: jit(f, internal=internal, **options)
     dispatcher = _one_type_per_value_kind(njit(**options)(fn))
+    if internal:
+        dispatcher.__class__ = _compiled_only_class()
     return _tolerant(dispatcher) if options["cache"] else dispatcher
+
+
+_COMPILED_ONLY = []
+
+
+def _compiled_only_class():
+    """numba's dispatcher for a function compiled without its CPython wrapper (``jit(internal=
+    True)``): its compilations are kept for compiled callers but not entered in the table that a
+    call from Python looks up (the entry would be no wrapper: a crash), so such a call reaches
+    ``_compile_for_args``, which refuses it in one line."""
+    if not _COMPILED_ONLY:
+        from numba.core.registry import CPUDispatcher
+
+        class CompiledOnly(CPUDispatcher):
+            def add_overload(self, cres):
+                self.overloads[tuple(cres.signature.args)] = cres
+
+            def _compile_for_args(self, *args, **kws):
+                raise TypeError(f"{self.py_func.__module__}.{self.py_func.__qualname__} is called from compiled "
+                                "code only (compiled without a Python wrapper); call its caller, or its .py_func")
+        _COMPILED_ONLY.append(CompiledOnly)
+    return _COMPILED_ONLY[0]
 
 
 def kernel(fn=None, **options):
