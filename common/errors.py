@@ -4,6 +4,7 @@ Every layer raises these; the CLI turns them into one line
 ``labtool: error: <what, where, what to do>`` and exit code 2.
 They live in ``common``, the bottom layer every other layer may import.
 """
+import signal
 
 
 class LabtoolError(Exception):
@@ -38,3 +39,13 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, signum: int):
         super().__init__(f"signal {signum}")
         self.signum = signum
+
+
+def interruption(signum: int, note: str = "") -> KeyboardInterrupt:
+    """The exception that ends a command stopped by ``signum`` (KeyboardInterrupt for Ctrl-C,
+    Interrupted for the others), raised after the command kept what it could; ``note`` (what was
+    kept, how to resume) is printed on the CLI's interrupted line (labtool.cli)."""
+    exc = KeyboardInterrupt() if signum == signal.SIGINT else Interrupted(signum)
+    if note:
+        exc.add_note(note)
+    return exc
