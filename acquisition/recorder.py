@@ -439,3 +439,34 @@ def read_recording(path) -> dict:
             "ka_m_s2_per_v": np.asarray(f["signals"].attrs["ka_m_s2_per_v"], float),
             "events": [(int(e["index"]), e["kind"].decode(), e["detail"].decode("utf-8", "replace")) for e in ev],
         }
+
+
+def unfinished(path) -> str | None:
+    """What ``path`` holds when a rerun may record over it without ``--force``: an empty file (a run
+    killed as it created it) or a labtool recording that did not finish (``complete`` false: stopped
+    short of its duration, killed, a full disk); None for anything else (a finished recording, another
+    file, one that cannot be read: those are replaced only when asked). The text names the samples kept."""
+    from labtool.common.errors import LabtoolError
+
+    p = Path(path)
+    try:
+        if not p.is_file():
+            return None
+        if p.stat().st_size == 0:
+            return "an empty file left by a run killed as it started"
+        f, _note = open_file(p)
+    except (OSError, LabtoolError):
+        return None
+    try:
+        with f:
+            if f.attrs.get("format") != FORMAT or "signals" not in f:
+                return None
+            if f.attrs.get("complete") not in (False, 0):
+                return None
+            reason = f.attrs.get("stop_reason", "")
+            reason = reason.decode("utf-8", "replace") if isinstance(reason, bytes) else str(reason)
+            n = int(f["signals"].shape[0])
+    except Exception:      # noqa: BLE001 - h5py raises many types for a damaged file: not replaced unasked
+        return None
+    why = "killed while recording" if reason in ("", "recording (not closed)") else reason
+    return f"an unfinished recording ({n} samples; {why})"

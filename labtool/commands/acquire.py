@@ -11,6 +11,7 @@ from labtool.acquisition.metadata import OPTION, missing_operating_point, operat
 from labtool.common.errors import InputError
 from labtool.common.files import check_output_path
 from labtool.common.invocation import command_line
+from labtool.common.names import shown
 from labtool.common.operating_point import FIELD, schema_field
 from labtool.common.schema import Integer, Number, String, Table, load_toml
 from labtool.options import op_option
@@ -153,7 +154,7 @@ def acquire(
                              f"got {float(opts['ka']):g}")
     if output.is_dir():
         raise InputError(f"{output} is a folder; give a file name for the recording")
-    check_output_path(output, force)
+    replacing = _check_output(output, force)
     if not (math.isfinite(status_every) and status_every >= 0):
         raise InputError(f"--status-every must be >= 0 s, got {status_every:g}")
     meta_given = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
@@ -162,7 +163,25 @@ def acquire(
     dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
                                 iepe_excitation, meta_given, motor_setting)
     attrs["command"] = command_line("labtool acquire")
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
+    if replacing:
+        typer.echo(f"labtool: warning: recording over {shown(output)}, {replacing}", err=True)
+    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force or bool(replacing),
+         status_every)
+
+
+def _check_output(output: Path, force: bool) -> str | None:
+    """Refuse an output another process is recording (--force does not help there), or an existing
+    file without --force unless a rerun may record over it: an unfinished recording (an interrupted
+    or killed run of this command; labtool.acquisition.recorder.unfinished). Returns what is
+    recorded over without --force (None: nothing)."""
+    from labtool.acquisition.recorder import unfinished
+    from labtool.acquisition.writer_lock import RecordingBusy, busy_message, is_being_written
+
+    if is_being_written(output):
+        raise RecordingBusy(busy_message(output))
+    replacing = None if force else unfinished(output)
+    check_output_path(output, force or replacing is not None)
+    return replacing
 
 
 def _device(kind, arg, opts, given, realtime, faults, dur, device_file, ni, iepe_excitation, meta_given,
@@ -321,11 +340,20 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, st
     if result.clipped:
         typer.echo(f"labtool: warning: clipping on {', '.join(result.clipped)} (ADC range exceeded); "
                    "see the 'clip' events", err=True)
-    if result.outcome == "interrupted":
-        typer.echo(f"labtool: {result.message}; the recording is closed and complete", err=True)
     if result.outcome in ("disconnected", "disk_full", "write_error"):
         raise InputError(f"{result.message}; {result.n_samples} samples ({result.n_samples / result.rate_hz:.3f} s) "
                          f"kept in {output}, complete={str(result.complete).lower()}")
+    if result.signum is not None:        # Ctrl-C, SIGTERM, SIGHUP: exit 128 + signal (labtool.cli)
+        from labtool.common.errors import interruption
+
+        secs = result.n_samples / result.rate_hz
+        if result.complete:
+            note = f"{shown(output)} is closed and complete ({result.n_samples} samples, {secs:.3f} s)"
+        else:
+            of = f" of {duration:g}" if duration is not None else ""
+            note = (f"{shown(output)} keeps its {result.n_samples} samples ({secs:.3f}{of} s), closed and marked "
+                    "incomplete; the same command records it again")
+        raise interruption(result.signum, note)
 
 
 class _Display:
