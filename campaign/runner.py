@@ -236,8 +236,43 @@ def _detail(step: str, info: dict) -> str:
     return f"closest: {info.get('closest')}"
 
 
-def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, redo=()) -> CampaignResult:
-    """Run (or resume) the campaign of ``plan`` into ``folder`` (module docstring)."""
+# what the outputs of a point weigh against its recording (bytes): measured.nc was 3.1 x its
+# recording and the pages ~0.7 MB on the sample plan's points (tests/test_campaign_run.py's quick plan)
+MEASURED_PER_RECORDING = 3.5
+PAGES_BYTES = 1e6
+
+
+def estimate_work(plan: Plan, states: list, redo=()) -> tuple[float, float, str]:
+    """(seconds, bytes, basis) of what a run of ``plan`` has left to do, given each point's
+    ``PointState``: the stand's time of the recordings still to make (real time: the simulated
+    stand paced so, or NI-DAQmx; a lower bound of the run, which also processes and compares), and
+    the disk of their recordings (float32 volts, 3 channels), measured files and pages."""
+    dev = plan.doc.device
+    paced = dev.kind == "nidaqmx" or dev.pacing == "realtime"
+    seconds = nbytes = 0.0
+    n_record = n_other = 0
+    for point, state in zip(plan.points, states):
+        if state.done() and point.name not in redo:
+            continue
+        recording = point.duration_s * dev.rate_hz * 3 * 4
+        if point.name in redo or not state.finished("acquire", _inputs(plan, point, state, "acquire")):
+            n_record += 1
+            seconds += point.duration_s if paced else 0.0
+            nbytes += recording * (1.0 + MEASURED_PER_RECORDING) + PAGES_BYTES
+        else:
+            n_other += 1
+            nbytes += recording * MEASURED_PER_RECORDING + PAGES_BYTES
+    basis = (f"{n_record} point(s) to record" + (" in real time" if paced and n_record else "")
+             + (f", {n_other} to process and compare" if n_other else "")
+             + f"; a measured file ~{MEASURED_PER_RECORDING:g} x its recording")
+    return seconds, nbytes, basis
+
+
+def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, redo=(),
+                 check_work=None) -> CampaignResult:
+    """Run (or resume) the campaign of ``plan`` into ``folder`` (module docstring).
+    ``check_work(seconds, bytes, basis)`` sees what is left to do (``estimate_work``) before any
+    point runs, and may refuse it (labtool.common.budget.check_work)."""
     rep = reporter or Reporter()
     folder = Path(folder)
     redo = set(redo)
@@ -247,6 +282,13 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
         raise InputError(f"--redo {', '.join(unknown)}: no such point in the plan (points: {', '.join(sorted(names))})")
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{shown(folder)} is a file; give a folder for the campaign")
+    if check_work is not None:       # asked before anything is created (read only; checked again under the lock)
+        for p in plan.points:
+            _check_point_paths(p, point_folder(folder, p))
+        states = [PointState.load(point_folder(folder, p), p.name, p.spec()) for p in plan.points]
+        for p, st in zip(plan.points, states):
+            _check_existing(plan, p, st, redo)
+        check_work(*estimate_work(plan, states, redo))
     try:
         (folder / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     except OSError as exc:

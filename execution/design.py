@@ -92,6 +92,14 @@ def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_ite
     return DesignOutcome(len(design), out.resumed, failures, n_failed, out.where, out.wall_s, out.cost_s)
 
 
+def disk_bytes(design) -> float:
+    """About the most disk a run of ``design`` uses (bytes): its parts (up to 17 digits a number,
+    ~19 bytes a cell) while it runs, and the results CSV (~8 bytes a cell) and the NetCDF (8 bytes a
+    response, run number and wall time) they are assembled into before the parts are removed."""
+    cells = len(design.columns) + len(EXTRA_COLUMNS)
+    return len(design) * (19.0 * cells + 8.0 * len(design.columns) + 8.0 * (len(design.responses) + 2))
+
+
 def check_free_space(folder: Path, n_runs: int) -> None:
     need = n_runs * BYTES_PER_RUN
     free = shutil.disk_usage(folder if str(folder) else ".").free
@@ -310,4 +318,4 @@ def _block_shape(index) -> tuple[int, ...]:
     return tuple(s.stop - s.start for s in index)
 
 
-__all__ = ["run_design", "DesignOutcome", "hyperslabs", "parts_folder", "DiskFull"]
+__all__ = ["run_design", "DesignOutcome", "hyperslabs", "parts_folder", "disk_bytes", "DiskFull"]

@@ -345,7 +345,8 @@ def test_a_design_of_ten_million_runs_gives_an_estimate_and_needs_yes(tmp_path):
                           timeout=120, stdin=subprocess.DEVNULL)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
-    assert lines[0].startswith("labtool: error: this design is 10000000 runs x ") and "pass --yes" in lines[0]
+    assert lines[0].startswith("labtool: error: this design of 10000000 runs would take about ") and "pass --yes" in lines[0]
+    assert "10000000 runs x " in lines[0] and "more than 10 min" in lines[0]
     assert time.monotonic() - t0 < 120
     assert not parts_folder(tmp_path / "r.csv").exists() and not (tmp_path / "r.csv").exists()
 

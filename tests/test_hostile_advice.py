@@ -55,3 +55,89 @@ def test_a_second_acquire_onto_a_recording_in_progress_is_not_advised_to_force(t
     assert code == 0 and "recording over" in err, err
 
 
+# --- budgets: a request far larger than meant -------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_an_acquisition_of_240_mb_is_refused_when_piped(tmp_path):
+    """acquire --duration 2000 (meant as ms) wrote 240 MB in 98 s without a word."""
+    t0 = time.monotonic()
+    line = one_error_line(*run(["acquire", "--fast", "--duration", "2000", "-o", tmp_path / "r.h5"],
+                               timeout=60))
+    assert "--duration 2000 s at 10000 Hz would write about 240 MB" in line and "pass --yes" in line
+    assert "in seconds" in line and list(tmp_path.iterdir()) == [] and time.monotonic() - t0 < 60
+
+
+@pytest.mark.hostile("silent_wrong")
+def test_a_paced_acquisition_over_ten_minutes_is_refused_when_piped(tmp_path, capsys):
+    line = one_error_line(*cli(["acquire", "--duration", "700", "-o", tmp_path / "r.h5"], capsys))
+    assert "would take about 12 min" in line and "pass --yes" in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def _on_a_terminal(args, answer: bytes, timeout: float = 120) -> tuple[int, str]:
+    """labtool with stdin, stdout and stderr on a pseudo-terminal; ``answer`` typed at the prompt."""
+    main, child = pty.openpty()
+    proc = subprocess.Popen(command(args), env=env(), stdin=child, stdout=child, stderr=child,
+                            preexec_fn=_prepare_child)
+    os.close(child)
+    seen = b""
+    try:
+        deadline = time.monotonic() + timeout
+        while b"Run it?" not in seen and time.monotonic() < deadline and proc.poll() is None:
+            try:
+                seen += os.read(main, 4096)
+            except OSError:
+                break
+        os.write(main, answer + b"\n")
+        while True:
+            try:
+                chunk = os.read(main, 4096)
+            except OSError:
+                break
+            if not chunk:
+                break
+            seen += chunk
+        proc.wait(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(main)
+    return proc.returncode, seen.decode("utf-8", "replace")
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_a_large_acquisition_is_asked_for_on_a_terminal(tmp_path):
+    code, out = _on_a_terminal(["acquire", "--fast", "--duration", "2000", "-o", tmp_path / "r.h5"], b"n")
+    assert "would write about 240 MB" in out and "Run it?" in out
+    assert code == 2 and "labtool: error: not run:" in out and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_a_large_campaign_is_refused_before_its_folder_is_made(tmp_path, capsys):
+    plan = tmp_path / "plan.toml"
+    plan.write_text(f'[device]\npacing = "realtime"\n[calibration]\nfiles = ["{CAL}"]\n[[points]]\nrpm = 180.0\n'
+                    'duration_s = 700.0\n[compare]\nmodels = ["kinematic"]\nomega1 = ["const"]\n')
+    line = one_error_line(*cli(["campaign", "run", plan, "-o", tmp_path / "camp"], capsys))
+    assert line.startswith("labtool: error: this campaign would take about 12 min") and "pass --yes" in line
+    assert "1 point(s) to record in real time" in line and not (tmp_path / "camp").exists()
+    plan.write_text(plan.read_text().replace('"realtime"', '"fast"').replace("700.0", "3000.0"))
+    line = one_error_line(*cli(["campaign", "run", plan, "-o", tmp_path / "camp"], capsys))
+    assert "would write about" in line and "MB" in line and "take about" not in line
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_a_design_that_writes_over_100_mb_is_refused_when_piped(tmp_path):
+    """400 000 kinematic runs: ~125 MB of parts and results (and minutes on two workers)."""
+    levels = ",".join(f"level_{k}" for k in range(1, 11))
+    rows = [f"{n},{s},{u}," + ",".join(str(v0 + dv * k) for k in range(10))
+            for n, s, u, v0, dv in [("A", "Fu", "N", 0, 5), ("B", "n1", "rpm", 150, 10), ("C", "Jt", "-", 1, 0.5),
+                                    ("D", "j", "mm", 0.016, 0.016), ("E", "k", "-", 0.1, 0.05)]]
+    rows.append("F,lw,mm," + ",".join(str(4 + 0.5 * k) for k in range(4)) + ",,,,,,")
+    (tmp_path / "f.csv").write_text(f"factor,symbol,unit,{levels}\n" + "\n".join(rows) + "\n")
+    line = one_error_line(*run(["doe", "run", "--model", "kinematic", "--factors", tmp_path / "f.csv",
+                                "-o", tmp_path / "r.csv"], timeout=300))
+    assert line.startswith("labtool: error: this design of 400000 runs would") and "write about" in line
+    assert "pass --yes" in line and sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]

@@ -114,6 +114,8 @@ def acquire(
     status_every: float = typer.Option(5.0, help="not on a terminal: one status line every this many seconds "
                                        "[s] (0 = none)"),
     force: bool = typer.Option(False, help="overwrite an existing output file (never one being recorded)"),
+    yes: bool = typer.Option(False, "--yes", "-y", help="record more than 10 min [s of the stand] or 100 MB without "
+                             "asking (off a terminal such a recording is refused without it)"),
 ) -> None:
     """Record aE_t, aE_n (volts) and the tacho from the stand into recording format v1 (docs/architecture.md)."""
     from labtool.acquisition.device import parse_device
@@ -163,6 +165,7 @@ def acquire(
     dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
                                 iepe_excitation, meta_given, motor_setting)
     attrs["command"] = command_line("labtool acquire")
+    _check_size(dur, float(opts["rate"]), len(dev.channel_names), realtime or kind == "nidaqmx", yes)
     if replacing:
         typer.echo(f"labtool: warning: recording over {shown(output)}, {replacing}", err=True)
     _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force or bool(replacing),
@@ -298,6 +301,22 @@ def _check_sample_count(duration_s: float, rate_hz: float) -> None:
         raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is more samples than the {MAX_SAMPLES:g} "
                          f"a recording can hold; give at most {MAX_SAMPLES / rate_hz:g} s, "
                          "or --duration inf --realtime to record until Ctrl-C")
+
+
+def _check_size(duration_s: float, rate_hz: float, n_channels: int, paced: bool, yes: bool) -> None:
+    """Ask before a recording of more than 10 min of the stand (paced: real time) or 100 MB
+    (float32 samples), on a terminal; refuse it elsewhere unless --yes (labtool.common.budget.check_work):
+    --duration 2000 meant as ms wrote 240 MB in 98 s without a word."""
+    if not math.isfinite(duration_s):            # until Ctrl-C: the user stops it
+        return
+    from labtool.common import budget
+    from labtool.output import terminal_confirm
+
+    samples = duration_s * rate_hz
+    budget.check_work(f"--duration {duration_s:g} s at {rate_hz:g} Hz", duration_s if paced else 0.0,
+                      samples * n_channels * 4, f"{samples:.4g} samples x {n_channels} channels x 4 bytes"
+                      + (", in real time" if paced else ""), terminal_confirm(), yes,
+                      "give a shorter --duration (in seconds)")
 
 
 def _check_sampled(duration_s: float, rate_hz: float, shaker: bool, cal_freq_hz: float) -> None:
