@@ -23,6 +23,61 @@ from test_campaign_run import CAL
 REPORT_QUICK = [*REPORT_FAST, "--no-robustness"]
 
 
+# --- traceback: a measured variable that holds text ------------------------------------------
+def _with_text(tmp_path, measured_nc, name: str):
+    """The measured file with variable ``name`` replaced by the text 'abc' in each cell."""
+    ds = xr.open_dataset(measured_nc, engine="h5netcdf", decode_times=False).load()
+    v = ds[name]
+    text = np.full(v.shape, "abc", dtype=object)
+    if name in ds.coords:
+        ds = ds.assign_coords({name: (v.dims, text, v.attrs)})
+    else:
+        ds[name] = (v.dims, text, v.attrs)
+    path = tmp_path / f"{name}.nc"
+    ds.to_netcdf(path, engine="h5netcdf")
+    return path
+
+
+# every variable report, fit and campaign report read as numbers (the spectra: the report's figure)
+READ_AS_NUMBERS = ["omega2", "epsilon2", "phi1", "time", "aE_n", "revolution_start_time", "frequency", "aE_t_psd"]
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("name", READ_AS_NUMBERS)
+def test_a_measured_variable_that_holds_text_is_refused_by_report(tmp_path, capsys, measured_nc, name):
+    """omega2 holding text was an internal error (ValueError: could not convert string to float,
+    exit 70) in labtool report; so were epsilon2, phi1, time, aE_n, revolution_start_time, frequency."""
+    path = _with_text(tmp_path, measured_nc, name)
+    line = one_error_line(*cli(["report", path, *REPORT_QUICK, "-o", tmp_path / "r.html"], capsys))
+    assert f"{name} holds text, not numbers" in line and "process the recording again" in line
+    assert not (tmp_path / "r.html").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("traceback")
+@pytest.mark.parametrize("command_line", [["fit", "--model", "rigid", "--free", "backlash", "--accuracy", "fast"],
+                                          ["campaign", "report", "--models", "kinematic", "--omega1", "const"]])
+def test_a_measured_omega2_that_holds_text_is_refused_by_fit_and_campaign_report(tmp_path, capsys, measured_nc,
+                                                                                   command_line):
+    path = _with_text(tmp_path, measured_nc, "omega2")
+    args = [*command_line[:2], path, *command_line[2:]] if command_line[0] == "campaign" else \
+        [command_line[0], path, *command_line[1:]]
+    if command_line[0] == "campaign":
+        args += ["-o", tmp_path / "c.html"]
+    line = one_error_line(*cli(args, capsys))
+    assert "omega2 holds text, not numbers" in line
+
+
+@pytest.mark.slow
+def test_the_advice_for_a_measured_file_that_holds_text_works(tmp_path, capsys, measured_nc):
+    """'process the recording again': the sample recording processed again is reported."""
+    again = tmp_path / "again.nc"
+    assert cli(["process", SAMPLE / "run_180rpm.h5", "-o", again], capsys)[0] == 0
+    code, err = cli(["report", again, *REPORT_QUICK, "-o", tmp_path / "r.html"], capsys)
+    assert code == 0, err
+
+
 # --- advice: a second acquire onto a recording in progress -----------------------------------
 def _rows(path) -> int:
     try:
