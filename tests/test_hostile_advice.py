@@ -110,6 +110,20 @@ def test_a_second_acquire_onto_a_recording_in_progress_is_not_advised_to_force(t
     assert code == 0 and "recording over" in err, err
 
 
+# --- silent wrong: a campaign's revolutions ---------------------------------------------------
+@pytest.mark.slow
+@pytest.mark.hostile("silent_wrong")
+def test_revolutions_n_in_a_plan_averages_n_whole_revolutions(tmp_path):
+    """revolutions = 8 gave '7 revolutions averaged' at every speed (the simulated stand starts at
+    a tacho mark, which has no edge to be seen)."""
+    plan = tmp_path / "plan.toml"
+    plan.write_text(f'[calibration]\nfiles = ["{CAL}"]\n[defaults]\nrevolutions = 8\n[grid]\n'
+                    'rpm = [180.0, 300.0, 500.0]\n[compare]\nmodels = ["kinematic"]\nomega1 = ["const"]\n')
+    code, err = run(["campaign", "run", plan, "-o", tmp_path / "camp", "--no-report"], timeout=600)
+    assert code == 0, err
+    assert err.count("8 revolutions averaged") == 3, err
+
+
 # --- budgets: a request far larger than meant -------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
