@@ -124,6 +124,52 @@ def test_revolutions_n_in_a_plan_averages_n_whole_revolutions(tmp_path):
     assert err.count("8 revolutions averaged") == 3, err
 
 
+# --- silent wrong: a factor level no model takes ----------------------------------------------
+@pytest.mark.hostile("silent_wrong")
+def test_a_backlash_level_that_undercuts_the_groove_is_refused_before_any_run(tmp_path, capsys):
+    """j = 8 mm ran the design and left its runs empty ('2 of 4 runs failed'), after the others ran."""
+    path = tmp_path / "f.csv"
+    path.write_text("factor,symbol,unit,level_1,level_2\nA,Fu,N,0,65\nB,j,mm,0.016,8\n")
+    line = one_error_line(*cli(["doe", "run", "--factors", path, "-o", tmp_path / "r.csv"], capsys))
+    assert line.startswith("labtool: error: factor B (j) level 2 = 8 mm: the groove's outer flank would be undercut")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]
+    largest = float(line.split("takes a backlash up to ")[1].split(" mm")[0])
+    assert 0.128 < largest < 8
+    # the advice: a level below it runs, as simulate does, and simulate refuses just past it
+    path.write_text(f"factor,symbol,unit,level_1,level_2\nA,Fu,N,0,65\nB,j,mm,0.016,{0.999 * largest:.6g}\n")
+    code, err = cli(["doe", "run", "--factors", path, "-o", tmp_path / "r.csv"], capsys)
+    assert code == 0, err
+    assert cli(["simulate", "--model", "rigid", "--backlash-mm", f"{1.001 * largest:.6g}"], capsys)[0] == 2
+
+
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.parametrize("row, said", [
+    ("C,n1,rpm,180,2000", "factor C (n1) level 2 = 2000 rpm: cam speed 2000 rpm is outside the range"),
+    ("C,k,-,0.5,1.5", "factor C (k) level 2 = 1.5: restitution k must lie in [0, 1]"),
+    ("C,j,mm,-1,0.128", "factor C (j) level 1 = -1 mm: backlash must be >= 0 mm"),
+])
+def test_a_factor_level_past_the_models_bounds_is_named_with_its_unit(tmp_path, capsys, row, said):
+    path = tmp_path / "f.csv"
+    path.write_text(f"factor,symbol,unit,level_1,level_2\nA,Fu,N,0,65\nB,Jt,-,1,4\n{row}\n")
+    line = one_error_line(*cli(["doe", "run", "--factors", path, "-o", tmp_path / "r.csv"], capsys))
+    assert said in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]
+
+
+def test_a_design_is_validated_by_the_library_before_its_first_run(tmp_path):
+    """run_design refuses the design before any run (no parts folder), whoever calls it."""
+    from labtool.common.errors import InputError
+    from labtool.execution.design import run_design
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.study.doe import Design, Factor
+
+    design = Design((Factor("A", "Fu", "N", (0.0, 65.0)), Factor("B", "j", "mm", (0.016, 8.0))), Scene(), "rigid")
+    calls = []
+    with pytest.raises(InputError, match="factor B \\(j\\) level 2 = 8 mm"):
+        run_design(design, tmp_path / "r.csv", tmp_path / "r.nc", progress=lambda *a: calls.append(a))
+    assert calls == [] and list(tmp_path.iterdir()) == []
+
+
 # --- budgets: a request far larger than meant -------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.hostile("silent_wrong")
