@@ -49,3 +49,17 @@ def interruption(signum: int, note: str = "") -> KeyboardInterrupt:
     if note:
         exc.add_note(note)
     return exc
+
+
+def interrupt_cause(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C) or Interrupted (SIGTERM, SIGHUP) at the root of ``exc``'s chain,
+    else None. A signal inside a numba-compiled function surfaces as a SystemError ("returned a
+    result with an exception set") chained to it: code that catches Exception to go on (one failed
+    run of many) must raise this instead, or a Ctrl-C becomes a failed run and the work goes on."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from labtool.common.errors import interrupt_cause
 from labtool.common.files import check_interrupted
 from labtool.execution.backends import InProcess, LocalProcesses, TaskFailed
 from labtool.execution.parts import DiskFull, PartStore
@@ -53,6 +54,9 @@ class Chunk:
             try:
                 rows.append(self.fn(self.items[i]))
             except Exception as exc:  # noqa: BLE001 - a failing item must not lose its chunk
+                stop = interrupt_cause(exc)
+                if stop is not None:      # a signal in compiled code: the run was stopped, not failed
+                    raise stop from None
                 rows.append({"error": f"{type(exc).__name__}: {exc}"})
             times[k] = time.perf_counter() - t0
         return ChunkResult(self.start, self.stop, rows, times, os.getpid())

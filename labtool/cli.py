@@ -20,7 +20,7 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from labtool.common.errors import Interrupted, LabtoolError, OutputError
+from labtool.common.errors import Interrupted, LabtoolError, OutputError, interrupt_cause
 from labtool.common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
                           lost_interrupt, signals_interrupt)
 from labtool.common.names import shown
@@ -93,17 +93,6 @@ def __getattr__(name: str):
         _register_all()
         return _app
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def _caused_by_interrupt(exc: BaseException) -> KeyboardInterrupt | None:
-    """The KeyboardInterrupt (Ctrl-C) or Interrupted (SIGTERM, SIGHUP) at the root of ``exc``'s chain."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -256,7 +245,7 @@ def _run(argv) -> int:
                           "rename the file (e.g. with convmv) and run again")
         return _internal(exc)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
-        root = _caused_by_interrupt(exc) if isinstance(exc, SystemError) else None
+        root = interrupt_cause(exc) if isinstance(exc, SystemError) else None
         if root is not None:
             # a signal inside a numba-compiled loop surfaces as a chain of "returned a result with
             # an exception set" with the KeyboardInterrupt (Ctrl-C) or Interrupted at its root

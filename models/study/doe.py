@@ -34,7 +34,7 @@ import numpy as np
 
 from labtool.common.units import RPM
 
-from labtool.common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError, interrupt_cause
 
 # symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
 SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
@@ -326,6 +326,9 @@ def simulate_run(scene, model: str) -> dict:
     except LabtoolError as exc:
         return {"ok": False, "error": str(exc)}
     except Exception as exc:  # a bug in a model must not lose the other runs
+        stop = interrupt_cause(exc)
+        if stop is not None:      # Ctrl-C or SIGTERM in the compiled model: the run was stopped, not failed
+            raise stop from None
         return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
     found.pop("wall_s", None)
     ind = {k: (None if v is None else float(v)) for k, v in found.items()
