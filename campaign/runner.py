@@ -18,7 +18,7 @@ import shutil
 import time
 from pathlib import Path
 
-from labtool.common.errors import InputError, LabtoolError, interruption
+from labtool.common.errors import InputError, LabtoolError, interrupt_cause, interruption
 from labtool.common.files import check_interrupted
 from labtool.common.names import shown
 from labtool.campaign import steps
@@ -323,9 +323,12 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
             left = n - k
             eta = (sum(walls) / len(walls)) * left if walls and left else (0.0 if not left else None)
             rep.point_done(k, n, point, wall, eta, worked)
-    except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP: what is finished stays, a rerun resumes
-        exc.add_note(f"{shown(folder)} keeps the finished points and steps; the same command resumes")
-        raise
+    except (KeyboardInterrupt, SystemError) as exc:   # Ctrl-C, SIGTERM, SIGHUP (in compiled code: a SystemError)
+        stop = interrupt_cause(exc)
+        if stop is None:
+            raise
+        stop.add_note(f"{shown(folder)} keeps the finished points and steps; the same command resumes")
+        raise stop from None
     finally:
         lock.__exit__(None, None, None)
     return CampaignResult(folder, [(p, point_folder(folder, p)) for p in plan.points], ran, kept,
