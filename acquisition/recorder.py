@@ -127,7 +127,7 @@ class Recorder:
         self._lock = WriterLock.create(self.path, replace)
         try:
             self._reserve = _DiskReserve(self.path.parent, self.reserve_bytes)
-            self._f = h5py.File(self.path, "w", libver=LIBVER)
+            self._f = _create_hdf5(self.path)
         except OSError as exc:
             self.path.unlink(missing_ok=True)
             self._lock.release()
@@ -403,6 +403,24 @@ class _DiskReserve:
         if self._f is not None:
             f, self._f = self._f, None
             f.close()
+
+
+CREATE_TRIES, CREATE_WAIT_S = 40, 0.025
+
+
+def _create_hdf5(path: Path):
+    """h5py.File(path, "w") on the file the writer lock just created. A reader that opens it in the
+    same instant (a monitor polling for it, a file indexer) holds HDF5's shared file lock for the
+    moment its open fails, and HDF5's create then fails with EAGAIN ("unable to lock file"): the
+    create is tried again for up to 1 s instead of failing the recording."""
+    for attempt in range(CREATE_TRIES):
+        try:
+            return h5py.File(path, "w", libver=LIBVER)
+        except OSError as exc:
+            busy = exc.errno == errno.EAGAIN or "unable to lock file" in str(exc)
+            if not busy or attempt == CREATE_TRIES - 1:
+                raise
+            time.sleep(CREATE_WAIT_S)
 
 
 def _classify(exc: Exception) -> OSError:

@@ -169,6 +169,32 @@ class _StopAfter(Device):
         return self.inner.actual_rate_hz
 
 
+@pytest.mark.hostile("concurrency")
+def test_a_reader_opening_the_new_file_does_not_fail_the_recording(tmp_path, monkeypatch):
+    """A process opening the recording in the instant it is created (a monitor polling for it) holds
+    HDF5's shared file lock while its open fails, and the recorder's create failed: 'cannot write
+    the recording rec.h5: Resource temporarily unavailable'. The create is tried again."""
+    import fcntl
+    import threading
+
+    from labtool.acquisition import recorder as rmod
+
+    real = rmod.WriterLock.create
+    released = threading.Event()
+
+    def create_then_read(path, replace):
+        lock = real(path, replace)
+        fd = os.open(path, os.O_RDONLY)          # what h5py's open does first: a shared flock
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        threading.Timer(0.2, lambda: (os.close(fd), released.set())).start()
+        return lock
+    monkeypatch.setattr(rmod.WriterLock, "create", staticmethod(create_then_read))
+    with Recorder(tmp_path / "r.h5", ["a"], 1000.0) as rec:
+        assert released.is_set()               # created once the reader let go
+        rec.write_block(Block(np.zeros((10, 1), np.float32), 0))
+    assert read_recording(tmp_path / "r.h5")["signals"].shape == (10, 1)
+
+
 def test_ctrl_c_stops_cleanly(tmp_path):
     """Stopped short of its duration: every sample kept, the file closed, and marked incomplete
     (it was marked complete, and a campaign took 7000 samples for the whole point)."""
