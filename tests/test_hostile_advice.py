@@ -145,8 +145,8 @@ def test_a_backlash_level_that_undercuts_the_groove_is_refused_before_any_run(tm
 @pytest.mark.hostile("silent_wrong")
 @pytest.mark.parametrize("row, said", [
     ("C,n1,rpm,180,2000", "factor C (n1) level 2 = 2000 rpm: cam speed 2000 rpm is outside the range"),
-    ("C,k,-,0.5,1.5", "factor C (k) level 2 = 1.5: restitution k must lie in [0, 1]"),
-    ("C,j,mm,-1,0.128", "factor C (j) level 1 = -1 mm: backlash must be >= 0 mm"),
+    ("C,k,-,0.5,1.5", "factor C (k) level 2 = 1.5: restitution k must be in [0, 1]"),
+    ("C,j,mm,-1,0.128", "factor C (j) level 1 = -1 mm: backlash j must be in [0, 10] mm"),
 ])
 def test_a_factor_level_past_the_models_bounds_is_named_with_its_unit(tmp_path, capsys, row, said):
     path = tmp_path / "f.csv"
