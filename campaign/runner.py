@@ -236,8 +236,8 @@ def _detail(step: str, info: dict) -> str:
     return f"closest: {info.get('closest')}"
 
 
-# what the outputs of a point weigh against its recording (bytes): measured.nc was 3.1 x its
-# recording and the pages ~0.7 MB on the sample plan's points (tests/test_campaign_run.py's quick plan)
+# what the outputs of a point weigh against its recording (bytes): measured.nc is 3.1 x its
+# recording and the pages ~0.7 MB on tests/test_campaign_run.py's quick plan
 MEASURED_PER_RECORDING = 3.5
 PAGES_BYTES = 1e6
 

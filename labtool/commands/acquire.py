@@ -306,7 +306,7 @@ def _check_sample_count(duration_s: float, rate_hz: float) -> None:
 def _check_size(duration_s: float, rate_hz: float, n_channels: int, paced: bool, yes: bool) -> None:
     """Ask before a recording of more than 10 min of the stand (paced: real time) or 100 MB
     (float32 samples), on a terminal; refuse it elsewhere unless --yes (labtool.common.budget.check_work):
-    --duration 2000 meant as ms wrote 240 MB in 98 s without a word."""
+    a --duration of 2000 meant as ms is 240 MB at 10 kHz."""
     if not math.isfinite(duration_s):            # until Ctrl-C: the user stops it
         return
     from labtool.common import budget
