@@ -18,7 +18,7 @@ import typer
 
 from labtool.options import given, op_option
 
-from labtool.common.files import atomic_write, check_output_path
+from labtool.common.files import OutputSet, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -82,20 +82,27 @@ def fit(
     req = FitRequest(measured, model, free, omega1, accuracy, revolutions,
                      parse_assignments(bounds, "--bounds", ranges=True), start_value, overrides,
                      {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs, scan=scan)
+    from labtool.common.files import check_interrupted
+
     err = console(stderr=True)
     with (err.status("fit") if err.is_terminal else ProgressLines(sys.stderr, "fit")) as status:
-        outcome = identify(req, progress=lambda msg: status.update(msg))
+        def progress(msg: str) -> None:
+            check_interrupted()        # a Ctrl-C that Python dropped (in a weakref callback) stops the search here
+            status.update(msg)
+        outcome = identify(req, progress=progress)
         text = json.dumps(outcome.summary, indent=1, allow_nan=False)
         fig = None
         if figure is not None:
             status.update("drawing the figure")
             from labtool.identification.figures import fit_figure
             fig = fit_figure(outcome)
-        # both outputs are ready before either is written (each atomically)
-        if output is not None:
-            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
-        if fig is not None:
-            atomic_write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        # both outputs are ready before either is written, and are renamed together (both or
+        # neither: a rerun after an interruption finds no JSON without its figure)
+        with OutputSet() as outputs:
+            if output is not None:
+                outputs.write_text(output, text + "\n")
+            if fig is not None:
+                outputs.write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     if as_json:
         typer.echo(text)
         return
