@@ -68,7 +68,7 @@ def run(
     per-run cost / workers) at more than 10 min, or using more than 100 MB of disk, asks for
     confirmation, or needs --yes when not on a terminal.
     """
-    from labtool.common.errors import InputError, SolverError
+    from labtool.common.errors import SolverError
     from labtool.execution.backends import backend_for, check_scheduler_address
     from labtool.execution.design import parts_folder, run_design
     from labtool.common.operating_point import PAPER_EXPERIMENT
