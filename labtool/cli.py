@@ -52,6 +52,7 @@ COMMAND_MODULES = (
     "labtool.commands.export",
     "labtool.commands.bench",
     "labtool.commands.campaign",
+    "labtool.commands.warmup",
 )
 
 
@@ -202,6 +203,8 @@ def _invoke(argv):
     _register_for(args)
     command = typer.main.get_command(_app)
     with running(args), command.make_context("labtool", args) as ctx:
+        from labtool.warmup import announce_for
+        announce_for(args)          # a command about to compile says so at once (labtool.warmup)
         return command.invoke(ctx)
 
 
