@@ -90,6 +90,11 @@ PROBES = {
     "the processing kernels": ("labtool.processing.kernels", "follower_chain_into", None),
     "the report's metrics": ("labtool.reports.metrics", "_dtw_fill", None),
 }
+# a command that runs other functions of a group than PROBES' one is probed on its own: the
+# report filters with _filtfilt_any and never runs the processing chain
+COMMAND_PROBES = {
+    ("report", "the processing kernels"): ("labtool.processing.kernels", "_filtfilt_any", None),
+}
 
 
 def _option(args: list[str], name: str, default: str) -> str:
@@ -128,15 +133,16 @@ def needs(args: list[str]) -> list[str]:
     return []
 
 
-def missing(whats) -> list[str]:
-    """The ``whats`` whose compiled code is not in numba's cache (``compiling.has_entry``)."""
+def missing(whats, command: str | None = None) -> list[str]:
+    """The ``whats`` whose compiled code for ``command`` is not in numba's cache
+    (``compiling.has_entry``)."""
     import importlib
 
     from labtool.models.dynamics import compiling
 
     out = []
     for what in whats:
-        module, name, first = PROBES[what]
+        module, name, first = COMMAND_PROBES.get((command, what), PROBES[what])
         if not compiling.has_entry(getattr(importlib.import_module(module), name), first):
             out.append(what)
     return out
@@ -150,7 +156,7 @@ def announce_for(args: list[str]) -> None:
     if whats:
         from labtool.models.dynamics import compiling
 
-        compiling.announce_now(missing(whats))
+        compiling.announce_now(missing(whats, args[0]))
 
 
 STEPS = (

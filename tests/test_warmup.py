@@ -32,6 +32,16 @@ def test_what_a_command_line_will_compile(args, expected):
     assert warmup.needs(args) == expected
 
 
+def test_the_report_is_probed_on_the_processing_kernel_it_runs(monkeypatch):
+    """report filters with _filtfilt_any and never runs the processing chain: probing the chain's
+    kernel announced a compilation on every warm report, while nothing compiled."""
+    probed = []
+    monkeypatch.setattr(compiling, "has_entry", lambda fn, first=None: probed.append(fn.py_func.__name__) or True)
+    assert warmup.missing(["the processing kernels"], "report") == []
+    assert warmup.missing(["the processing kernels"], "process") == []
+    assert probed == ["_filtfilt_any", "follower_chain_into"]
+
+
 def test_every_step_of_the_warmup_is_one_of_the_probed_things_and_runs_in_a_folder():
     assert [step.what for step in warmup.STEPS] == list(warmup.PROBES)
     assert all(callable(step.run) for step in warmup.STEPS)
@@ -41,7 +51,7 @@ def test_a_command_about_to_compile_says_so_before_it_starts(monkeypatch, capsys
     monkeypatch.setitem(compiling._state, "quiet", 0)
     monkeypatch.setitem(compiling._state, "announced", set())
     cached = {"the rigid model"}
-    monkeypatch.setattr(warmup, "missing", lambda whats: [w for w in whats if w not in cached])
+    monkeypatch.setattr(warmup, "missing", lambda whats, command=None: [w for w in whats if w not in cached])
     warmup.announce_for(["report", "m.nc"])
     warmup.announce_for(["simulate", "--model", "elastic"])        # announced already: once a process
     about = compiling.estimate_text("the elastic model", "the processing kernels", "the report's metrics")
