@@ -85,3 +85,57 @@ def _profile_panel(ax, outcome, i, par) -> None:
     ax.set_title(f"{par.name}: {verdict}", fontsize=8)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=6, loc="best")
+
+
+def joint_figure(outcome) -> Figure:
+    """The figure of a joint fit (labtool.identification.joint.JointOutcome): one panel per free
+    parameter against the measured cam speed (rpm): each file's own fit with its 95 % interval,
+    and the joint value, its interval and (when the files disagree) the widened one for a shared
+    parameter, or each file's joint value for one fitted per file."""
+    s = outcome.summary
+    keys = list(s["shared"]) + list(s["per_file"])
+    fig = Figure(figsize=(5.5 * max(len(keys), 1), 4.2), layout="constrained")
+    rpm = np.array(s["cam_speed_rpm_measured"], float)
+    for n, key in enumerate(keys):
+        ax = fig.add_subplot(1, len(keys), n + 1)
+        singles = [f["parameters"][key] for f in s["single_fits"]]
+        vals = np.array([e["value"] for e in singles], float)
+        lo = np.array([np.nan if e["ci95"][0] is None else e["ci95"][0] for e in singles], float)
+        hi = np.array([np.nan if e["ci95"][1] is None else e["ci95"][1] for e in singles], float)
+        ok = np.isfinite(lo) & np.isfinite(hi)
+        ax.errorbar(rpm[ok], vals[ok], yerr=[vals[ok] - lo[ok], hi[ok] - vals[ok]], fmt="o", color="k", capsize=4,
+                    label="each file alone (95 %)")
+        if (~ok).any():
+            ax.plot(rpm[~ok], vals[~ok], "x", color="k", label="each file alone (no interval)")
+        if key in s["parameters"]:
+            e = s["parameters"][key]
+            ax.axhline(e["value"], color="tab:blue", lw=1.2, label=f"joint: {e['value']:.4g}")
+            a, b = e["ci95_joint"]
+            if a is not None and b is not None:
+                ax.axhspan(a, b, color="tab:blue", alpha=0.2, lw=0, label="joint 95 %")
+            if list(e["ci95"]) != list(e["ci95_joint"]) and None not in e["ci95"]:
+                ax.axhspan(*e["ci95"], color="tab:red", alpha=0.08, lw=0, label="widened: the files disagree")
+                ax.set_ylim(*_limits(np.r_[lo[ok], hi[ok], a, b]))
+            test = s["consistency"][key]
+            said = ("consistent" if test["consistent"] else "INCONSISTENT") if test["consistent"] is not None else "untested"
+            ax.set_title(f"{key} (shared): {said}" + (f", p = {test['p_value']:.2g}" if test["p_value"] is not None
+                                                      else ""), fontsize=9)
+        else:
+            joint = [f[key] for f in s["per_file_parameters"]]
+            jv = np.array([e["value"] for e in joint], float)
+            ax.plot(rpm, jv, "s", color="tab:blue", mfc="none", label="joint, per file")
+            ax.set_title(f"{key} (per file)", fontsize=9)
+        ax.set_xlabel("measured cam speed [rpm]")
+        unit = singles[0].get("unit", "-")
+        ax.set_ylabel(key if unit == "-" else f"{key} [{unit}]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def _limits(values) -> tuple[float, float]:
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    lo, hi = float(v.min()), float(v.max())
+    pad = 0.15 * (hi - lo or abs(hi) or 1.0)
+    return lo - pad, hi + pad

@@ -88,6 +88,7 @@ class FitOutcome:
     after: Evaluation
     profiles: list
     linear: uncertainty.Linear
+    evaluator: Evaluator | None = None     # its cached model runs (a joint fit reuses them)
 
 
 def identify(req: FitRequest, progress=None) -> FitOutcome:
@@ -138,7 +139,7 @@ def identify(req: FitRequest, progress=None) -> FitOutcome:
                      "stand's physics here; the intervals include that misfit".replace("{req.model}", req.model))
     summary = _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profiles, notes,
                        time.perf_counter() - t0)
-    return FitOutcome(summary, target, space, before, after, profiles, lin)
+    return FitOutcome(summary, target, space, before, after, profiles, lin, ev)
 
 
 def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say):
@@ -289,11 +290,20 @@ def metrics(target, e: Evaluation, delay_deg: float = 0.0) -> dict | None:
 
 def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
     """One parameter's entry of the JSON (edge units)."""
+    out = _parameter_entry(space, i, lin, prof, space.keys)
+    out["start"] = float(x_start[i])
+    out["scene_value"] = float(x_scene[i])
+    return out
+
+
+def _parameter_entry(space, i: int, lin, prof, names: list[str]) -> dict:
+    """Parameter i's value, intervals and verdict (edge units); ``prof`` None: no profile was
+    computed (the linear interval stands); ``names``: every parameter's, for the verdicts."""
     p = space.params[i]
     lo, hi, sides = uncertainty.interval(lin, prof, i)
     lin_lo, lin_hi = lin.interval_u()
-    plo, phi = prof.interval_u(lin)
-    why = uncertainty.verdict(lin, prof, i, space.keys, lo, hi)
+    plo, phi = prof.interval_u(lin) if prof is not None else (math.nan, math.nan)
+    why = uncertainty.verdict(lin, prof, i, names, lo, hi)
     bound = uncertainty.at_bound(float(lin.u[i]))
     return {
         "value": space.value(i, float(lin.u[i])),
@@ -303,10 +313,9 @@ def _parameter(space, i: int, lin, prof, x_start, x_scene) -> dict:
         "bound": bound,
         "unit": p.unit,
         "bounds": [float(space.lo[i]), float(space.hi[i])],
-        "start": float(x_start[i]),
-        "scene_value": float(x_scene[i]),
         "ci95_profile": [space.value(i, plo), space.value(i, phi)],
-        "profile_agrees": all(r is None or PROFILE_LOW <= r <= PROFILE_HIGH for r in (prof.rho_low, prof.rho_high)),
+        "profile_agrees": prof is not None and all(r is None or PROFILE_LOW <= r <= PROFILE_HIGH
+                                                   for r in (prof.rho_low, prof.rho_high)),
         "interval_sources": lin.sources(i),
         "roughness_over_threshold": lin.rough_ratio(i),
         "identifiable": not why,
@@ -388,6 +397,10 @@ def load_fit(path: Path) -> dict:
         raise InputError(f"fit file {path} not found") from None
     except (UnicodeDecodeError, ValueError) as exc:
         raise InputError(f"fit file {path} is not JSON ({exc})") from None
+    if isinstance(doc, dict) and doc.get("format") == "labtool.fit.joint":
+        n = len(doc.get("files") or [])
+        raise InputError(f"{path} is a joint fit of {n} measurements; --fit draws one measurement's fit: fit that "
+                         "file alone (labtool fit FILE --model ... --free ... -o fit.json) and give that")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"{path} is not a 'labtool fit' result (no format = {FORMAT!r})")
     if doc.get("format_version") != FORMAT_VERSION:
