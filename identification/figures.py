@@ -139,3 +139,42 @@ def _limits(values) -> tuple[float, float]:
     lo, hi = float(v.min()), float(v.max())
     pad = 0.15 * (hi - lo or abs(hi) or 1.0)
     return lo - pad, hi + pad
+
+
+def suggest_figure(outcome) -> Figure:
+    """The criterion of ``labtool suggest`` against the cam speed, one curve per load: the shared
+    parameters' expected 95 % interval width after a recording there, as a share of today's (top),
+    and the D-criterion's gain, log det(M after / M before) of the shared information (bottom);
+    the measured speeds and the suggested point marked."""
+    s = outcome.summary
+    fig = Figure(figsize=(9, 7), layout="constrained")
+    top, bottom = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    cands = s["candidates"]
+    loads = sorted({c["Fu_N"] for c in cands})
+    keys = s["shared"]
+    for n, Fu in enumerate(loads):
+        rows = sorted((c for c in cands if c["Fu_N"] == Fu), key=lambda c: c["cam_speed_rpm"])
+        rpm = np.array([c["cam_speed_rpm"] for c in rows])
+        gain = np.array([np.nan if c["log_det_gain"] is None else c["log_det_gain"] for c in rows])
+        color = f"C{n}"
+        bottom.plot(rpm, gain, "o-", ms=3, color=color, label=f"Fu = {Fu:g} N")
+        for k, key in enumerate(keys):
+            w = np.array([np.nan if not c["interval_width_ratio"] or c["interval_width_ratio"].get(key) is None
+                          else 100 * c["interval_width_ratio"][key] for c in rows])
+            top.plot(rpm, w, ["o-", "s--", "^:"][k % 3], ms=3, color=color, label=f"{key}, Fu = {Fu:g} N")
+        bad = [c["cam_speed_rpm"] for c in rows if c["error"] is not None]
+        if bad:
+            bottom.plot(bad, [np.nanmin(gain) if np.isfinite(gain).any() else 0.0] * len(bad), "x", color=color,
+                        label=f"Fu = {Fu:g} N: model refused or doubtful")
+    for ax in (top, bottom):
+        for m in s["measured"]:
+            ax.axvline(m["cam_speed_rpm"], color="0.5", lw=0.8, ls=":")
+        ax.axvline(s["point"]["cam_speed_rpm"], color="tab:red", lw=1.2)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    top.set_ylabel("expected 95 % interval [% of today's]")
+    top.set_title(f"labtool suggest --goal {s['goal']}: next point {s['point']['cam_speed_rpm']:g} rpm, "
+                  f"Fu = {s['point']['Fu_N']:g} N (red); measured speeds dotted", fontsize=9)
+    bottom.set_ylabel("log det gain of the shared information")
+    bottom.set_xlabel("cam speed of the next recording [rpm]")
+    return fig
