@@ -505,3 +505,48 @@ def _revolution_residuals(problem: JointProblem, u, e: JointEvaluation) -> list[
            for ev, v, part in zip(problem.evs, problem.split(u), e.parts)]
     k = min((len(p) for p in per), default=0)
     return [np.concatenate([p[i] for p in per]) for i in range(k)]
+
+
+# --------------------------------------------------------------------------- a campaign's points
+
+def campaign_identification(point_fits: list, joint_doc: dict | None = None, joint_source: str = "") -> dict | None:
+    """What a campaign's page says about its points' fits (``labtool campaign report``): from a
+    joint fit of its measurements (``joint_doc``, a labtool.fit.joint result) when there is one,
+    else the points' own fits (``point_fits``: (point name, labtool.fit result) pairs) combined
+    (``combine``) for every group of two or more fitted with the same model and free parameters,
+    their stand properties shared. None when neither is there. Plain JSON, no wall time."""
+    if joint_doc is not None and joint_doc.get("format") == FORMAT:
+        params = {}
+        for k in joint_doc.get("shared", []):
+            e, test = joint_doc["parameters"][k], joint_doc["consistency"][k]
+            params[k] = {"value": e["value"], "unit": e.get("unit"), "ci95": e["ci95"], "ci95_combined": e["ci95_joint"],
+                         "identifiable": e.get("identifiable", True), "files": test["files"],
+                         "consistency": {x: test.get(x) for x in ("chi2", "dof", "p_value", "birge_ratio", "consistent",
+                                                                  "files_used")},
+                         "verdict": test["verdict"]}
+        return {"source": f"joint fit {joint_source}".strip(), "groups": [
+            {"model": joint_doc["model"], "free": joint_doc["free"], "points": joint_doc["files"], "parameters": params}]}
+    groups: dict = {}
+    for name, doc in point_fits:
+        if not (isinstance(doc, dict) and doc.get("format") == "labtool.fit" and isinstance(doc.get("parameters"), dict)):
+            continue
+        groups.setdefault((doc.get("model"), tuple(doc.get("free", []))), []).append((name, doc))
+    out = []
+    for (model, free), members in groups.items():
+        if len(members) < 2:
+            continue
+        try:
+            keys = [p.key for p in parse_free(",".join(free), model) if p.stand]
+        except InputError:
+            continue
+        if not keys:
+            continue
+        summaries = [doc for _, doc in members]
+        params = combine(summaries, keys)
+        for k, e in params.items():
+            for f, (name, _) in zip(e["files"], members):
+                f["point"] = name
+        out.append({"model": model, "free": list(free), "points": [n for n, _ in members], "parameters": params})
+    if not out:
+        return None
+    return {"source": "the points' own fits (fit.json in each point's folder), combined", "groups": out}
