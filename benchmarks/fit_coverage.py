@@ -165,12 +165,11 @@ def one(root: Path, c: dict, tag: str, labtool: str, accuracy: str) -> str:
 # --------------------------------------------------------------------------- the table
 
 def verdict(p: dict) -> str:
-    """identified | not identifiable | misfit (the interval is said to understate)."""
-    if not p["identifiable"]:
-        return "not identifiable"
-    if p.get("misfit"):
-        return "misfit"
-    return "identified"
+    """identified | not identifiable | misfit (the interval is said to understate); a fit from
+    before the verdicts had identifiable alone."""
+    if "verdict" in p:
+        return p["verdict"]
+    return "identified" if p["identifiable"] else "not identifiable"
 
 
 def table(root: Path, tags: list[str]) -> dict:

@@ -426,6 +426,7 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals, revs,
                                                                 other.residuals if other.ok else None)
     lin.rough_u, lin.rough = uncertainty.roughness(final, lin, J, u_j, r_j, search.FD_STEP)
+    lin.disc_u, lin.disc_rise, lin.disc_info = uncertainty.discrepancy(J, after.residuals, lin)
     limit = after.objective + lin.acceptance()
     rows = [v for v in final.visited.values() if final.at(v).ok and final.at(v).objective <= limit]
     if rows:
@@ -439,7 +440,10 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     jhi = np.concatenate([space.hi[shared]] + [space.hi[~shared]] * len(files))
     from labtool.identification.parameters import Space
     jspace = Space(tuple(jparams), jlo, jhi)
-    entries = [_parameter_entry(jspace, i, lin, profiles[i], jnames) for i in range(u.size)]
+    chi2 = after.objective / after.residuals.size
+    shared_idx = list(range(prob.ns))
+    entries = [_parameter_entry(jspace, i, lin, profiles[i], jnames, chi2, shared_idx if i < prob.ns else None)
+               for i in range(u.size)]
 
     # the consistency test of every shared parameter: the files' own fits against the joint value
     tests = {}

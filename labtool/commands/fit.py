@@ -142,6 +142,15 @@ def _num(v, fmt=".4g") -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _verdict(p: dict) -> str:
+    """A parameter's verdict as a line prints it."""
+    if not p["identifiable"]:
+        return "NOT identifiable: " + "; ".join(p["notes"])
+    if p.get("misfit"):
+        return "NOT the stand's: " + "; ".join(n for n in p["notes"] if n.startswith("misfit"))
+    return "identified"
+
+
 def summary_lines(s: dict) -> list[str]:
     """The result in plain lines: each parameter with its interval and verdict, then the fit."""
     lines = [f"{s['model']} model, omega1 {s['omega1']}, {s['accuracy']} preset (search at {s['search_accuracy']}), "
@@ -149,8 +158,7 @@ def summary_lines(s: dict) -> list[str]:
     for key, p in s["parameters"].items():
         lo, hi = p["ci95"]
         bound = f", at its {p['bound']} bound" if p["bound_hit"] else ""
-        verdict = "identified" if p["identifiable"] else "NOT identifiable: " + "; ".join(p["notes"])
-        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % [{_num(lo)}, {_num(hi)}]{bound}  {verdict}")
+        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % [{_num(lo)}, {_num(hi)}]{bound}  {_verdict(p)}")
     names = list(s["correlation"])
     for i, a in enumerate(names):
         for b in names[i + 1:]:
@@ -182,8 +190,7 @@ def joint_lines(s: dict) -> list[str]:
     lines = [f"{s['model']} model, omega1 {s['omega1']}, {s['accuracy']} preset, joint fit of {len(s['files'])} "
              f"measurements (shared: {', '.join(s['shared'])}; per file: {', '.join(s['per_file']) or '-'})"]
     for key, p in s["parameters"].items():
-        verdict = "identified" if p["identifiable"] else "NOT identifiable: " + "; ".join(p["notes"])
-        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % {_interval(*p['ci95'])}  {verdict}")
+        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % {_interval(*p['ci95'])}  {_verdict(p)}")
         if p["ci95"] != p["ci95_joint"]:
             lines.append(f"  {'':24s} {'':>10s}  (joint fit alone: {_interval(*p['ci95_joint'])})")
         for f in s["consistency"][key]["files"]:
@@ -192,8 +199,7 @@ def joint_lines(s: dict) -> list[str]:
         lines.append(f"    {s['consistency'][key]['verdict']}")
     for f, own in zip(s["files"], s["per_file_parameters"]):
         for key, p in own.items():
-            lines.append(f"  {f}: {key} {_num(p['value'])} 95 % {_interval(*p['ci95'])}"
-                         f"{'' if p['identifiable'] else ' (not identifiable)'}")
+            lines.append(f"  {f}: {key} {_num(p['value'])} 95 % {_interval(*p['ci95'])} ({p['verdict']})")
     lines.append(f"objective {_num(s['objective_after'])} ({s['degrees_of_freedom']:.0f} effective degrees of freedom), "
                  f"{s['evaluations']} model runs, {s['wall_s']:.1f} s")
     for n in s["notes"]:
