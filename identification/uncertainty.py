@@ -41,8 +41,9 @@ per direction of the part left over: the discrepancy's variance per degree of fr
 u_i has variance (J^T J)^-1_ii (S - N) / (K - p) (the classical residual-variance estimate, with
 the misfit's features in place of the residual points). K is the residuals' participation ratio
 (sum r^2)^2 / sum r^4 (the number of points that carry the misfit; for a misfit at a few impacts,
-a few) over the residuals' correlation inflation (the points one feature spans), at least p + 1;
-its 95 % half-width uses t(0.975, K - p). A model that explains the measurement (S ~ N) adds
+a few) over the residuals' correlation inflation (the points one feature spans), at least
+p + MIN_FEATURE_DOF (a variance from one or two features is no estimate: its t quantile reaches
+12.7 and 4.3, and the interval the bounds); its 95 % half-width uses t(0.975, K - p). A model that explains the measurement (S ~ N) adds
 nothing. The objective's rise at that half-width joins the acceptance threshold (every evaluated
 point below it widens the interval, other basins of a misfit objective included).
 
@@ -68,6 +69,7 @@ PROFILE_AGREES = (0.5, 2.0)     # rho within this: the linear interval's edge is
 BOUND_TOL = 1e-3                # u this close to 0 or 1 is at the bound
 BOUNDS_CHECK = 0.25             # the profile visits the bounds when the interval spans more than this of them
 MOST_OF_BOUNDS = 0.5            # an interval spanning more than this of the bounds identifies nothing
+MIN_FEATURE_DOF = 3             # the discrepancy's degrees of freedom, at least (t(0.975, 3) = 3.18)
 
 
 @dataclasses.dataclass
@@ -229,7 +231,7 @@ def discrepancy(J: np.ndarray, r: np.ndarray, lin: "Linear") -> tuple[np.ndarray
     ratio = S * S / r4 if r4 > 0 else float(n)
     infl = lin.inflation
     infl = infl[np.isfinite(infl) & (infl > 0)]
-    features = max(ratio / max(float(np.mean(infl)) if infl.size else 1.0, 1.0), p + 1.0)
+    features = max(ratio / max(float(np.mean(infl)) if infl.size else 1.0, 1.0), p + MIN_FEATURE_DOF)
     dof = features - p
     t = float(stats.t.ppf(0.975, dof))
     per = excess / dof
