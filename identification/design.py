@@ -1,5 +1,6 @@
 """The next experiment: the operating point whose recording would narrow the fit's intervals most
-(``labtool suggest --goal identify``; docs/identification.md, "The next experiment").
+(``labtool suggest --goal identify``), or tell the candidate models apart (``--goal discriminate``;
+docs/identification.md, "The next experiment").
 
 D-optimal design on the fit's own Jacobian (Atkinson, Donev & Tobias, Optimum Experimental
 Designs, ch. 10-11): the measurements so far are fitted (one file alone, several jointly), which
@@ -23,6 +24,12 @@ revolutions a recording of the same duration holds at c, and the fit's 1 % floor
 Candidates: cam speeds on ``rpm_range`` (within the models' range, Mechanism.check_cam_speed) at
 the loads given (default the measured ones and the paper's two levels, 0 and 65 N); a candidate
 whose model run fails or warns about its own validity is left out and listed with the reason.
+
+``--goal discriminate``: the candidate models (``models``, at the first measurement's operating
+point and model options) are simulated at every candidate speed and load by the report's
+discrimination (labtool.reports.discrimination.discriminate): their omega2 and epsilon2 cycles'
+rms difference in units of the measurement's scatter (scaled with the speed as the signals are);
+the point is where the closest pair's epsilon2 lies furthest apart.
 """
 from __future__ import annotations
 
@@ -63,13 +70,16 @@ class SuggestRequest:
     accuracy: str = "fast"
     revolutions: int = 3
     fit: dict = dataclasses.field(default_factory=dict)
+    models: tuple = ("rigid", "elastic")     # --goal discriminate: the candidate models
 
     def check(self) -> None:
         if self.goal not in GOALS:
             raise InputError(f"--goal must be one of {', '.join(GOALS)}, got '{self.goal}'")
         if self.goal == "discriminate":
-            raise InputError("--goal discriminate needs the models' discrimination (labtool.reports.discrimination), "
-                             "which this labtool does not have yet; use --goal identify")
+            bad = [m for m in self.models if m not in pipeline.MODELS]
+            if bad or len(set(self.models)) < 2:
+                raise InputError(f"--models: --goal discriminate needs two or more of {', '.join(pipeline.MODELS)}, got "
+                                 f"{','.join(self.models) or 'none'}")
         lo, hi, step = self.rpm_range
         if not (all(math.isfinite(v) for v in (lo, hi, step)) and 0 < lo <= hi and step > 0):
             raise InputError(f"--rpm-range must be lo:hi:step with 0 < lo <= hi and step > 0 rpm, got "
@@ -172,6 +182,8 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
     files = [Path(m) for m in req.measured]
     if not files:
         raise InputError("give at least one measured file")
+    if req.goal == "discriminate":
+        return _discriminate(req, files, say, t0)
     free = parse_free(req.free, req.model, (req.fit.get("overrides") or {}).get("elastic_gap") or "physical")
     from labtool.identification.joint import parse_shared
     shared = parse_shared(req.shared, free)
@@ -320,3 +332,58 @@ def _summary(req, files, free, shared, fit, current, noise, cands, best, targets
         "fit": fit,
         "wall_s": wall,
     })
+
+
+def _discriminate(req: SuggestRequest, files: list, say, t0: float) -> SuggestOutcome:
+    """--goal discriminate: where the candidate models' predictions lie furthest apart against the
+    first measurement's scatter (labtool.reports.discrimination), over the candidate speeds and loads."""
+    from labtool.identification.objective import load_target
+    from labtool.reports.discrimination import TELLS_APART, discriminate
+    from labtool.reports.summary import plain_json
+
+    rpms = speeds(req.rpm_range)
+    say(f"reading {files[0].name}")
+    target = load_target(files[0], None, (req.fit.get("overrides") or {}))
+    scatter = {s: target.cycles.std(s) for s in SIGNALS}
+    measured_rpm = float(target.cycles.cam_speed_rpm)
+    loads = sorted(set(req.loads) if req.loads is not None else {float(target.op.get("Fu_N", 0.0))} | set(PAPER_LOADS))
+    cands = [(m, m, "const") for m in req.models]
+    per_load, rows, failed = {}, [], {}
+    for n, Fu in enumerate(loads):
+        say(f"the models at {len(rpms)} speeds, Fu = {Fu:g} N ({n + 1}/{len(loads)})")
+        op = {**{k: v for k, v in target.op.items() if k not in pipeline.CHAIN_KEYS}, "Fu_N": float(Fu)}
+        d = discriminate(op, cands, scatter, measured_rpm, speeds_rpm=list(rpms) + [measured_rpm],
+                         accuracy=req.accuracy, revolutions=req.revolutions, cond=target.cond)
+        per_load[Fu] = d
+        failed.update({f"{k} (Fu = {Fu:g} N)": v for k, v in d.failed.items()})
+        worst = d.worst_pair("epsilon2")
+        for rpm, dist, w2 in zip(d.speeds_rpm, worst, d.worst_pair("omega2")):
+            rows.append({"cam_speed_rpm": float(rpm), "Fu_N": float(Fu),
+                         "epsilon2_distance": float(dist) if math.isfinite(dist) else None,
+                         "omega2_distance": float(w2) if math.isfinite(w2) else None,
+                         "measured_speed": bool(abs(rpm - measured_rpm) < 1e-6)})
+    good = [r for r in rows if r["epsilon2_distance"] is not None]
+    if not good:
+        raise InputError(f"the models could not be compared at any candidate point (first failure: "
+                         f"{next(iter(failed.values()), 'none')}); check them with 'labtool simulate'")
+    best = max(good, key=lambda r: r["epsilon2_distance"])
+    here = next((r for r in good if r["measured_speed"] and r["Fu_N"] == float(target.op.get("Fu_N", 0.0))), None)
+    d_best = per_load[best["Fu_N"]]
+    sentence = (f"a recording at {best['cam_speed_rpm']:g} rpm, Fu = {best['Fu_N']:g} N is where the closest pair of "
+                f"{', '.join(req.models)} differs most: epsilon2 by {best['epsilon2_distance']:.3g} x the measured scatter"
+                + (f" ({here['epsilon2_distance']:.3g} x at the measured {measured_rpm:.0f} rpm)" if here else "")
+                + ("" if best["epsilon2_distance"] >= TELLS_APART else
+                   f"; below {TELLS_APART:g}: no candidate point tells them apart"))
+    snippet = (f"[[points]]\nname = \"next_{best['cam_speed_rpm']:g}rpm\"\nrpm = {best['cam_speed_rpm']:g}\n"
+               f"Fu_N = {best['Fu_N']:g}\n")
+    summary = plain_json({
+        "format": FORMAT, "format_version": FORMAT_VERSION, "goal": "discriminate", "models": list(req.models),
+        "measured": [{"file": str(files[0]), "cam_speed_rpm": measured_rpm, "Fu_N": target.op.get("Fu_N")}],
+        "point": {"cam_speed_rpm": best["cam_speed_rpm"], "Fu_N": best["Fu_N"], "law": target.op.get("law"),
+                  "jt_factor": target.op.get("jt_factor")},
+        "expected": {"epsilon2_distance": best["epsilon2_distance"], "omega2_distance": best["omega2_distance"],
+                     "at_measured": here["epsilon2_distance"] if here else None, "tells_apart": TELLS_APART,
+                     "sentence": sentence},
+        "candidates": rows, "pairs": [list(p) for p in d_best.pairs], "failed": failed,
+        "plan_points_toml": snippet, "wall_s": time.perf_counter() - t0})
+    return SuggestOutcome(summary, rows, None)

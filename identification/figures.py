@@ -145,8 +145,11 @@ def suggest_figure(outcome) -> Figure:
     """The criterion of ``labtool suggest`` against the cam speed, one curve per load: the shared
     parameters' expected 95 % interval width after a recording there, as a share of today's (top),
     and the D-criterion's gain, log det(M after / M before) of the shared information (bottom);
-    the measured speeds and the suggested point marked."""
+    the measured speeds and the suggested point marked. ``--goal discriminate``: the closest pair
+    of models' distance against speed."""
     s = outcome.summary
+    if s["goal"] == "discriminate":
+        return _discriminate_figure(s)
     fig = Figure(figsize=(9, 7), layout="constrained")
     top, bottom = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     cands = s["candidates"]
@@ -177,4 +180,27 @@ def suggest_figure(outcome) -> Figure:
                   f"Fu = {s['point']['Fu_N']:g} N (red); measured speeds dotted", fontsize=9)
     bottom.set_ylabel("log det gain of the shared information")
     bottom.set_xlabel("cam speed of the next recording [rpm]")
+    return fig
+
+
+def _discriminate_figure(s: dict) -> Figure:
+    """The closest pair of models' epsilon2 (and omega2) distance in measured scatters against speed."""
+    fig = Figure(figsize=(9, 5), layout="constrained")
+    ax = fig.add_subplot(1, 1, 1)
+    for n, Fu in enumerate(sorted({c["Fu_N"] for c in s["candidates"]})):
+        rows = sorted((c for c in s["candidates"] if c["Fu_N"] == Fu), key=lambda c: c["cam_speed_rpm"])
+        rpm = [c["cam_speed_rpm"] for c in rows]
+        for key, style in (("epsilon2_distance", "o-"), ("omega2_distance", "s:")):
+            ax.plot(rpm, [np.nan if c[key] is None else c[key] for c in rows], style, ms=3, color=f"C{n}",
+                    label=f"{key.split('_')[0]}, Fu = {Fu:g} N")
+    ax.axhline(s["expected"]["tells_apart"], color="0.3", lw=0.8, ls="--", label="tells apart")
+    ax.axvline(s["measured"][0]["cam_speed_rpm"], color="0.5", lw=0.8, ls=":")
+    ax.axvline(s["point"]["cam_speed_rpm"], color="tab:red", lw=1.2)
+    ax.set_yscale("log")
+    ax.set_xlabel("cam speed of the next recording [rpm]")
+    ax.set_ylabel("closest pair's rms difference / measured scatter")
+    ax.set_title(f"labtool suggest --goal discriminate ({', '.join(s['models'])}): next point "
+                 f"{s['point']['cam_speed_rpm']:g} rpm, Fu = {s['point']['Fu_N']:g} N (red); measured dotted", fontsize=9)
+    ax.grid(True, alpha=0.3, which="both")
+    ax.legend(fontsize=7, loc="best")
     return fig

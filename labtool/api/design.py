@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def suggest(measured, *, goal: str = "identify", model: str = "rigid", free: str = "backlash,restitution",
-            shared: str | None = None, rpm_range: tuple = (120.0, 600.0, 20.0), loads=None, accuracy: str = "fast",
+            models=("rigid", "elastic"), shared: str | None = None, rpm_range: tuple = (120.0, 600.0, 20.0), loads=None, accuracy: str = "fast",
             revolutions: int = 3, progress=None, **fit_options):
     """Suggest the next operating point (cam speed, load) from the measurements so far.
 
@@ -14,12 +14,16 @@ def suggest(measured, *, goal: str = "identify", model: str = "rigid", free: str
     ----------
     measured : path or list of paths
         measured.nc files (``labtool.process``); several are fitted jointly.
-    goal : {"identify"}
-        ``identify``: D-optimal on the fit's Jacobian (docs/identification.md, "The next experiment").
+    goal : {"identify", "discriminate"}
+        ``identify``: D-optimal on the fit's Jacobian; ``discriminate``: where the ``models``'
+        predictions differ most against the measured scatter (docs/identification.md, "The next
+        experiment").
     model : {"rigid", "elastic"}
         The model whose parameters are identified.
     free : str
         The identified parameters, comma-separated (as ``labtool.fit``).
+    models : sequence of str
+        ``discriminate``: the models to tell apart.
     shared : str, optional
         The free parameters every recording shares (default: the stand's properties).
     rpm_range : (lo, hi, step)
@@ -47,5 +51,5 @@ def suggest(measured, *, goal: str = "identify", model: str = "rigid", free: str
     files = [Path(m) for m in measured] if isinstance(measured, (list, tuple)) else [Path(measured)]
     req = SuggestRequest(files, model, free, goal, shared, tuple(float(v) for v in rpm_range),
                          None if loads is None else tuple(float(v) for v in loads), accuracy, int(revolutions),
-                         fit=dict(fit_options))
+                         fit=dict(fit_options), models=tuple(models))
     return run(req, progress=progress)

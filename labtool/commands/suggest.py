@@ -1,10 +1,12 @@
 """``labtool suggest``: the operating point to record next (labtool.identification.design).
 
-Fits the measurements given (one alone, several jointly), rates candidate cam speeds and loads by
-how much a recording there would narrow the shared parameters' intervals, and prints the point,
-the expected gain and a ``[[points]]`` snippet for a campaign plan; ``-o next.json`` writes the
-result and the figure of the criterion against speed beside it (``next.png``, or ``--figure``).
-Exit 0: a point was suggested; exit 2: bad input, one line, nothing written.
+``--goal identify``: fits the measurements given (one alone, several jointly) and rates candidate
+cam speeds and loads by how much a recording there would narrow the shared parameters' intervals;
+``--goal discriminate``: where the candidate models' predictions differ most against the
+measurement's scatter. Prints the point, the expected gain and a ``[[points]]`` snippet for a
+campaign plan; ``-o next.json`` writes the result and the figure of the criterion against speed
+beside it (``next.png``, or ``--figure``). Exit 0: a point was suggested; exit 2: bad input, one
+line, nothing written.
 """
 from __future__ import annotations
 
@@ -25,8 +27,9 @@ def register(app: typer.Typer) -> None:
 def suggest(
     measured: list[Path] = typer.Argument(..., help="measured.nc files written by 'labtool process' (one or more)"),
     goal: str = typer.Option("identify", help="identify: the point that narrows the fit's intervals most (D-optimal); "
-                             "discriminate: where the models differ most (not available yet)"),
+                             "discriminate: where the --models' predictions differ most against the measured scatter"),
     model: str = typer.Option("rigid", help="the model whose parameters are identified: rigid or elastic"),
+    models: str = typer.Option("rigid,elastic", help="--goal discriminate: the models to tell apart, comma-separated"),
     free: str = typer.Option("backlash,restitution", help="the parameters identified, comma-separated (as labtool fit "
                              "--free)"),
     shared: Optional[str] = typer.Option(None, help="the free parameters every recording shares (the others are each "
@@ -65,7 +68,7 @@ def suggest(
         if not load_values:
             raise InputError("--loads names no load; give e.g. --loads 0,65")
     req = SuggestRequest(list(measured), model, free, goal, shared, (lo, hi, step), load_values, accuracy,
-                         fit={"max_runs": max_runs})
+                         fit={"max_runs": max_runs}, models=tuple(m.strip() for m in models.split(",") if m.strip()))
     err = console(stderr=True)
     with (err.status("suggest") if err.is_terminal else ProgressLines(sys.stderr, "suggest")) as status:
         outcome = run(req, progress=lambda msg: status.update(msg))
@@ -91,6 +94,8 @@ def suggest(
 
 def summary_lines(s: dict) -> list[str]:
     """The suggestion in plain lines: today's intervals, the point, the gain, the best candidates."""
+    if s["goal"] == "discriminate":
+        return _discriminate_lines(s)
     p = s["point"]
     lines = [f"{s['model']} model, shared {', '.join(s['shared'])}; measured: "
              + ", ".join(f"{m['cam_speed_rpm']:.1f} rpm (Fu = {m['Fu_N']:g} N)" for m in s["measured"])]
@@ -107,6 +112,22 @@ def summary_lines(s: dict) -> list[str]:
     if left:
         lines.append(f"  left out: {len(left)} candidate(s) the model refused or doubted (first: {left[0]['cam_speed_rpm']:g} "
                      f"rpm, Fu = {left[0]['Fu_N']:g} N: {left[0]['error']})")
+    lines.append("a campaign plan takes it as its next point:")
+    lines += ["  " + line for line in s["plan_points_toml"].strip().splitlines()]
+    return lines
+
+
+def _discriminate_lines(s: dict) -> list[str]:
+    p, m = s["point"], s["measured"][0]
+    lines = [f"models {', '.join(s['models'])}; measured: {m['cam_speed_rpm']:.1f} rpm (Fu = {m['Fu_N']:g} N)",
+             f"next point: {p['cam_speed_rpm']:g} rpm, Fu = {p['Fu_N']:g} N",
+             f"  {s['expected']['sentence']}"]
+    good = sorted((c for c in s["candidates"] if c["epsilon2_distance"] is not None),
+                  key=lambda c: -c["epsilon2_distance"])
+    lines.append("  best candidates: " + ", ".join(f"{c['cam_speed_rpm']:g} rpm / {c['Fu_N']:g} N "
+                                                  f"({c['epsilon2_distance']:.3g})" for c in good[:5]))
+    for what, why in s["failed"].items():
+        lines.append(f"  {what} failed at {why}")
     lines.append("a campaign plan takes it as its next point:")
     lines += ["  " + line for line in s["plan_points_toml"].strip().splitlines()]
     return lines
