@@ -1,6 +1,8 @@
 """Does following ``labtool suggest`` pay? A simulated campaign loop on the simulated stand.
 
-For each seed (a stand with its own backlash j and contact damping, the twin: docs/twin.md):
+For each seed (a stand with its own backlash j and energy loss: the twin, docs/twin.md, with its
+contact damping, or ``--truth rigid``, the rigid model's own physics through the stand's chain,
+with its restitution):
 
 * **suggested**: a first recording at 180 rpm, no load; ``labtool suggest --goal identify``
   on it gives the second point; ``labtool suggest`` on the two gives the third;
@@ -13,7 +15,7 @@ backlash,restitution --shared backlash``) and the backlash's 95 % interval compa
 Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and writes
 ``benchmarks/results/suggest_loop.json``.
 
-    nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 4
+    nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
 """
 from __future__ import annotations
@@ -39,10 +41,16 @@ SUGGEST = ["--model", "rigid", "--free", "backlash,restitution", "--shared", "ba
            "--loads", "0,65", "--accuracy", "fast"]
 
 
+TRUTH = {"model": "twin"}     # the stand's truth: twin or rigid (--truth)
+
+
 def truth(seed: int) -> dict:
     rng = np.random.default_rng([2026, seed])
-    return {"backlash_mm": round(float(np.exp(rng.uniform(math.log(0.06), math.log(0.2)))), 4),
-            "contact_damping": round(float(rng.uniform(20.0, 60.0)), 1)}
+    out = {"backlash_mm": round(float(np.exp(rng.uniform(math.log(0.06), math.log(0.2)))), 4),
+           "contact_damping": round(float(rng.uniform(20.0, 60.0)), 1)}
+    if TRUTH["model"] == "rigid":
+        out = {"backlash_mm": out["backlash_mm"], "restitution": round(float(rng.uniform(0.2, 0.6)), 3)}
+    return out
 
 
 def _run(args: list[str]) -> subprocess.CompletedProcess:
@@ -61,8 +69,10 @@ def record(folder: Path, seed: int, rpm: float, Fu: float, tag: str = "") -> Pat
     nc = folder / f"{rpm:g}rpm_{Fu:g}N{tag}.nc"
     if not nc.exists():
         h5 = nc.with_suffix(".h5")
+        loss = (["--truth", "rigid", "--restitution", str(t["restitution"])] if "restitution" in t
+                else ["--contact-damping", str(t["contact_damping"])])
         _run(["acquire", "--device", "sim", "--fast", "--duration", str(DURATION_S), "--rpm", f"{rpm:g}", "--fu",
-              f"{Fu:g}", "--backlash-mm", str(t["backlash_mm"]), "--contact-damping", str(t["contact_damping"]),
+              f"{Fu:g}", "--backlash-mm", str(t["backlash_mm"]), *loss,
               "--seed", str(seed * 100_000 + int(rpm) * 100 + int(Fu) + (11 * int(tag[-1]) if tag else 0)),
               "-o", str(h5), "--force"])
         _run(["process", str(h5), "-o", str(nc), "--force"])
@@ -128,7 +138,9 @@ def main() -> None:
     ap.add_argument("--dir", type=Path, required=True)
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--table", action="store_true")
+    ap.add_argument("--truth", default="twin", choices=("twin", "rigid"), help="the simulated stand's truth")
     args = ap.parse_args()
+    TRUTH["model"] = args.truth
     if args.table:
         rows = table(args.dir)
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
