@@ -40,7 +40,7 @@ from labtool.common.errors import InputError, SolverError
 from labtool.identification import search, uncertainty
 from labtool.identification.fit import (FitOutcome, FitRequest, OTHER_PRESET, POLISH_NFEV, SEARCH_PRESET,
                                         identify, _parameter_entry)
-from labtool.identification.parameters import CATALOGUE, make_space, parse_free
+from labtool.identification.parameters import CATALOGUE, Space, make_space, parse_free
 
 FORMAT = "labtool.fit.joint"
 FORMAT_VERSION = 1
@@ -438,7 +438,6 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     jnames = shared_keys + [f"{k}[{i}]" for i in range(len(files)) for k in own_keys]
     jlo = np.concatenate([space.lo[shared]] + [space.lo[~shared]] * len(files))
     jhi = np.concatenate([space.hi[shared]] + [space.hi[~shared]] * len(files))
-    from labtool.identification.parameters import Space
     jspace = Space(tuple(jparams), jlo, jhi)
     chi2 = after.objective / after.residuals.size
     shared_idx = list(range(prob.ns))
@@ -461,6 +460,7 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
             e["notes"] = e["notes"] + [verdict_text(k, test)]
             if _to_unit_one(jspace, i, e["ci95"][1]) - _to_unit_one(jspace, i, e["ci95"][0]) > uncertainty.MOST_OF_BOUNDS:
                 e["identifiable"] = False
+                e["verdict"] = "not identifiable"
                 e["notes"].append("widened, its 95 % interval spans more than half the bounds")
         tests[k] = {**test, "verdict": verdict_text(k, test),
                     "files": [{"file": str(f), "cam_speed_rpm": s["measured"]["cam_speed_rpm_measured"],

@@ -226,7 +226,12 @@ class Space:
         if math.isinf(u):
             return 0.0 if self.params[i].log and u < 0 else float(u)
         lo, hi = float(self.lo[i]), float(self.hi[i])
-        return lo * (hi / lo) ** u if self.params[i].log else lo + u * (hi - lo)
+        if not self.params[i].log:
+            return lo + u * (hi - lo)
+        try:
+            return lo * (hi / lo) ** u
+        except OverflowError:          # far beyond the bounds (a widened interval): no finite value
+            return math.inf
 
 
     def as_dict(self, edge) -> dict:

@@ -149,3 +149,13 @@ def test_combining_fits_is_the_inverse_variance_mean_on_the_search_scale():
     # a fit that does not identify it is listed but not used
     d = _summary(0.9, [None, None], "d.nc", identifiable=False)
     assert combine([a, b, d], ["restitution"])["restitution"]["value"] == pytest.approx(c["value"])
+
+
+@pytest.mark.slow
+def test_a_disagreement_that_widens_past_half_the_bounds_is_not_identifiable(tmp_path, monkeypatch):
+    # files at 0.05 and 0.4 mm: the Birge-widened joint interval spans more than half the log bounds
+    stand_in(monkeypatch)
+    s = _joint(_files(tmp_path, (0.05, 0.4)), shared="backlash")
+    j = s["parameters"]["backlash_mm"]
+    assert not s["consistent"] and not j["identifiable"] and j["verdict"] == "not identifiable"
+    assert any("widened" in n for n in j["notes"])
