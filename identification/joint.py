@@ -349,6 +349,10 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     free = parse_free(req.free, req.model, req.overrides.get("elastic_gap") or "physical")
     shared = parse_shared(req.shared, free)
     space = make_space(free, req.bounds)
+    # every file readable before the first is fitted: a typo in the last must not cost minutes
+    from labtool.reports.pipeline import load_measured
+    for f in files:
+        load_measured(f).close()
     singles: list[FitOutcome] = []
     for i, f in enumerate(files):
         tell = (lambda msg, i=i, f=f: say(f"file {i + 1}/{len(files)} ({f.name}): {msg}"))

@@ -159,3 +159,12 @@ def test_a_disagreement_that_widens_past_half_the_bounds_is_not_identifiable(tmp
     j = s["parameters"]["backlash_mm"]
     assert not s["consistent"] and not j["identifiable"] and j["verdict"] == "not identifiable"
     assert any("widened" in n for n in j["notes"])
+
+
+def test_a_missing_file_is_refused_before_any_file_is_fitted(tmp_path, monkeypatch):
+    calls = []
+    stand_in(monkeypatch, calls=calls)
+    p = _files(tmp_path, (0.2,))[0]
+    with pytest.raises(InputError, match="measured file .*none.nc not found"):
+        _joint([p, tmp_path / "none.nc"])
+    assert calls == []
