@@ -29,7 +29,7 @@ def suggest(measured, *, goal: str = "identify", model: str = "rigid", free: str
     rpm_range : (lo, hi, step)
         Candidate cam speeds [rpm].
     loads : sequence of float, optional
-        Candidate loads Fu [N] (default: the measured ones and the paper's 0 and 65 N).
+        Candidate loads Fu [N] (default: the measured ones).
     accuracy : {"fast", "standard"}
         Solver preset of the fit and of the candidates' runs.
     revolutions : int

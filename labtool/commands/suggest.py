@@ -37,7 +37,8 @@ def suggest(
                                          "contact_length, ka_gain, delay)"),
     rpm_range: str = typer.Option("120:600:20", help="candidate cam speeds lo:hi:step [rpm], within the models' range"),
     loads: Optional[str] = typer.Option(None, help="candidate loads Fu, comma-separated [N] (default: the measured "
-                                        "ones and the paper's 0 and 65 N)"),
+                                        "ones; at a load never measured the model may misfit far more than the "
+                                        "expected gain assumes)"),
     accuracy: str = typer.Option("fast", help="solver preset of the fit and of the candidates' runs: fast or standard"),
     max_runs: int = typer.Option(200, help="model runs the fit's search may use [-]"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="the suggestion to write (JSON)"),
