@@ -127,7 +127,7 @@ class Recorder:
         self._lock = WriterLock.create(self.path, replace)
         try:
             self._reserve = _DiskReserve(self.path.parent, self.reserve_bytes)
-            self._f = h5py.File(self.path, "w", libver=LIBVER)
+            self._f = _create_hdf5(self.path)
         except OSError as exc:
             self.path.unlink(missing_ok=True)
             self._lock.release()
@@ -405,6 +405,24 @@ class _DiskReserve:
             f.close()
 
 
+CREATE_TRIES, CREATE_WAIT_S = 40, 0.025
+
+
+def _create_hdf5(path: Path):
+    """h5py.File(path, "w") on the file the writer lock just created. A reader that opens it in the
+    same instant (a monitor polling for it, a file indexer) holds HDF5's shared file lock for the
+    moment its open fails, and HDF5's create then fails with EAGAIN ("unable to lock file"): the
+    create is tried again for up to 1 s instead of failing the recording."""
+    for attempt in range(CREATE_TRIES):
+        try:
+            return h5py.File(path, "w", libver=LIBVER)
+        except OSError as exc:
+            busy = exc.errno == errno.EAGAIN or "unable to lock file" in str(exc)
+            if not busy or attempt == CREATE_TRIES - 1:
+                raise
+            time.sleep(CREATE_WAIT_S)
+
+
 def _classify(exc: Exception) -> OSError:
     """ENOSPC (also when h5py wraps it in a RuntimeError's message) -> DiskFull; other OSErrors
     unchanged; any other HDF5 failure -> OSError with its first line."""
@@ -439,3 +457,34 @@ def read_recording(path) -> dict:
             "ka_m_s2_per_v": np.asarray(f["signals"].attrs["ka_m_s2_per_v"], float),
             "events": [(int(e["index"]), e["kind"].decode(), e["detail"].decode("utf-8", "replace")) for e in ev],
         }
+
+
+def unfinished(path) -> str | None:
+    """What ``path`` holds when a rerun may record over it without ``--force``: an empty file (a run
+    killed as it created it) or a labtool recording that did not finish (``complete`` false: stopped
+    short of its duration, killed, a full disk); None for anything else (a finished recording, another
+    file, one that cannot be read: those are replaced only when asked). The text names the samples kept."""
+    from labtool.common.errors import LabtoolError
+
+    p = Path(path)
+    try:
+        if not p.is_file():
+            return None
+        if p.stat().st_size == 0:
+            return "an empty file left by a run killed as it started"
+        f, _note = open_file(p)
+    except (OSError, LabtoolError):
+        return None
+    try:
+        with f:
+            if f.attrs.get("format") != FORMAT or "signals" not in f:
+                return None
+            if f.attrs.get("complete") not in (False, 0):
+                return None
+            reason = f.attrs.get("stop_reason", "")
+            reason = reason.decode("utf-8", "replace") if isinstance(reason, bytes) else str(reason)
+            n = int(f["signals"].shape[0])
+    except Exception:      # noqa: BLE001 - h5py raises many types for a damaged file: not replaced unasked
+        return None
+    why = "killed while recording" if reason in ("", "recording (not closed)") else reason
+    return f"an unfinished recording ({n} samples; {why})"

@@ -1,8 +1,11 @@
 """One acquisition run: device -> recorder, with clean stops on Ctrl-C, disconnect and a full disk.
 
 ``run(device, path, ...)`` configures and starts the device, writes every block, and always
-leaves a readable file: a clean end (duration reached, Ctrl-C, device disconnected) closes it with
-``complete = True`` and a ``stop`` event saying why; a full disk stops the run (before HDF5 meets
+leaves a readable file with a ``stop`` event saying why it ended. ``complete = True`` means the
+recording holds what was asked: the duration reached, a device that ended (a disconnect: its
+fault event says so), or, without a duration, the user's stop. A recording stopped short of its
+duration (Ctrl-C, SIGTERM, SIGHUP) is closed cleanly with every sample kept and ``complete = False``,
+so that nothing takes it for the whole recording; a full disk stops the run (before HDF5 meets
 ENOSPC: the recorder keeps a reserve), keeps every sample that reached the file and leaves
 ``complete = False``. A run that fails before its first sample leaves no file.
 """
@@ -38,6 +41,7 @@ class RunResult:
     clipped: tuple
     peak_v: tuple
     complete: bool
+    signum: int | None = None     # the stop signal received (SIGINT, SIGTERM, SIGHUP), even after the last block
 
 
 def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: dict | None = None,
@@ -77,6 +81,7 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         while target is None or rec.device_index < target:
             if stop.signum is not None:
                 outcome, message = "interrupted", f"stopped by the user ({stop.name})"
+                complete = target is None       # short of its duration: never taken for the whole recording
                 break
             block = device.read_block()
             if block is None:
@@ -97,6 +102,7 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     except KeyboardInterrupt as exc:
         name = signal.Signals(exc.signum).name if isinstance(exc, Interrupted) else "Ctrl-C"
         outcome, message = "interrupted", f"stopped by the user ({name})"
+        complete = target is None or rec.device_index >= target
         insist = exc
     except DeviceDisconnected as exc:
         outcome, message = "disconnected", f"device disconnected: {exc}"
@@ -114,9 +120,11 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
         _try(lambda: rec.add_event(Event(rec.n_samples, "fault", message[:250])))
         raise
     finally:
-        stop.restore()
-        _try(device.stop)
-        outcome, message, complete = _close(rec, outcome, message, complete)
+        try:       # a signal while the file is closed is seen (stop.signum), never lost nor raised mid-close
+            _try(device.stop)
+            outcome, message, complete = _close(rec, outcome, message, complete)
+        finally:
+            stop.restore()
     # a recording that another command runs (labtool demo's acquire step): a stop signal ends that
     # command too, once this file is closed, not only this recording (a second signal always does)
     if stop.signum is not None and inside_another_command():
@@ -124,8 +132,11 @@ def run(device: Device, path, rate_hz: float, duration_s: float | None, attrs: d
     if insist is not None and inside_another_command():
         raise insist
     wall = time.perf_counter() - t0
+    signum = stop.signum if stop.signum is not None else \
+        (getattr(insist, "signum", signal.SIGINT) if insist is not None else None)
     return RunResult(str(path), outcome, message, rec.n_samples, actual, wall, rec.overruns, rec.gaps,
-                     rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete)
+                     rec.samples_lost, tuple(sorted(rec.clipped)), tuple(float(p) for p in rec.peak_v), complete,
+                     signum)
 
 
 def _close(rec: Recorder, outcome: str, message: str, complete: bool):

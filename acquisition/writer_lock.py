@@ -100,6 +100,12 @@ def _folder_lock(folder: Path):
             os.close(fd)  # closing releases the flock
 
 
+def busy_message(path) -> str:
+    """The refusal of a recording in progress: its name, and that --force does not replace it."""
+    return (f"{path} is being recorded by another process right now; --force does not replace a recording in "
+            "progress: choose another name or stop that run first")
+
+
 class WriterLock:
     """The lock of one recording being written; ``release()`` (or closing) ends it.
 
@@ -117,9 +123,7 @@ class WriterLock:
         with _folder_lock(path.parent if str(path.parent) else Path(".")):
             if path.exists() or path.is_symlink():
                 if is_being_written(path):
-                    raise RecordingBusy(f"{path} is being recorded by another process right now; "
-                                        "--force does not replace a recording in progress: "
-                                        "choose another name or stop that run first")
+                    raise RecordingBusy(busy_message(path))
                 if not replace:
                     raise InputError(f"{path} already exists; use --force to overwrite it")
                 path.unlink()

@@ -35,7 +35,7 @@ grid, or both) and what to compare with. Example (sample_data/plans/paper_3_spee
     Fu_N = 0.0
     backlash_mm = 0.128                  # j
     jt_factor = 1.0                      # Jt / Jt nominal
-    revolutions = 10                     # whole cam revolutions to record (or duration_s)
+    revolutions = 10                     # whole cam revolutions averaged (N + 1.5 periods recorded; or duration_s)
 
     [[points]]                           # a list ...
     rpm = 180
@@ -259,8 +259,11 @@ def _resolve(base: Path, rel: str, what: str) -> Path:
 def _duration(v: dict, rpm: float) -> float:
     if v.get("duration_s") is not None:
         return float(v["duration_s"])
-    # N whole revolutions need N + 1 periods: the recording starts and ends mid-revolution in general
-    return (float(v["revolutions"]) + 1.0) * 60.0 / rpm
+    # N whole revolutions averaged need N + 1 tacho marks with the rise after the last one whole:
+    # a recording that starts at a mark (the simulated stand's, at phi1 = 0) sees no edge there, and
+    # processing completes a revolution once the next rise is whole (0.2 of a period on the STB-216).
+    # N + 1.5 periods: N revolutions from such a start, N or N + 1 from any other
+    return (float(v["revolutions"]) + 1.5) * 60.0 / rpm
 
 
 def expand_points(doc) -> list[Point]:

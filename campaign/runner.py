@@ -13,11 +13,13 @@ Progress goes to a ``Reporter`` (the CLI draws it); warnings of the layers go to
 from __future__ import annotations
 
 import dataclasses
+import secrets
 import shutil
 import time
 from pathlib import Path
 
-from labtool.common.errors import InputError, LabtoolError
+from labtool.common.errors import InputError, LabtoolError, interrupt_cause, interruption
+from labtool.common.files import check_interrupted
 from labtool.common.names import shown
 from labtool.campaign import steps
 from labtool.campaign.plan import Plan
@@ -104,11 +106,19 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
     _check_existing(plan, point, state, redo)
     worked = False
     for step in ("acquire", "process", "compare"):
+        check_interrupted()          # a stop signal whose exception Python dropped ends the run here
         inputs = _inputs(plan, point, state, step)
         if state.finished(step, inputs):
             rep.step(point, step, "kept")
             continue
         if step == "acquire" and (folder / "recording.h5").exists():
+            own = _own_finished_recording(folder / "recording.h5", state, inputs, point)
+            if own is not None:    # stopped between the recording's end and its record: it is whole
+                state.record(step, inputs, own)
+                rep.warn(f"point {point.name}: its recording had finished when the run was stopped; kept")
+                rep.step(point, step, "done", _detail(step, own))
+                worked = True
+                continue
             if "acquire" not in state.steps and _finished_recording(folder / "recording.h5"):
                 raise InputError(f"point {point.name}: {shown(folder / 'recording.h5')} is a finished recording "
                                  "that its point.json does not record (deleted or replaced); rerun with --redo "
@@ -118,8 +128,13 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
         _ensure_space(folder, point, step, plan)
         try:
             state.forget_from(step)
+            token = ""
+            if step == "acquire":
+                token = secrets.token_hex(8)
+                state.begin_acquisition(inputs, token)
             rep.step(point, step, "running")
-            info = _do(plan, point, folder, step, rep)
+            info = _do(plan, point, folder, step, rep, token)
+            signum = info.pop("stopped_by_signal", None)
             info["wall_s"] = time.perf_counter() - t0
             state.record(step, inputs, info)
         except OSError as exc:   # a full disk, a read-only folder: what is finished stays finished
@@ -127,17 +142,47 @@ def _run_point(plan: Plan, point, folder: Path, rep: Reporter, redo: set) -> boo
                              f"{exc.strerror or exc}; the finished points and steps are kept, rerun to resume") from None
         rep.step(point, step, "done", _detail(step, info))
         worked = True
+        if signum is not None:   # a stop signal after the recording's last sample: recorded, then the run stops
+            raise interruption(signum)
     return worked
 
 
 def _finished_recording(path: Path) -> bool:
     """True when ``path`` is a recording that says it is complete (an acquisition that ended)."""
+    return _complete_recording(path) is not None
+
+
+def _complete_recording(path: Path) -> dict | None:
+    """The root attributes and facts of ``path`` when it is a recording that says it is complete
+    (an acquisition that reached its duration), else None (not HDF5, truncated, unfinished)."""
     import h5py
     try:
         with h5py.File(path, "r") as h:
-            return h.attrs.get("complete") in (True, 1)
-    except (OSError, ValueError):        # not HDF5, truncated: not a finished recording
-        return False
+            if h.attrs.get("complete") not in (True, 1):
+                return None
+            kinds = [bytes(k).decode("ascii", "replace") for k in h["events"]["kind"]] if "events" in h else []
+            clipped = [str(n.decode() if isinstance(n, bytes) else n) for n, c in
+                       zip(h["signals"].attrs.get("channel_names", []), h["signals"].attrs.get("clipped", [])) if c]
+            return {"attrs": dict(h.attrs), "rows": int(h["signals"].shape[0]), "overruns": kinds.count("overrun"),
+                    "gaps": kinds.count("gap"), "clipped": clipped}
+    except (OSError, ValueError, KeyError, TypeError):   # not HDF5, truncated, not a recording: not finished
+        return None
+
+
+def _own_finished_recording(path: Path, state: PointState, inputs: str, point) -> dict | None:
+    """The acquire step's record of ``path`` when it is the complete, whole recording of the
+    acquisition ``point.json`` says was under way from today's inputs (its token); else None."""
+    if state.acquiring is None or state.acquiring.get("inputs") != inputs:
+        return None
+    rec = _complete_recording(path)
+    if rec is None or str(rec["attrs"].get("campaign_acquisition", "")) != state.acquiring["token"]:
+        return None
+    rate = float(rec["attrs"].get("sample_rate_hz", 0.0))
+    lost = int(rec["attrs"].get("samples_lost", 0))
+    if rec["rows"] + lost < int(round(point.duration_s * rate)):
+        return None
+    return {"n_samples": rec["rows"], "rate_hz": rate, "overruns": rec["overruns"], "gaps": rec["gaps"],
+            "samples_lost": lost, "clipped": rec["clipped"], "wall_s": 0.0}
 
 
 def _need_bytes(folder: Path, point, step: str, plan: Plan) -> int:
@@ -160,12 +205,13 @@ def _ensure_space(folder: Path, point, step: str, plan: Plan) -> None:
                          f"{need / 1e6:.1f} MB needed; the finished points and steps are kept: free space and rerun")
 
 
-def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter) -> dict:
+def _do(plan: Plan, point, folder: Path, step: str, rep: Reporter, token: str = "") -> dict:
     try:
         if step == "acquire":
             (folder / "recording.h5").unlink(missing_ok=True)
             return steps.acquire(plan, point, folder / "recording.h5", ask=rep.ask, say=rep.say,
-                                 progress=lambda recorder, t: rep.acquisition_progress(point, recorder, t))
+                                 progress=lambda recorder, t: rep.acquisition_progress(point, recorder, t),
+                                 token=token)
         if step == "process":
             return steps.process(plan, point, folder / "recording.h5", folder / "measured.nc",
                                  warn=lambda m: rep.warn(f"point {point.name}: {m}"))
@@ -190,8 +236,43 @@ def _detail(step: str, info: dict) -> str:
     return f"closest: {info.get('closest')}"
 
 
-def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, redo=()) -> CampaignResult:
-    """Run (or resume) the campaign of ``plan`` into ``folder`` (module docstring)."""
+# what the outputs of a point weigh against its recording (bytes): measured.nc is 3.1 x its
+# recording and the pages ~0.7 MB on tests/test_campaign_run.py's quick plan
+MEASURED_PER_RECORDING = 3.5
+PAGES_BYTES = 1e6
+
+
+def estimate_work(plan: Plan, states: list, redo=()) -> tuple[float, float, str]:
+    """(seconds, bytes, basis) of what a run of ``plan`` has left to do, given each point's
+    ``PointState``: the stand's time of the recordings still to make (real time: the simulated
+    stand paced so, or NI-DAQmx; a lower bound of the run, which also processes and compares), and
+    the disk of their recordings (float32 volts, 3 channels), measured files and pages."""
+    dev = plan.doc.device
+    paced = dev.kind == "nidaqmx" or dev.pacing == "realtime"
+    seconds = nbytes = 0.0
+    n_record = n_other = 0
+    for point, state in zip(plan.points, states):
+        if state.done() and point.name not in redo:
+            continue
+        recording = point.duration_s * dev.rate_hz * 3 * 4
+        if point.name in redo or not state.finished("acquire", _inputs(plan, point, state, "acquire")):
+            n_record += 1
+            seconds += point.duration_s if paced else 0.0
+            nbytes += recording * (1.0 + MEASURED_PER_RECORDING) + PAGES_BYTES
+        else:
+            n_other += 1
+            nbytes += recording * MEASURED_PER_RECORDING + PAGES_BYTES
+    basis = (f"{n_record} point(s) to record" + (" in real time" if paced and n_record else "")
+             + (f", {n_other} to process and compare" if n_other else "")
+             + f"; a measured file ~{MEASURED_PER_RECORDING:g} x its recording")
+    return seconds, nbytes, basis
+
+
+def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, redo=(),
+                 check_work=None) -> CampaignResult:
+    """Run (or resume) the campaign of ``plan`` into ``folder`` (module docstring).
+    ``check_work(seconds, bytes, basis)`` sees what is left to do (``estimate_work``) before any
+    point runs, and may refuse it (labtool.common.budget.check_work)."""
     rep = reporter or Reporter()
     folder = Path(folder)
     redo = set(redo)
@@ -201,6 +282,13 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
         raise InputError(f"--redo {', '.join(unknown)}: no such point in the plan (points: {', '.join(sorted(names))})")
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{shown(folder)} is a file; give a folder for the campaign")
+    if check_work is not None:       # asked before anything is created (read only; checked again under the lock)
+        for p in plan.points:
+            _check_point_paths(p, point_folder(folder, p))
+        states = [PointState.load(point_folder(folder, p), p.name, p.spec()) for p in plan.points]
+        for p, st in zip(plan.points, states):
+            _check_existing(plan, p, st, redo)
+        check_work(*estimate_work(plan, states, redo))
     try:
         (folder / POINTS_DIR).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -235,6 +323,12 @@ def run_campaign(plan: Plan, folder: Path, reporter: Reporter | None = None, red
             left = n - k
             eta = (sum(walls) / len(walls)) * left if walls and left else (0.0 if not left else None)
             rep.point_done(k, n, point, wall, eta, worked)
+    except (KeyboardInterrupt, SystemError) as exc:   # Ctrl-C, SIGTERM, SIGHUP (in compiled code: a SystemError)
+        stop = interrupt_cause(exc)
+        if stop is None:
+            raise
+        stop.add_note(f"{shown(folder)} keeps the finished points and steps; the same command resumes")
+        raise stop from None
     finally:
         lock.__exit__(None, None, None)
     return CampaignResult(folder, [(p, point_folder(folder, p)) for p in plan.points], ran, kept,

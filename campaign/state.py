@@ -97,6 +97,9 @@ class PointState:
         self.name = name
         self.spec = spec
         self.steps: dict[str, dict] = {}
+        # the acquisition under way: its inputs and the token its recording carries, so that a run
+        # killed between the recording's end and its record finds that recording its own
+        self.acquiring: dict | None = None
         self.file = self.folder / "point.json"
 
     @classmethod
@@ -123,6 +126,9 @@ class PointState:
                                       "away to redo it")
         st.recorded_spec = doc.get("spec")
         st.steps = {k: v for k, v in doc["steps"].items() if k in STEPS and isinstance(v, dict)}
+        started = doc.get("acquiring")
+        if isinstance(started, dict) and all(isinstance(started.get(k), str) for k in ("inputs", "token")):
+            st.acquiring = {"inputs": started["inputs"], "token": started["token"]}
         return st
 
     recorded_spec: dict | None = None
@@ -157,6 +163,13 @@ class PointState:
         for s in later:
             self.steps.pop(s, None)
         self.steps[step] = {"inputs": inputs, "outputs": outs, "info": info}
+        if step == "acquire":
+            self.acquiring = None
+        self.save()
+
+    def begin_acquisition(self, inputs: str, token: str) -> None:
+        """Say (in point.json, before the recording starts) which acquisition is under way."""
+        self.acquiring = {"inputs": inputs, "token": token}
         self.save()
 
     def forget_from(self, step: str) -> None:
@@ -168,8 +181,10 @@ class PointState:
         return all(s in self.steps for s in STEPS)
 
     def save(self) -> None:
-        write_json(self.file, {"format": POINT_FORMAT, "format_version": 1, "name": self.name, "spec": self.spec,
-                               "steps": self.steps})
+        doc = {"format": POINT_FORMAT, "format_version": 1, "name": self.name, "spec": self.spec, "steps": self.steps}
+        if self.acquiring is not None:
+            doc["acquiring"] = self.acquiring
+        write_json(self.file, doc)
 
 
 def clean_partials(folder: Path) -> list[str]:

@@ -13,6 +13,7 @@ change, this module is the one place to follow them.
 from __future__ import annotations
 
 import math
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ import xarray as xr
 
 from labtool.common.operating_point import FIELD, SOURCE_SUFFIX, STATED
 from labtool.campaign.plan import COMPARE_OPTIONS
-from labtool.common.errors import InputError
+from labtool.common.errors import InputError, interruption
 from labtool.common.names import shown
 
 # --------------------------------------------------------------------------- acquire
@@ -105,25 +106,31 @@ def settle(plan, point, ask=None, say=None):
                              dev.settle_timeout_s, say=say)
 
 
-def acquire(plan, point, path: Path, ask=None, say=None, progress=None) -> dict:
-    """Record the point into ``path`` (format v1); InputError unless the run reached its duration."""
+def acquire(plan, point, path: Path, ask=None, say=None, progress=None, token: str = "") -> dict:
+    """Record the point into ``path`` (format v1); InputError unless the run reached its duration.
+    ``token`` is stored as the recording's ``campaign_acquisition``: the run that made it."""
     from labtool.acquisition import session
 
     settled = settle(plan, point, ask, say)
     device, ka, attrs = make_device(plan, point)
     attrs.update(point_attrs(plan, point))
+    if token:
+        attrs["campaign_acquisition"] = token
     if settled is not None:
         attrs.update(settled.attrs())
     res = session.run(device, path, plan.doc.device.rate_hz, point.duration_s, attrs, ka_m_s2_per_v=ka,
                       progress=progress)
     target = int(round(point.duration_s * res.rate_hz))
-    if res.outcome == "interrupted":
-        raise KeyboardInterrupt
-    if res.outcome != "done" or not res.complete or res.n_samples < target:
+    if res.outcome == "interrupted" and not res.complete:   # closed short and incomplete: redone on rerun
+        raise interruption(res.signum or signal.SIGINT)
+    if res.outcome not in ("done", "interrupted") or not res.complete or res.n_samples < target:
         raise InputError(f"point {point.name}: the acquisition ended early ({res.message}; {res.n_samples} of "
                          f"{target} samples); the recording {shown(path)} is kept for inspection and redone on rerun")
+    # a stop signal after the last sample: the recording is whole, so it is recorded as finished
+    # (labtool.campaign.runner) before the run stops
     return {"n_samples": res.n_samples, "rate_hz": res.rate_hz, "overruns": res.overruns, "gaps": res.gaps,
-            "samples_lost": res.samples_lost, "clipped": list(res.clipped), "wall_s": res.wall_s}
+            "samples_lost": res.samples_lost, "clipped": list(res.clipped), "wall_s": res.wall_s,
+            **({"stopped_by_signal": int(res.signum)} if res.signum is not None else {})}
 
 
 # --------------------------------------------------------------------------- process

@@ -10,6 +10,10 @@ on::
     labtool: error: --points 100000000 would take about 21 min and 90 GB of memory (measured 12.6 us
     and 897 bytes per point on 50000 points); 22 GB are available: use fewer --points
 
+Work that takes long or writes much by its nature (a recording, a campaign, a design) is not
+refused for it: past ~10 min or ~100 MB it is asked for on a terminal, and elsewhere refused in one
+line stating the figures until ``--yes`` is given (``check_work``).
+
 Usage::
 
     est = probe_linear(lambda n: analyze(..., n_points=n), sizes=(2_000, 50_000), target=points,
@@ -28,6 +32,9 @@ from labtool.common.errors import InputError
 
 DEFAULT_MAX_SECONDS = 120.0
 MEMORY_FRACTION = 0.8          # of the memory available now
+# a request past either is asked for on a terminal and refused elsewhere unless --yes (check_work)
+LONG_RUN_S = 600.0
+LARGE_OUTPUT_BYTES = 100e6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,6 +127,30 @@ def check(estimate: Estimate, what: str, max_seconds: float = DEFAULT_MAX_SECOND
     suggestion = _round_up(estimate.seconds * 1.5)
     raise InputError(f"{about}, over the limit of {max_seconds:g} s: give --max-seconds {suggestion:g} to run it"
                      + (f", or {reduce}" if reduce else ""))
+
+
+def check_work(what: str, seconds: float = 0.0, nbytes: float = 0.0, basis: str = "",
+               confirm: Callable[[str], bool] | None = None, yes: bool = False, reduce: str = "") -> None:
+    """Before a run longer than LONG_RUN_S (``seconds``, s) or writing more than LARGE_OUTPUT_BYTES
+    (``nbytes``): on a terminal ``confirm(question)`` (InputError "not run" when the answer is no);
+    elsewhere InputError stating the figures and that ``--yes`` runs it. Nothing when ``yes`` or
+    when both are below. ``what`` names the request, ``basis`` how the figures were found,
+    ``reduce`` how to make it smaller."""
+    over = []
+    if seconds > LONG_RUN_S:
+        over.append(f"take about {_duration(seconds)}")
+    if nbytes > LARGE_OUTPUT_BYTES:
+        over.append(f"write about {_bytes(nbytes)}")
+    if yes or not over:
+        return
+    text = f"{what} would {' and '.join(over)}" + (f" ({basis})" if basis else "")
+    if confirm is not None:
+        if confirm(f"{text}. Run it?"):
+            return
+        raise InputError(f"not run: {text}")
+    limits = " and ".join(x for x, hit in ((f"{LONG_RUN_S / 60:.0f} min", seconds > LONG_RUN_S),
+                                           (f"{_bytes(LARGE_OUTPUT_BYTES)}", nbytes > LARGE_OUTPUT_BYTES)) if hit)
+    raise InputError(f"{text}, more than {limits}: pass --yes to run it" + (f", or {reduce}" if reduce else ""))
 
 
 def _round_up(seconds: float) -> float:

@@ -4,6 +4,7 @@ Every layer raises these; the CLI turns them into one line
 ``labtool: error: <what, where, what to do>`` and exit code 2.
 They live in ``common``, the bottom layer every other layer may import.
 """
+import signal
 
 
 class LabtoolError(Exception):
@@ -38,3 +39,27 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, signum: int):
         super().__init__(f"signal {signum}")
         self.signum = signum
+
+
+def interruption(signum: int, note: str = "") -> KeyboardInterrupt:
+    """The exception that ends a command stopped by ``signum`` (KeyboardInterrupt for Ctrl-C,
+    Interrupted for the others), raised after the command kept what it could; ``note`` (what was
+    kept, how to resume) is printed on the CLI's interrupted line (labtool.cli)."""
+    exc = KeyboardInterrupt() if signum == signal.SIGINT else Interrupted(signum)
+    if note:
+        exc.add_note(note)
+    return exc
+
+
+def interrupt_cause(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C) or Interrupted (SIGTERM, SIGHUP) at the root of ``exc``'s chain,
+    else None. A signal inside a numba-compiled function surfaces as a SystemError ("returned a
+    result with an exception set") chained to it: code that catches Exception to go on (one failed
+    run of many) must raise this instead, or a Ctrl-C becomes a failed run and the work goes on."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -252,9 +252,10 @@ def inside_another_command() -> bool:
 
 
 @contextlib.contextmanager
-def signals_interrupt(signals: Iterable[int] = (signal.SIGTERM, signal.SIGHUP)):
+def signals_interrupt(signals: Iterable[int] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
     """Inside the block, SIGTERM and SIGHUP raise :class:`Interrupted` (like Ctrl-C raises
-    KeyboardInterrupt), so that ``finally`` and rollbacks run. Handlers set by others are kept."""
+    KeyboardInterrupt), so that ``finally`` and rollbacks run; Ctrl-C still raises KeyboardInterrupt,
+    and is kept too. Handlers set by others are kept."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -263,13 +264,15 @@ def signals_interrupt(signals: Iterable[int] = (signal.SIGTERM, signal.SIGHUP)):
     def handler(signum, frame):
         # kept as well as raised: raised inside a weakref callback or a __del__ (the garbage
         # collector's), the exception is printed and dropped, and the command would go on (found by
-        # CI: a SIGTERM during labtool demo's acquire step, exit 0); commit() raises it again
+        # CI: a SIGTERM during labtool demo's acquire step, exit 0; a Ctrl-C in labtool fit's search,
+        # exit 0 with its outputs written); commit() and check_interrupted() raise it again
         _LOST_SIGNAL[0] = signum
-        raise Interrupted(signum)
+        raise KeyboardInterrupt() if signum == signal.SIGINT else Interrupted(signum)
 
     for s in signals:
         with contextlib.suppress(ValueError, OSError):
-            if signal.getsignal(s) in (signal.SIG_DFL, None):
+            default = signal.default_int_handler if s == signal.SIGINT else signal.SIG_DFL
+            if signal.getsignal(s) in (default, None):
                 old[s] = signal.signal(s, handler)
     if old:
         _LOST_SIGNAL[0] = None
@@ -287,9 +290,17 @@ _LOST_SIGNAL = [None]     # the signal signals_interrupt's handler last raised, 
 
 
 def lost_interrupt() -> int | None:
-    """The signal that ``signals_interrupt`` turned into Interrupted in its block, if any (None
+    """The signal that ``signals_interrupt`` turned into an exception in its block, if any (None
     otherwise): the exception may have been dropped where Python ignores exceptions."""
     return _LOST_SIGNAL[0]
+
+
+def check_interrupted() -> None:
+    """Raise again the stop signal whose exception was dropped (``lost_interrupt``): long work
+    calls it between its steps (a progress report), so that a dropped Ctrl-C still stops it there."""
+    if _LOST_SIGNAL[0] is not None:
+        signum = _LOST_SIGNAL[0]
+        raise KeyboardInterrupt() if signum == signal.SIGINT else Interrupted(signum)
 
 
 @contextlib.contextmanager

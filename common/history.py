@@ -80,6 +80,22 @@ class ApplyKa(Step):
 
 
 @dataclasses.dataclass(frozen=True)
+class CheckChannels(Step):
+    """Which recorded channel reads the tangential and which the normal acceleration, and their
+    signs (processing/orientation.py): the verdict, what was applied, and the evidence."""
+    name: ClassVar[str] = "check_channels"
+    verdict: str                 # "as labelled", "corrected", "inconclusive", "not checked"
+    swapped: bool                # aE_t and aE_n exchanged by the check
+    inverted: list               # channels whose sign is inverted in processing (by --invert or the check)
+    inverted_by_option: list     # ... of which by --invert
+    r: dict                      # Pearson's r of each channel with an ideal sensor's readings (T, N)
+    templates_r: float | None    # r(T, N): near +-1 the check cannot tell the channels apart
+    marks: str                   # the cam angle of the span checked: "tacho" or "correlation"
+    revolutions: int
+    finding: str                 # in words, with the evidence
+
+
+@dataclasses.dataclass(frozen=True)
 class CamAngle(Step):
     name: ClassVar[str] = "cam_angle"
     method: str                  # "tacho" or "correlation"
@@ -93,6 +109,13 @@ class CamAngle(Step):
     law: str
     mechanism: str
     autocorrelation_period_s: float | None = None
+    search_rpm: list | None = None       # [lo, hi] rpm searched by the correlation, and why
+    search_reason: str | None = None
+    search_averaged_samples: int | None = None   # samples averaged into one for the search (slow cams)
+    cam_speed_rpm_min: float | None = None       # per revolution, the regular ones
+    cam_speed_rpm_max: float | None = None
+    cam_speed_trend: float | None = None         # relative change over the recording of a line through them
+    assumption: str | None = None                # what the cam angle rests on that the data cannot show
 
 
 @dataclasses.dataclass(frozen=True)
@@ -203,9 +226,9 @@ class Spikes(Step):
     stored: int
 
 
-STEPS: dict[str, type[Step]] = {c.name: c for c in (Read, ApplyKa, CamAngle, Lowpass, UndoAcCoupling, RemoveGravity,
-                                                    DwellReference, Epsilon2, Omega2, TimeAxis, Clipping, CheckNormal,
-                                                    CycleAverage, Spectra, Spikes)}
+STEPS: dict[str, type[Step]] = {c.name: c for c in (Read, CheckChannels, ApplyKa, CamAngle, Lowpass, UndoAcCoupling,
+                                                    RemoveGravity, DwellReference, Epsilon2, Omega2, TimeAxis, Clipping,
+                                                    CheckNormal, CycleAverage, Spectra, Spikes)}
 
 
 class History:

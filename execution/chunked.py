@@ -27,7 +27,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from labtool.common.errors import InputError
+from labtool.common.errors import interrupt_cause
+from labtool.common.files import check_interrupted
 from labtool.execution.backends import InProcess, LocalProcesses, TaskFailed
 from labtool.execution.parts import DiskFull, PartStore
 
@@ -53,6 +54,9 @@ class Chunk:
             try:
                 rows.append(self.fn(self.items[i]))
             except Exception as exc:  # noqa: BLE001 - a failing item must not lose its chunk
+                stop = interrupt_cause(exc)
+                if stop is not None:      # a signal in compiled code: the run was stopped, not failed
+                    raise stop from None
                 rows.append({"error": f"{type(exc).__name__}: {exc}"})
             times[k] = time.perf_counter() - t0
         return ChunkResult(self.start, self.stop, rows, times, os.getpid())
@@ -164,6 +168,7 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
         out.done_now += r.stop - r.start
         if progress:
             progress(state["done"], n)
+        check_interrupted()          # a stop signal whose exception Python dropped ends the run here
 
     def on_result(task: Chunk, res) -> bool | None:
         if isinstance(res, TaskFailed):
@@ -197,9 +202,11 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
                 active.run(tasks, on_result)
         if state["buffer"]:
             accept()
-    except KeyboardInterrupt:
-        raise InputError(f"interrupted: {state['done']} of {n} {unit} are finished and kept in {store.folder}; "
-                         "rerun the same command to resume") from None
+    except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP: the command ends 128 + signal (labtool.cli)
+        if state["done"]:
+            exc.add_note(f"{state['done']} of {n} {unit} are finished and kept in {store.folder}; "
+                         "the same command resumes")
+        raise
     finally:
         active.close()
     out.cost_s = cost.per_item

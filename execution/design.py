@@ -59,9 +59,10 @@ def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_ite
     design.validate()
     csv_path, nc_path = Path(csv_path), Path(nc_path)
     check_free_space(csv_path.parent, len(design))
-    store = PartStore(parts_folder(csv_path), design.fingerprint(),
-                      design.columns + list(EXTRA_COLUMNS), fresh=fresh)
+    store = None
     try:
+        store = PartStore(parts_folder(csv_path), design.fingerprint(), design.columns + list(EXTRA_COLUMNS),
+                          fresh=fresh)
         _check_parts(store, len(design))
         out = map_chunked(design.row, range(len(design)), store, backend, chunk_items=chunk_items,
                           on_estimate=on_estimate, progress=progress, unit="runs")
@@ -71,14 +72,32 @@ def run_design(design, csv_path: Path, nc_path: Path, backend=None, *, chunk_ite
             raise InputError(f"{len(out.failed_chunks)} chunk(s) ({runs} runs, first runs {a + 1}-{b}) failed on the "
                              f"workers: {msg}; the finished runs are kept in {store.folder}, rerun to retry")
         failures, n_failed = assemble(design, store, csv_path, nc_path, history)
-    except BaseException:
+    except BaseException as exc:
+        if store is None:                # PartStore cleans up what it made when it cannot open
+            raise
         if not store.part_files():      # refused or failed before any run finished: leave nothing
             store.remove()
+        elif isinstance(exc, KeyboardInterrupt) and not getattr(exc, "__notes__", None):
+            # stopped before the runs (checking the parts) or while the results were assembled
+            done = sum(b - a for a, b, _ in store.part_files())
+            exc.add_note(f"all {done} runs are finished and kept in {store.folder}; the same command writes the "
+                         "results without computing again" if done == len(design) else
+                         f"{done} of {len(design)} runs are finished and kept in {store.folder}; the same command "
+                         "resumes")
         raise
     finally:
-        store.close()
+        if store is not None:
+            store.close()
     store.remove()
     return DesignOutcome(len(design), out.resumed, failures, n_failed, out.where, out.wall_s, out.cost_s)
+
+
+def disk_bytes(design) -> float:
+    """About the most disk a run of ``design`` uses (bytes): its parts (up to 17 digits a number,
+    ~19 bytes a cell) while it runs, and the results CSV (~8 bytes a cell) and the NetCDF (8 bytes a
+    response, run number and wall time) they are assembled into before the parts are removed."""
+    cells = len(design.columns) + len(EXTRA_COLUMNS)
+    return len(design) * (19.0 * cells + 8.0 * len(design.columns) + 8.0 * (len(design.responses) + 2))
 
 
 def check_free_space(folder: Path, n_runs: int) -> None:
@@ -299,4 +318,4 @@ def _block_shape(index) -> tuple[int, ...]:
     return tuple(s.stop - s.start for s in index)
 
 
-__all__ = ["run_design", "DesignOutcome", "hyperslabs", "parts_folder", "DiskFull"]
+__all__ = ["run_design", "DesignOutcome", "hyperslabs", "parts_folder", "disk_bytes", "DiskFull"]

@@ -53,7 +53,22 @@ class PartStore:
         self.fingerprint = json.loads(json.dumps(fingerprint, default=str))
         self.columns = list(columns)
         self._lock_fh = None
-        self._open(fresh)
+        created = not self.folder.exists()
+        try:
+            self._open(fresh)
+        except BaseException:        # refused or interrupted while opening: a folder it made goes again
+            if created and not self.part_files_safe():
+                self.remove()
+            else:
+                self.close()
+            raise
+
+    def part_files_safe(self) -> list:
+        """``part_files``, or [] when the folder cannot be listed."""
+        try:
+            return self.part_files()
+        except OSError:
+            return []
 
     # ---------------------------------------------------------------- opening, locking
     def _open(self, fresh: bool) -> None:
@@ -124,6 +139,8 @@ class PartStore:
             p[2].unlink(missing_ok=True)
         for name in ("manifest.json", "lock"):
             (self.folder / name).unlink(missing_ok=True)
+        for tmp in self.folder.glob(".*.tmp"):
+            tmp.unlink(missing_ok=True)
         self.close()
         with contextlib.suppress(OSError):
             self.folder.rmdir()
@@ -191,8 +208,10 @@ class PartStore:
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, path)
-        except OSError as exc:
+        except BaseException as exc:     # an interruption too: no temporary is left behind
             tmp.unlink(missing_ok=True)
+            if not isinstance(exc, OSError):
+                raise
             if _is_disk_full(exc):
                 raise DiskFull(f"{exc.strerror} writing {path}") from None
             raise InputError(f"cannot write {path} ({exc.strerror})") from None

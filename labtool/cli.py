@@ -20,7 +20,7 @@ try:  # typer >= 0.29 vendors click; older typer uses the click package
 except ImportError:  # pragma: no cover
     from click import exceptions as click_exc
 
-from labtool.common.errors import Interrupted, LabtoolError, OutputError
+from labtool.common.errors import Interrupted, LabtoolError, OutputError, interrupt_cause
 from labtool.common.files import (command_scope, describe_disk_error, disk_error, inside_another_command,
                           lost_interrupt, signals_interrupt)
 from labtool.common.names import shown
@@ -96,16 +96,6 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _caused_by_interrupt(exc: BaseException) -> bool:
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
-
-
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the process exit code.
 
@@ -116,17 +106,39 @@ def main(argv: list[str] | None = None) -> int:
     """
     _tolerant_stdio()
     _STATE["exit_at_disk_error"] = argv is None
-    with command_scope(), signals_interrupt():
-        code = _run(argv)
-        lost = lost_interrupt()
-        if lost is not None and code == 0:   # its Interrupted was dropped where Python ignores errors
-            if inside_another_command():     # as _run does: the command that runs this one ends too
-                raise Interrupted(lost) if lost != signal.SIGINT else KeyboardInterrupt()
-            code = _interrupted(lost)
+    hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_interrupts(hook)
+    code = None
+    try:
+        with command_scope(), signals_interrupt():
+            code = _run(argv)
+            lost = lost_interrupt()
+            if lost is not None and code == 0:   # its Interrupted was dropped where Python ignores errors
+                if inside_another_command():     # as _run does: the command that runs this one ends too
+                    raise Interrupted(lost) if lost != signal.SIGINT else KeyboardInterrupt()
+                code = _interrupted(lost)
+    finally:
+        # after an interruption, objects the signal left half-built (an h5netcdf File stopped in its
+        # __init__) may fail in their finalizers at exit: that is no bug to report, so it stays quiet
+        if argv is None and code is not None and code > 128:
+            _STATE["interrupted"] = True
+        else:
+            sys.unraisablehook = hook
     if argv is None:
         _exit_without_teardown(code)
         sys.exit(code)
     return code
+
+
+def _quiet_interrupts(hook):
+    """sys.unraisablehook that drops a stop signal's exception raised where Python cannot raise it
+    (a weakref callback, a __del__) instead of printing its traceback: the signal is kept
+    (labtool.common.files.lost_interrupt) and ends the command at its next check."""
+    def quiet(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) or _STATE["interrupted"]:
+            return
+        hook(unraisable)
+    return quiet
 
 
 def _exit_without_teardown(code: int) -> None:
@@ -170,7 +182,7 @@ def _exit_without_teardown(code: int) -> None:
     os._exit(code)
 
 
-_STATE = {"exit_at_disk_error": False}
+_STATE = {"exit_at_disk_error": False, "interrupted": False}
 
 
 def _disk_error_seen(code: int) -> int:
@@ -194,9 +206,12 @@ def _invoke(argv):
         return command.invoke(ctx)
 
 
-def _interrupted(signum: int) -> int:
-    """The interrupted line on stderr; the exit code 128 + signal."""
-    typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); no output was left half-written", err=True)
+def _interrupted(signum: int, exc: BaseException | None = None) -> int:
+    """The interrupted line on stderr; the exit code 128 + signal. The exception's notes
+    (labtool.common.errors.interruption: what was kept, how to resume) replace the default text."""
+    notes = [str(n) for n in getattr(exc, "__notes__", ()) if str(n).strip()]
+    said = "; ".join(notes) if notes else "no output was left half-written"
+    typer.echo(f"labtool: interrupted ({signal.Signals(signum).name}); {_one_line(said)}", err=True)
     return 128 + int(signum)
 
 
@@ -212,11 +227,11 @@ def _run(argv) -> int:
         return exc.exit_code
     except (typer.Abort, KeyboardInterrupt) as exc:
         # click turns KeyboardInterrupt (and so Interrupted, for SIGTERM/SIGHUP) into Abort
-        cause = exc if isinstance(exc, Interrupted) else exc.__cause__ or exc.__context__
+        cause = exc if isinstance(exc, KeyboardInterrupt) else exc.__cause__ or exc.__context__
         signum = cause.signum if isinstance(cause, Interrupted) else signal.SIGINT
         if inside_another_command():      # a step of another command (labtool demo): that one ends too
             raise (cause if isinstance(cause, KeyboardInterrupt) else KeyboardInterrupt()) from None
-        return _interrupted(signum)
+        return _interrupted(signum, cause if isinstance(cause, KeyboardInterrupt) else None)
     except click_exc.UsageError as exc:
         hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx else ""
         return _error(f"{exc.format_message() or 'no command given'}{hint}")
@@ -231,10 +246,13 @@ def _run(argv) -> int:
                           "rename the file (e.g. with convmv) and run again")
         return _internal(exc)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
-        if isinstance(exc, SystemError) and _caused_by_interrupt(exc):
-            # Ctrl-C inside a numba-compiled loop surfaces as a chain of "returned a result with an
-            # exception set" with the KeyboardInterrupt at its root
-            return _interrupted(signal.SIGINT)
+        root = interrupt_cause(exc) if isinstance(exc, SystemError) else None
+        if root is not None:
+            # a signal inside a numba-compiled loop surfaces as a chain of "returned a result with
+            # an exception set" with the KeyboardInterrupt (Ctrl-C) or Interrupted at its root
+            if inside_another_command():
+                raise root from None
+            return _interrupted(root.signum if isinstance(root, Interrupted) else signal.SIGINT, root)
         code = disk_error(exc)
         if code is not None:      # HDF5 and zlib say "errno = 28" in a RuntimeError or ValueError
             name = getattr(exc, "filename", None)

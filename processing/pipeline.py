@@ -38,7 +38,7 @@ from labtool.common.invocation import command_line
 from labtool.common.names import shown
 from labtool.models.mechanism import Mechanism
 from labtool.models.mechanism.motion_laws import CamProgram
-from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, speed, spectra
+from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, orientation, speed, spectra
 from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
 from labtool.processing.ka import ka_for_channels
 from labtool.processing.readers import Recording
@@ -68,6 +68,7 @@ class ProcessOptions:
     dwell_margin_deg: float = 10.0
     spike_k_sigma: float = events.DEFAULT_K_SIGMA
     tacho_channel: str = "tacho"
+    invert: tuple = ()                  # chain names (aE_t, aE_n) of channels whose sensor reads the other way round
     ac_tau_s: float | None = None       # sensor chain's AC-coupling time constant (s), undone if given
     mechanism: object | None = None     # labtool.models.mechanism.Mechanism; default: the paper's STB-216
 
@@ -89,19 +90,25 @@ def process_recording(rec: Recording, output: Path, options: ProcessOptions | No
 
 def process_file(recording: Path, output: Path, calibration_files=(), channels: dict | None = None,
                  options: ProcessOptions | None = None, progress: Callable[[int], None] | None = None,
-                 warn: Callable[[str], None] | None = None, on_open: Callable | None = None,
+                 warn: Callable[[str], None] | None = None, on_open: Callable | None = None, invert=(),
                  **reader_options) -> dict:
     """A recording file -> ``output`` (measured.nc, written atomically); returns the summary dict.
 
     ``calibration_files``: calibration TOML files (labtool calibrate), merged; ``channels``: the
     file's channel for each of aE_t, aE_n, tacho (``{"aE_t": "ai0"}``); ``options``: processing
-    parameters (their calibration is replaced by the files'); ``reader_options``: what the reader
-    of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, ...);
+    parameters (their calibration is replaced by the files'); ``invert``: aE_t and/or aE_n, channels
+    whose sensor reads the other way round (after ``channels``); ``reader_options``: what the
+    reader of the format takes (sample_rate_hz, group, delimiter, decimal, time_unit_s, units, ...);
     ``on_open(recording)`` is called once the file is open (a progress bar sized on it)."""
     from labtool.processing.calibration_file import read_calibrations
     from labtool.processing.readers import open_recording
 
     opts = options or ProcessOptions()
+    if invert:
+        opts = dataclasses.replace(opts, invert=tuple(invert))
+    bad = [c for c in opts.invert if c not in orientation.CHANNELS]
+    if bad:
+        raise InputError(f"--invert: {bad[0]!r} is not one of {', '.join(orientation.CHANNELS)}")
     if calibration_files:
         opts = dataclasses.replace(opts, calibration=read_calibrations(list(calibration_files)),
                                    calibration_source="; ".join(str(c) for c in calibration_files))
@@ -141,13 +148,23 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
     hist.add(H.Read(source=rec.source, format=rec.format, sample_rate_hz=rec.sample_rate_hz, n_samples=rec.n_samples,
                     channels=rec.channel_names, complete=rec.complete, start_time_utc=rec.start_time_utc,
                     segments=[[a, b] for a, b in segs], assumptions=list(rec.assumptions)))
-    cal = hist.add(ka_for_channels(rec, opts.calibration, opts.calibration_source, warn)).channels
     mech = opts.mechanism or Mechanism.default()
     law = opts.law or (rec.attrs.get("law") if isinstance(rec.attrs.get("law"), str) else None)
     program = CamProgram.for_mechanism(mech, law=law)
-    ka = np.array([cal["aE_t"]["ka_m_s2_per_v"], cal["aE_n"]["ka_m_s2_per_v"]])
+    # before Ka, so Ka follows a channel the check renames; what it says is said once the marks are
+    # found (before an error that ends the run, it is not the news)
+    check_said: list[str] = []
+    check, signs = orientation.check_recording(rec, segs, mech, program, _rpm_hint(rec, opts), opts.invert,
+                                               opts.tacho_channel, check_said.append)
+    hist.add(check)
+    cal = hist.add(ka_for_channels(rec, opts.calibration, opts.calibration_source, warn)).channels
+    # a channel's sign (--invert, or the check's correction) rides on its Ka: every later step sees it
+    ka = np.array([cal["aE_t"]["ka_m_s2_per_v"], cal["aE_n"]["ka_m_s2_per_v"]]) * np.asarray(signs, dtype=float)
     marks, cam = _revolutions(rec, segs, opts, ka[0], mech, program, hist, warn, progress)
+    for msg in check_said:
+        warn(msg)
     chain = _design(rec, opts, ka, cam, mech, program)
+    _say_ac_coupling(rec, chain, cam, warn)
     out = MeasuredWriter(tmp, rec.n_samples, rec.start_time_utc)
     try:
         state = _pass2(rec, segs, marks, cam, chain, opts, out, warn, progress)
@@ -167,7 +184,7 @@ def _run(rec: Recording, tmp: Path, opts: ProcessOptions, progress, warn) -> dic
 def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
     """Pass 1 (marks, extremes) and the cam speed; falls back to correlation without tacho pulses."""
     itacho = rec.channel_index(opts.tacho_channel) if rec.has_channel(opts.tacho_channel) else None
-    rpm_hint = opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
+    rpm_hint = _rpm_hint(rec, opts)
     method = "tacho" if itacho is not None else "correlation"
     # what the search says on the way is said once the marks are found: before the error that ends
     # the run it misleads ("cam speed from the data (1030.8 rpm)" for a 5 rpm run of 3 s)
@@ -181,12 +198,22 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
             method = "correlation"
             found = _find_marks(rec, segs, method, itacho, ka_t, opts.chunk_samples, mech, program, rpm_hint,
                                 said.append, lambda k: None)
-        marks_by_seg, vmin, vmax, period_est = found
+        marks_by_seg, vmin, vmax, period_est, (search, q) = found
+        if method == "correlation" and not _stated(rpm_hint) and sum(max(len(m) - 1, 0) for m in marks_by_seg) < 1:
+            raise InputError(f"{shown(rec.source)}: no whole cam revolution found in aE_t by correlation (searched "
+                             f"{search.why}) and no tacho recorded: give the speed the cam turned at with --rpm "
+                             f"(rpm; it is then searched within a factor {cam_angle.STATED_FACTOR:g} of it)")
         cam = speed.estimate(marks_by_seg, rec.sample_rate_hz, rpm_hint, rec.source, said.append)
     except InputError:
         _check_two_revolutions(rec, segs, rpm_hint, opts)   # the cause, when the stated speed shows it
         raise
     fs = rec.sample_rate_hz
+    assumption = None
+    if method == "correlation" and orientation.mirror_symmetric(program):
+        assumption = ("without a tacho the cam angle comes from aE_t, and this cam's return mirrors its rise half a "
+                      "turn later, so an aE_t of the other sign gives the same marks half a turn on: phi1 and the "
+                      "sign of omega2 assume aE_t reads positive along the rise")
+        said.append(f"{assumption} (a sensor mounted the other way round: give --invert aE_t; a tacho settles it)")
     for msg in said:
         warn(msg)
     hist.add(H.CamAngle(method=method, revolution_marks=int(sum(len(m) for m in marks_by_seg)),
@@ -194,8 +221,21 @@ def _revolutions(rec, segs, opts, ka_t, mech, program, hist, warn, progress):
                         period_min_s=float(cam.periods.min()) / fs, period_max_s=float(cam.periods.max()) / fs,
                         irregular_revolutions=cam.n_irregular, irregular_tolerance=speed.IRREGULAR,
                         law=program.segments[0].law.name, mechanism=mech.name,
-                        autocorrelation_period_s=period_est / fs if period_est else None))
+                        autocorrelation_period_s=period_est / fs if period_est else None,
+                        search_rpm=[search.rpm_lo, search.rpm_hi] if search else None,
+                        search_reason=search.why if search else None, search_averaged_samples=q if search else None,
+                        cam_speed_rpm_min=cam.rpm_min, cam_speed_rpm_max=cam.rpm_max, cam_speed_trend=cam.drift,
+                        assumption=assumption))
     return {"by_segment": marks_by_seg, "vmin": vmin, "vmax": vmax, "method": method}, cam
+
+
+def _stated(rpm) -> bool:
+    return bool(rpm and math.isfinite(rpm) and rpm > 0)
+
+
+def _rpm_hint(rec, opts):
+    """The stated cam speed (rpm): --rpm, else the recording's (NaN when it states none)."""
+    return opts.cam_speed_rpm if opts.cam_speed_rpm else rec.cam_speed_rpm
 
 
 def _check_two_revolutions(rec, segs, rpm_hint, opts) -> None:
@@ -240,6 +280,23 @@ def _design(rec, opts, ka, cam, mech, program) -> Chain:
     steps += [H.RemoveGravity(g_m_s2=mech.g, table_points=tables.N), dwell, H.Epsilon2(DE_m=mech.DE), omega]
     return Chain(fs=fs, ka=ka, sos=sos, zi=filters.sosfilt_zi(sos), padlen=filters.padlen(sos), margin=margin,
                  tables=tables, dwell=dwell, omega=omega, DE=mech.DE, tau=tau, steps=steps)
+
+
+AC_BEND = 10.0   # a stated AC-coupling corner within this factor of the cam frequency bends the motion
+
+
+def _say_ac_coupling(rec, chain, cam, warn) -> None:
+    """A chain's AC coupling (the recording's ``highpass_hz``, first order) not undone and within
+    AC_BEND of the cam frequency: said, with the --ac-tau that undoes it (on the simulated stand at
+    30 rpm, 0.1 Hz: omega2 2.8 % and epsilon2 14 % off; undone 0.2 % and 0.8 %)."""
+    hp = _float_attr(rec.attrs.get("highpass_hz"))
+    f1 = cam.rpm / 60.0
+    if chain.tau or not (hp and math.isfinite(hp) and hp > 0) or f1 >= AC_BEND * hp:
+        return
+    warn(f"the chain's AC coupling (highpass_hz = {hp:g} Hz, the recording states) lies within a factor "
+         f"{AC_BEND:g} of the cam frequency {f1:.3g} Hz and bends the motion: give --ac-tau {1 / (2 * math.pi * hp):.3g} "
+         "(s) to undo it" + (" (below the corner little is left to undo: record with a DC-coupled chain)"
+                             if f1 < hp else ""))
 
 
 @dataclasses.dataclass
@@ -361,6 +418,7 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
 def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, opts) -> dict:
     """Numbers as numbers; an unknown value is left out, never written as text."""
     lp = hist.find(H.Lowpass)
+    check = hist.find(H.CheckChannels)
     # CF 'source' (method of production): "recording", the word reports/ reads to tell a measurement
     # from a synthetic one; the file and the command are in source_file and history
     attrs = cf.global_attrs("labtool measured follower motion", source="recording",
@@ -369,6 +427,9 @@ def _global_attrs(rec, method, cam, chain, st, program, cal, hist, n_segs, law, 
         "source_file": shown(rec.source), "source_format": rec.format, "start_time_utc": rec.start_time_utc,
         "recording_complete": int(rec.complete), "sample_rate_hz": chain.fs, "cam_speed_rpm_measured": cam.rpm,
         "phi1_method": method, "lowpass_hz": lp.cutoff_hz, "DE_m": chain.DE,
+        "cam_speed_rpm_min": cam.rpm_min, "cam_speed_rpm_max": cam.rpm_max, "cam_speed_drift": cam.drift,
+        "channel_check": check.verdict, "channel_check_finding": check.finding,
+        "channels_inverted": " ".join(check.inverted),
         "omega2_normal_check_rel_rms": st.normal.value, "n_revolutions_averaged": st.cycles.count,
         "n_clipped_samples": st.clip.flagged, "n_segments": n_segs, "n_spikes": st.spikes.seen,
         "n_samples_lost": st.time.samples_lost, H.ATTRIBUTE: hist.to_json(),
@@ -423,10 +484,9 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
     it = rec.channel_index("aE_t")
     vmin = np.full(rec.n_channels, np.inf)
     vmax = np.full(rec.n_channels, -np.inf)
-    period_est = None
+    period_est, q, search = None, 1, None
     if method == "correlation":
-        a0, b0 = max(segs, key=lambda s: s[1] - s[0])
-        period_est = cam_angle.estimate_period(rec.read(a0, min(b0, a0 + int(20 * fs)))[:, it], fs)
+        period_est, q, search = cam_angle.period_by_correlation(rec, segs, it, rpm_hint, mech, chunk)
         if rpm_hint and math.isfinite(rpm_hint) and abs(period_est / (fs * 60.0 / rpm_hint) - 1) > 0.2:
             warn(f"cam speed from the data ({60 * fs / period_est:.1f} rpm) differs from the stated "
                  f"{rpm_hint:g} rpm by more than 20 %; using the data")
@@ -442,15 +502,16 @@ def _find_marks(rec, segs, method, itacho, ka_t, chunk, mech, program, rpm_hint,
                 marks.extend(det.feed(a, block[:, itacho]))
                 progress(len(block))
         else:
-            corr = cam_angle.CorrelationEdges(mech, program, period_est)
+            corr = cam_angle.CorrelationEdges(mech, program, period_est, fs, q)
             for a in range(a_seg, b_seg, chunk):
                 b = min(a + chunk, b_seg)
-                block = rec.read(a, min(b + corr.n + 2, b_seg))
+                block = rec.read(a, min(b + corr.span, b_seg))
                 _scan(rec, block[: b - a], a, vmin, vmax)
                 marks.extend(corr.feed(a, block[:, it] * ka_t, a, b))
+                corr.retune(marks)          # a drifting speed: the template follows the latest revolutions
                 progress(b - a)
         marks_by_seg.append(np.asarray(marks, dtype=float))
-    return marks_by_seg, vmin, vmax, period_est
+    return marks_by_seg, vmin, vmax, period_est, (search, q)
 
 
 def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:

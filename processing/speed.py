@@ -15,6 +15,7 @@ import numpy as np
 from labtool.common.errors import InputError
 
 IRREGULAR = 0.2          # relative deviation from the median period that makes a revolution irregular
+DRIFT_SAID = 0.02        # per-revolution speeds spread wider than this (relative to the mean): said
 REFUSE_RATIO = 1.5       # measured / stated speed beyond this (either way): the rate is wrong
 PLAUSIBLE_RPM = (1.0, 3000.0)   # rpm: a measured cam speed outside is a wrong channel or rate, not a cam
 
@@ -26,6 +27,9 @@ class CamSpeed:
     periods: np.ndarray              # every mark-to-mark period (samples)
     irregular_by_segment: list       # per segment: bool per revolution
     n_irregular: int
+    rpm_min: float = math.nan        # slowest and fastest regular revolution (rpm)
+    rpm_max: float = math.nan
+    drift: float = math.nan          # relative change of the speed over the recording, by a line through the revolutions'
 
 
 def estimate(marks_by_seg, fs: float, rpm_hint, source: str, warn) -> CamSpeed:
@@ -57,4 +61,29 @@ def estimate(marks_by_seg, fs: float, rpm_hint, source: str, warn) -> CamSpeed:
     if n_irr:
         warn(f"{n_irr} revolutions deviate by more than {100 * IRREGULAR:.0f} % from the median period "
              f"{period / fs * 1e3:.1f} ms (missed tacho pulses?); their samples are NaN")
-    return CamSpeed(period, rpm, periods, irregular, n_irr)
+    rpm_min, rpm_max, drift = _spread(marks_by_seg, fs, lo, hi)
+    if (rpm_max - rpm_min) > DRIFT_SAID * rpm:
+        warn(f"the cam speed varies over the recording: {rpm_min:.2f} to {rpm_max:.2f} rpm per revolution "
+             f"({100 * (rpm_max - rpm_min) / rpm:.1f} % of the mean {rpm:.2f} rpm; a line through them changes by "
+             f"{100 * drift:+.1f} %): the cycle statistics (omega2_mean, ...) average revolutions of these speeds, and "
+             "their _std holds the spread (attributes cam_speed_rpm_min, cam_speed_rpm_max, cam_speed_drift)")
+    return CamSpeed(period, rpm, periods, irregular, n_irr, rpm_min, rpm_max, drift)
+
+
+def _spread(marks_by_seg, fs: float, lo: float, hi: float):
+    """(slowest, fastest regular revolution in rpm, relative change over the recording of a line
+    fitted to the regular revolutions' speeds against their mid-times)."""
+    mid, rpm = [], []
+    for m in marks_by_seg:
+        d = np.diff(m)
+        ok = (d > lo) & (d < hi)
+        mid.append((0.5 * (m[:-1] + m[1:]))[ok] if len(m) >= 2 else np.empty(0))
+        rpm.append(60.0 * fs / d[ok] if len(m) >= 2 else np.empty(0))
+    mid, rpm = np.concatenate(mid), np.concatenate(rpm)
+    if len(rpm) == 0:
+        return math.nan, math.nan, math.nan
+    drift = 0.0
+    if len(rpm) >= 3 and np.ptp(mid) > 0:
+        slope = np.polyfit(mid, rpm, 1)[0]
+        drift = float(slope * np.ptp(mid) / np.mean(rpm))
+    return float(rpm.min()), float(rpm.max()), drift

@@ -102,6 +102,15 @@ def check_measured(ds: xr.Dataset, where: str = "measured file") -> None:
     if "time" in ds.variables and not in_seconds(ds["time"].attrs.get("units")):
         raise InputError(f"{where}: its time is in '{shown(as_text(ds['time'].attrs['units']))}', the report reads it "
                          "in seconds (s, or 'seconds since <start>', as 'labtool process' writes it); convert time to s")
+    # every variable the report, fit and campaign report read as numbers, checked where the file is
+    # opened: text there fails deep in numpy (could not convert string to float) where it is first used
+    read = [n for n in ("time", "phi1", *SIGNALS, "aE_n", "revolution_start_time", "frequency") if n in ds.variables]
+    for name in read + [n for n in ds.data_vars if ds[n].dims == ("frequency",)]:
+        kind = ds[name].dtype.kind
+        if kind not in "fiu":
+            held = "text" if kind in "OSU" else f"{ds[name].dtype} values"
+            raise InputError(f"{where}: {name} holds {held}, not numbers; the file is damaged or not written by "
+                             "'labtool process': process the recording again")
     for name, unit in MEASURED_UNITS.items():
         stated = ds[name].attrs.get("units")
         if stated is not None and udunits(as_text(stated)) != unit:

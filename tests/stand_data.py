@@ -7,6 +7,7 @@ recording format v1 (docs/architecture.md) with plain h5py, so a test can damage
 """
 from __future__ import annotations
 
+import contextlib
 import math
 
 import h5py
@@ -15,6 +16,29 @@ import numpy as np
 from labtool.acquisition import signal_chain as sc
 from labtool.acquisition.sim_stand import SimStand
 from labtool.common.units import RPM
+
+
+@contextlib.contextmanager
+def drifting_speed(drift: float, duration_s: float):
+    """The kinematic truth's cam turning at a speed that drifts linearly by ``drift`` (relative, e.g.
+    0.05) from the first sample to the last, centred on the nominal speed: omega1 = Omega (1 + drift
+    (t / duration_s - 1/2)), phi1 = 0 at t = 0 (a tacho pulse), no ripple. A drive warming up or a
+    load change, which the simulated stand does not make: ``signal_chain.cam_angle`` is replaced
+    while the block runs, so the chain (gravity, noise, filters, tacho) and ``truth`` both follow it."""
+    original = sc.cam_angle
+
+    def cam_angle(scene, t):
+        t = np.asarray(t, dtype=float)
+        W = scene.omega1_nominal
+        phi1 = W * (t + drift * (t * t / (2.0 * duration_s) - 0.5 * t))
+        omega1 = W * (1.0 + drift * (t / duration_s - 0.5))
+        return phi1, omega1, np.full_like(t, W * drift / duration_s)
+
+    sc.cam_angle = cam_angle
+    try:
+        yield
+    finally:
+        sc.cam_angle = original
 
 
 def stand_volts(duration_s: float, rpm: float = 180.0, fs: float = 10000.0, seed: int = 1,
@@ -69,12 +93,18 @@ def write_v1(path, volts: np.ndarray, names=("aE_t", "aE_n", "tacho"), fs: float
 
 
 def stand_recording(path, duration_s: float = 3.0, rpm: float = 180.0, seed: int = 1, events=(), tacho: bool = True,
-                    scene: dict | None = None, params: dict | None = None, extra_m_s2=None, **kw) -> dict:
+                    scene: dict | None = None, params: dict | None = None, extra_m_s2=None, speed_drift: float = 0.0,
+                    **kw) -> dict:
     """Record ``duration_s`` of the simulated stand into ``path`` (format v1); returns the truth.
 
     ``extra_m_s2(t) -> (n, 2)`` adds accelerations (m/s^2) after the chain, divided by the chain's Ka
-    (impact bursts at known times). ``tacho=False`` leaves the tacho channel out.
+    (impact bursts at known times). ``tacho=False`` leaves the tacho channel out. ``speed_drift``:
+    the cam speed drifts by this fraction over the recording (drifting_speed; the ripple is then 0).
     """
+    if speed_drift:
+        with drifting_speed(speed_drift, duration_s):
+            return stand_recording(path, duration_s, rpm, seed, events, tacho, {**(scene or {}), "ripple": 0.0},
+                                   params, extra_m_s2, **kw)
     volts, st, pa, fs = stand_volts(duration_s, rpm, seed=seed, scene=scene, params=params)
     volts = volts.astype(np.float64)
     if extra_m_s2 is not None:

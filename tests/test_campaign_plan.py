@@ -20,7 +20,7 @@ def test_the_sample_plan_is_the_papers_three_speeds():
     assert [p.name for p in plan.points] == ["01_180rpm", "02_300rpm", "03_500rpm"]
     for p in plan.points:
         assert (p.law, p.Fu_N, p.backlash_mm, p.jt_factor) == ("sine", 0.0, 0.128, 1.0)
-        assert p.duration_s == pytest.approx(9 * 60 / p.rpm)      # 8 whole revolutions + 1 period
+        assert p.duration_s == pytest.approx(9.5 * 60 / p.rpm)    # 8 whole revolutions + 1.5 periods
     assert [p.seed for p in plan.points] == [1, 2, 3]
     assert plan.calibration_files[0].name == "calibration.toml" and plan.calibration_files[0].is_file()
     assert plan.doc.compare.models == ["rigid", "elastic"]
@@ -32,7 +32,7 @@ def test_a_grid_varies_rpm_fastest_and_names_what_varies(tmp_path):
     assert [(x.rpm, x.Fu_N) for x in pts] == [(500, 0), (180, 0), (300, 0), (180, 65), (300, 65)]
     assert pts[0].name == "extra" and pts[0].duration_s == 2.0
     assert pts[3].name == "04_180rpm_Fu65N"
-    assert pts[1].duration_s == pytest.approx(11 * 60 / 180)   # the paper's default: 10 revolutions
+    assert pts[1].duration_s == pytest.approx(11.5 * 60 / 180)   # the paper's default: 10 revolutions
 
 
 @pytest.mark.hostile("silent_wrong")
@@ -48,7 +48,7 @@ def test_a_grid_varies_rpm_fastest_and_names_what_varies(tmp_path):
     # inside the schema's bound but past the models' range: refused before any point runs
     ("[grid]\nrpm = [180, 1500]\n", "grid point 2: cam speed 1500 rpm is outside the range the models take"),
     ("[[points]]\nrpm = 180\nrevolutions = 5\nduration_s = 3\n", "give revolutions or duration_s, not both"),
-    # whole revolutions are recorded and averaged: 8.5 would record 9.5 periods and average 8
+    # whole revolutions are recorded and averaged: 8.5 cannot be
     ("[defaults]\nrevolutions = 8.5\n[[points]]\nrpm = 180\n", "[defaults] revolutions = 8.5: must be a whole number"),
     ("[compare]\nmodels = ['rigid', 'fem']\n[[points]]\nrpm = 180\n", "[compare] models[1] = \"fem\": expected one of"),
     ("[device]\nkind = 'nidaqmx'\n[[points]]\nrpm = 180\n", "needs channels"),
@@ -94,7 +94,7 @@ def test_defaults_and_points_combine():
                       "points": [{"rpm": 180}, {"rpm": 300, "revolutions": 4, "jt_factor": 1.5}]}, "plan")
     a, b = expand_points(doc)
     assert (a.law, a.duration_s, a.backlash_mm) == ("cosine", 2.0, 0.016)
-    assert b.duration_s == pytest.approx(5 * 60 / 300) and b.jt_factor == 1.5
+    assert b.duration_s == pytest.approx(5.5 * 60 / 300) and b.jt_factor == 1.5
     with pytest.raises(InputError, match="belong to a point"):
         expand_points(check_plan({"defaults": {"seed": 3}, "points": [{"rpm": 180}]}, "plan"))
 

@@ -284,3 +284,35 @@ def test_a_full_disk_stops_before_the_step_that_does_not_fit_and_resumes(tmp_pat
     assert res.returncode == 0, res.stderr
     assert "acquire: done" not in res.stderr and "process: done" in res.stderr
     assert (out / "campaign.csv").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.hostile("interrupted")
+def test_a_run_stopped_between_a_recording_and_its_record_keeps_the_recording(tmp_path, capsys, monkeypatch):
+    """A stop in the instant between the recording's end and its record in point.json left a
+    complete recording that point.json did not record: the rerun stopped and asked for --redo. The
+    record of the acquisition under way (its token, also in the recording) lets the rerun keep it."""
+    from labtool.campaign.state import PointState
+
+    plan = quick_plan(tmp_path)
+    out = tmp_path / "camp"
+    real = PointState.record
+
+    def stopped(self, step, inputs, info):
+        if step == "acquire" and self.name == "02_300rpm":
+            raise KeyboardInterrupt          # after the recording closed, before its record
+        return real(self, step, inputs, info)
+    monkeypatch.setattr(PointState, "record", stopped)
+    assert main(["campaign", "run", str(plan), "-o", str(out), "--no-report"]) == 130
+    assert "camp keeps the finished points and steps; the same command resumes" in capsys.readouterr().err
+    rec = out / "points" / "02_300rpm" / "recording.h5"
+    with h5py.File(rec) as h:
+        assert h.attrs["complete"] and len(h.attrs["campaign_acquisition"]) == 16
+    before = rec.read_bytes()
+    monkeypatch.setattr(PointState, "record", real)
+    assert main(["campaign", "run", str(plan), "-o", str(out), "--no-report"]) == 0
+    err = capsys.readouterr().err
+    assert "its recording had finished when the run was stopped; kept" in err and "--redo" not in err
+    assert rec.read_bytes() == before and err.count("process: done") == 1
+    state = json.loads((out / "points" / "02_300rpm" / "point.json").read_text())
+    assert "acquiring" not in state and set(state["steps"]) == {"acquire", "process", "compare"}

@@ -123,6 +123,35 @@ def test_a_sigterm_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path
 
 
 @pytest.mark.slow
+@pytest.mark.hostile("interrupted")
+def test_a_ctrl_c_dropped_in_a_weakref_callback_still_ends_the_command(tmp_path):
+    """Ctrl-C's KeyboardInterrupt raised inside a garbage-collector callback was printed ("Exception
+    ignored in ... Traceback") and dropped: labtool fit ran its search to the end, wrote its outputs
+    and exited 0. Ctrl-C is kept as SIGTERM is: nothing is published, the command ends 130 quietly."""
+    out = tmp_path / "kin.nc"
+    code = f"""
+        import os, signal, sys, weakref
+        import labtool.common.files as files
+        real_commit = files.OutputSet.commit
+        def commit(self):
+            class Thing: pass
+            t = Thing()
+            weakref.finalize(t, os.kill, os.getpid(), signal.SIGINT)
+            del t                                  # the signal arrives inside the finalizer
+            return real_commit(self)
+        files.OutputSet.commit = commit
+        sys.argv = ["labtool", "kinematics", "--points", "200", "-o", {str(out)!r}]
+        import labtool.cli
+        labtool.cli.main()
+        """
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == 128 + signal.SIGINT, proc.stderr[-2000:]
+    assert "interrupted (SIGINT)" in proc.stderr and not out.exists()
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr
+
+
+@pytest.mark.slow
 def test_a_sigterm_dropped_in_a_step_after_its_commit_ends_the_command_that_runs_it(tmp_path):
     # CI found it: in labtool demo's acquire step the signal was dropped after the step's last
     # commit; the step ended 143 by itself and the demo reported "demo step 'acquire' failed",

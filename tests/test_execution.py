@@ -152,6 +152,30 @@ def test_a_reopened_store_resumes_and_another_work_is_refused(tmp_path):
     fresh.close()
 
 
+def _stopped_in_compiled_code(i):
+    """Item 20 meets a Ctrl-C inside a numba function: a SystemError chained to the KeyboardInterrupt."""
+    if i == 20:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher(<function run>) returned a result with an exception set") from exc
+    return square(i)
+
+
+@pytest.mark.hostile("interrupted")
+def test_a_ctrl_c_in_compiled_code_stops_the_map_instead_of_failing_a_run(tmp_path):
+    """doe run interrupted in a model's compiled loop went on, with 'run 529: SystemError:
+    CPUDispatcher(...) returned a result with an exception set' left empty in the results."""
+    store = _store(tmp_path)
+    with pytest.raises(KeyboardInterrupt) as caught:
+        chunked.map_chunked(_stopped_in_compiled_code, list(range(50)), store, backends.InProcess(), chunk_items=7)
+    assert "14 of 50 items are finished and kept in" in caught.value.__notes__[0]
+    assert store.done_ranges() == [(0, 7), (7, 14)]
+    cells = [store.read(p) for _, _, p in store.part_files()]
+    assert all(e == "" for c in cells for e in c["error"])
+    store.close()
+
+
 @pytest.mark.slow
 def test_a_store_has_one_writer_across_processes(tmp_path):
     store = _store(tmp_path)
@@ -345,7 +369,8 @@ def test_a_design_of_ten_million_runs_gives_an_estimate_and_needs_yes(tmp_path):
                           timeout=120, stdin=subprocess.DEVNULL)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
-    assert lines[0].startswith("labtool: error: this design is 10000000 runs x ") and "pass --yes" in lines[0]
+    assert lines[0].startswith("labtool: error: this design of 10000000 runs would take about ") and "pass --yes" in lines[0]
+    assert "10000000 runs x " in lines[0] and "more than 10 min" in lines[0]
     assert time.monotonic() - t0 < 120
     assert not parts_folder(tmp_path / "r.csv").exists() and not (tmp_path / "r.csv").exists()
 

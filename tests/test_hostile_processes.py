@@ -103,7 +103,8 @@ def test_what_a_sigkill_leaves_is_removed_by_the_next_run(tmp_path, measured_nc)
     assert not (tmp_path / "r.html").exists()          # no final name half-written
     code, err = run(_report(measured_nc, tmp_path))
     assert code in (0, 1), err
-    assert hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["r.html", "r.json", "r.pdf"]
+    assert hidden(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == \
+        ["r.html", "r.json", "r.pdf", "r_curves.csv", "r_curves.nc"]
 
 
 def _staged(tmp_path, suffix: str) -> bool:

@@ -30,14 +30,15 @@ CHAINS = {
         (["--channels", "aE_t=First  Channel,aE_n=Second Chan,tacho=Third Chan"], "not a cam speed")],
     "nptdms_big_endian.tdms": [
         ([], "--channels"),
-        (["--channels", "aE_t=Amplitude sweep,aE_n=Phase sweep"], "fewer than two cam revolutions")],
+        (["--channels", "aE_t=Amplitude sweep,aE_n=Phase sweep"], "--rpm"),
+        (["--rpm", "300"], "fewer than two cam revolutions")],
     "nptdms_Digital_Input.tdms": [
         ([], "--group"),
         (["--group", ALL_DATA], "--channels")],
     "lvm_read_short.lvm": [
         ([], "--channels"),
         (["--channels", "aE_t=Response (Trigger)"], "--channels aE_n=")],
-    "lvm_read_with_comments.lvm": [([], "neither a voltage nor an acceleration")],
+    "lvm_read_with_comments.lvm": [([], "none of its channels is in a unit of voltage or acceleration")],
     "lvm_read_with_empty_fields.lvm": [
         ([], "--channels"),
         (["--channels", "aE_t=Dev0/Ai0,aE_n=Dev0/Ai2", "--rpm", "300"], "revolutions at the stated 300 rpm")],
@@ -50,7 +51,8 @@ CHAINS = {
     "picoquake_car_vibration_head.csv": [
         ([], "--sample-rate"),
         (["--sample-rate", "2000"], "--channels"),
-        (["--channels", "aE_t=a_x,aE_n=a_z"], "fewer than two cam revolutions")],
+        (["--channels", "aE_t=a_x,aE_n=a_z"], "--rpm"),
+        (["--rpm", "300"], "fewer than two cam revolutions")],
 }
 
 

@@ -11,6 +11,7 @@ from labtool.acquisition.metadata import OPTION, missing_operating_point, operat
 from labtool.common.errors import InputError
 from labtool.common.files import check_output_path
 from labtool.common.invocation import command_line
+from labtool.common.names import shown
 from labtool.common.operating_point import FIELD, schema_field
 from labtool.common.schema import Integer, Number, String, Table, load_toml
 from labtool.options import op_option
@@ -113,6 +114,8 @@ def acquire(
     status_every: float = typer.Option(5.0, help="not on a terminal: one status line every this many seconds "
                                        "[s] (0 = none)"),
     force: bool = typer.Option(False, help="overwrite an existing output file (never one being recorded)"),
+    yes: bool = typer.Option(False, "--yes", "-y", help="record more than 10 min [s of the stand] or 100 MB without "
+                             "asking (off a terminal such a recording is refused without it)"),
 ) -> None:
     """Record aE_t, aE_n (volts) and the tacho from the stand into recording format v1 (docs/architecture.md)."""
     from labtool.acquisition.device import parse_device
@@ -153,7 +156,7 @@ def acquire(
                              f"got {float(opts['ka']):g}")
     if output.is_dir():
         raise InputError(f"{output} is a folder; give a file name for the recording")
-    check_output_path(output, force)
+    replacing = _check_output(output, force)
     if not (math.isfinite(status_every) and status_every >= 0):
         raise InputError(f"--status-every must be >= 0 s, got {status_every:g}")
     meta_given = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
@@ -162,7 +165,26 @@ def acquire(
     dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
                                 iepe_excitation, meta_given, motor_setting)
     attrs["command"] = command_line("labtool acquire")
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force, status_every)
+    _check_size(dur, float(opts["rate"]), len(dev.channel_names), realtime or kind == "nidaqmx", yes)
+    if replacing:
+        typer.echo(f"labtool: warning: recording over {shown(output)}, {replacing}", err=True)
+    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force or bool(replacing),
+         status_every)
+
+
+def _check_output(output: Path, force: bool) -> str | None:
+    """Refuse an output another process is recording (--force does not help there), or an existing
+    file without --force unless a rerun may record over it: an unfinished recording (an interrupted
+    or killed run of this command; labtool.acquisition.recorder.unfinished). Returns what is
+    recorded over without --force (None: nothing)."""
+    from labtool.acquisition.recorder import unfinished
+    from labtool.acquisition.writer_lock import RecordingBusy, busy_message, is_being_written
+
+    if is_being_written(output):
+        raise RecordingBusy(busy_message(output))
+    replacing = None if force else unfinished(output)
+    check_output_path(output, force or replacing is not None)
+    return replacing
 
 
 def _device(kind, arg, opts, given, realtime, faults, dur, device_file, ni, iepe_excitation, meta_given,
@@ -281,6 +303,22 @@ def _check_sample_count(duration_s: float, rate_hz: float) -> None:
                          "or --duration inf --realtime to record until Ctrl-C")
 
 
+def _check_size(duration_s: float, rate_hz: float, n_channels: int, paced: bool, yes: bool) -> None:
+    """Ask before a recording of more than 10 min of the stand (paced: real time) or 100 MB
+    (float32 samples), on a terminal; refuse it elsewhere unless --yes (labtool.common.budget.check_work):
+    a --duration of 2000 meant as ms is 240 MB at 10 kHz."""
+    if not math.isfinite(duration_s):            # until Ctrl-C: the user stops it
+        return
+    from labtool.common import budget
+    from labtool.output import terminal_confirm
+
+    samples = duration_s * rate_hz
+    budget.check_work(f"--duration {duration_s:g} s at {rate_hz:g} Hz", duration_s if paced else 0.0,
+                      samples * n_channels * 4, f"{samples:.4g} samples x {n_channels} channels x 4 bytes"
+                      + (", in real time" if paced else ""), terminal_confirm(), yes,
+                      "give a shorter --duration (in seconds)")
+
+
 def _check_sampled(duration_s: float, rate_hz: float, shaker: bool, cal_freq_hz: float) -> None:
     """InputError when the recording could not hold what it asks: --duration under one sample
     (1e-9 s wrote a recording of 0 samples marked complete, exit 0), or the calibration shaker's
@@ -321,11 +359,20 @@ def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, st
     if result.clipped:
         typer.echo(f"labtool: warning: clipping on {', '.join(result.clipped)} (ADC range exceeded); "
                    "see the 'clip' events", err=True)
-    if result.outcome == "interrupted":
-        typer.echo(f"labtool: {result.message}; the recording is closed and complete", err=True)
     if result.outcome in ("disconnected", "disk_full", "write_error"):
         raise InputError(f"{result.message}; {result.n_samples} samples ({result.n_samples / result.rate_hz:.3f} s) "
                          f"kept in {output}, complete={str(result.complete).lower()}")
+    if result.signum is not None:        # Ctrl-C, SIGTERM, SIGHUP: exit 128 + signal (labtool.cli)
+        from labtool.common.errors import interruption
+
+        secs = result.n_samples / result.rate_hz
+        if result.complete:
+            note = f"{shown(output)} is closed and complete ({result.n_samples} samples, {secs:.3f} s)"
+        else:
+            of = f" of {duration:g}" if duration is not None else ""
+            note = (f"{shown(output)} keeps its {result.n_samples} samples ({secs:.3f}{of} s), closed and marked "
+                    "incomplete; the same command records it again")
+        raise interruption(result.signum, note)
 
 
 class _Display:

@@ -86,14 +86,22 @@ def run(
     output: Path = typer.Option(..., "-o", "--output", help="campaign folder (created; rerun into it to resume)"),
     redo: Optional[List[str]] = typer.Option(None, help="point name to record again although it is finished (repeatable)"),
     report: bool = typer.Option(True, "--report/--no-report", help="write the cross-point page at the end"),
+    yes: bool = typer.Option(False, "--yes", "-y", help="run a campaign that records more than 10 min [s of the "
+                             "stand] or writes more than 100 MB without asking (off a terminal it is refused without it)"),
 ) -> None:
     """Acquire, process and compare every point of the plan; one folder per point; resumable."""
     from labtool.campaign.plan import load_plan
     from labtool.campaign.runner import run_campaign
+    from labtool.common import budget
+    from labtool.output import terminal_confirm
 
     p = load_plan(plan)
     rep = _reporter()
-    res = run_campaign(p, output, rep, redo or [])
+
+    def check_work(seconds, nbytes, basis):
+        budget.check_work("this campaign", seconds, nbytes, basis, terminal_confirm(), yes,
+                          "record fewer points or revolutions (finished points are kept, a rerun resumes)")
+    res = run_campaign(p, output, rep, redo or [], check_work)
     rep.out(f"campaign finished in {res.wall_s:.1f} s: {len(res.ran)} point(s) worked on, {len(res.kept)} kept")
     if report:
         _report([output], output / "campaign.html", output / "campaign.json", output / "campaign.csv", force=True)

@@ -13,6 +13,7 @@ from typing import List, Optional
 
 import typer
 
+from labtool.common.budget import LONG_RUN_S
 from labtool.common.files import atomic_write, check_output_path
 from labtool.common.invocation import command_line
 from labtool.common.names import shown
@@ -28,7 +29,7 @@ def register(app: typer.Typer) -> None:
 
 
 # a design whose estimated time exceeds this asks for confirmation (terminal) or --yes (s)
-CONFIRM_ABOVE_S = 600.0
+CONFIRM_ABOVE_S = LONG_RUN_S
 
 
 @doe_app.command("run")
@@ -51,7 +52,8 @@ def run(
     fresh: bool = typer.Option(False, help="discard the finished chunks of an interrupted run into this output "
                                            "(default: a rerun of the same design resumes from them)"),
     yes: bool = typer.Option(False, "--yes", "-y", help=f"run a design estimated at more than "
-                                                        f"{CONFIRM_ABOVE_S / 60:.0f} min without asking"),
+                                                        f"{CONFIRM_ABOVE_S / 60:.0f} min or 100 MB on disk without "
+                                                        "asking (off a terminal such a design is refused without it)"),
     netcdf: Optional[Path] = typer.Option(None, help="NetCDF to write (default: the CSV's name with .nc)"),
     force: bool = typer.Option(False, help="overwrite existing output files"),
 ) -> None:
@@ -60,8 +62,8 @@ def run(
     Runs go in chunks to this process, local processes or a Dask cluster; each finished chunk is
     written to OUTPUT.parts/ at once, so an interrupted run (Ctrl-C, a kill, a full disk) keeps
     them and the same command again resumes where it stopped. A design estimated (runs x measured
-    per-run cost / workers) at more than 10 min asks for confirmation, or needs --yes when not on
-    a terminal.
+    per-run cost / workers) at more than 10 min, or using more than 100 MB of disk, asks for
+    confirmation, or needs --yes when not on a terminal.
     """
     from labtool.common.errors import InputError, SolverError
     from labtool.execution.backends import backend_for, check_scheduler_address
@@ -101,17 +103,17 @@ def run(
     err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
 
     def on_estimate(cost_s, n_left, n_workers):
+        # called once the first runs measured the cost, before any is kept: the time of the runs
+        # left and the disk of the whole design, asked for on a terminal, else refused without --yes
+        from labtool.common import budget
         from labtool.execution.chunked import estimate_text
-        total = cost_s * n_left / max(n_workers, 1)
-        if total <= CONFIRM_ABOVE_S or yes:
-            return
-        text = estimate_text(cost_s, n_left, n_workers)
-        if err is not None and typer.get_text_stream("stdin").isatty():
-            if typer.confirm(f"doe run: {text}; run it?", default=False, err=True):
-                return
-            raise InputError(f"not run: {text}")
-        raise InputError(f"this design is {text}, more than {CONFIRM_ABOVE_S / 60:.0f} min; pass --yes to run it "
-                         "(finished chunks are kept, a rerun resumes), or use fewer levels")
+        from labtool.execution.design import disk_bytes
+        from labtool.output import terminal_confirm
+
+        budget.check_work(f"this design of {n_runs} runs", cost_s * n_left / max(n_workers, 1), disk_bytes(design),
+                          f"{estimate_text(cost_s, n_left, n_workers)}; about {disk_bytes(design) / n_runs:.0f} bytes "
+                          "a run on disk", terminal_confirm(), yes, "use fewer levels (finished chunks are kept, "
+                          "a rerun resumes)")
 
     folder = parts_folder(output)
     if folder.exists() and not fresh:

@@ -22,7 +22,7 @@ import typer
 
 from labtool.options import given, op_option
 
-from labtool.common.files import atomic_write, check_output_path
+from labtool.common.files import OutputSet, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -92,25 +92,31 @@ def fit(
                   chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=max_runs, scan=scan)
     if len(measured) == 1 and shared is not None:
         raise InputError("--shared needs several measured files (a joint fit); give two or more, or drop --shared")
+    from labtool.common.files import check_interrupted
+
     err = console(stderr=True)
     with (err.status("fit") if err.is_terminal else ProgressLines(sys.stderr, "fit")) as status:
+        def progress(msg: str) -> None:
+            check_interrupted()        # a Ctrl-C that Python dropped (in a weakref callback) stops the search here
+            status.update(msg)
         if len(measured) == 1:
-            outcome = identify(FitRequest(measured[0], model, free, **common), progress=lambda msg: status.update(msg))
+            outcome = identify(FitRequest(measured[0], model, free, **common), progress=progress)
         else:
             from labtool.identification.joint import JointRequest, identify_joint
-            outcome = identify_joint(JointRequest(list(measured), model, free, shared, **common),
-                                     progress=lambda msg: status.update(msg))
+            outcome = identify_joint(JointRequest(list(measured), model, free, shared, **common), progress=progress)
         text = json.dumps(outcome.summary, indent=1, allow_nan=False)
         fig = None
         if figure is not None:
             status.update("drawing the figure")
             from labtool.identification.figures import fit_figure, joint_figure
             fig = fit_figure(outcome) if len(measured) == 1 else joint_figure(outcome)
-        # both outputs are ready before either is written (each atomically)
-        if output is not None:
-            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
-        if fig is not None:
-            atomic_write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        # both outputs are ready before either is written, and are renamed together (both or
+        # neither: a rerun after an interruption finds no JSON without its figure)
+        with OutputSet() as outputs:
+            if output is not None:
+                outputs.write_text(output, text + "\n")
+            if fig is not None:
+                outputs.write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     joint = len(measured) > 1
     if as_json:
         typer.echo(text)

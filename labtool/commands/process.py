@@ -24,7 +24,13 @@ def process(
     rpm: Optional[float] = typer.Option(None, help="nominal cam speed [rpm] (default: the recording's; the speed used is measured)"),
     lowpass_hz: Optional[float] = typer.Option(None, help="low-pass corner [Hz] (default: 100 x cam frequency)"),
     ac_tau: Optional[float] = typer.Option(None, help="AC-coupling time constant of the sensor chain [s], undone if given"),
-    channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=Dev1/ai2'"),
+    channels: Optional[str] = typer.Option(None, help="name the file's channels, e.g. 'aE_t=aE180t,aE_n=aE180n,tacho=Dev1/ai2' "
+                                           "('aE_t=aE_n,aE_n=aE_t' swaps two)"),
+    invert: Optional[str] = typer.Option(None, help="channels whose sensor reads the other way round (mounted turned "
+                                         "over): 'aE_t', 'aE_n' or 'aE_t,aE_n'; their sign is inverted "
+                                         "(a swap or inversion the data show is corrected and said anyway)"),
+    units: Optional[str] = typer.Option(None, help="the unit of channels whose file states none usable, e.g. "
+                                        "'aE_t=V,aE_n=V' (V, mV, m/s^2, g; a unit the file states is replaced)"),
     group: Optional[str] = typer.Option(None, help="TDMS group holding the samples (default: the only group with samples)"),
     delimiter: Optional[str] = typer.Option(None, help="text tables: column delimiter, 'comma', 'semicolon' or 'tab' (default: detected)"),
     decimal: Optional[str] = typer.Option(None, help="text tables: decimal mark, '.' or ',' (default: detected)"),
@@ -50,7 +56,8 @@ def process(
                        chunk_samples=chunk_samples, progress=progress,
                        warn=lambda msg: typer.echo(f"labtool: warning: {msg}", err=True),
                        sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
-                       decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit))
+                       decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), units=_unit_map(units),
+                       invert=_inverted(invert))
     summary = measured.attrs
     measured.close()
     typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm_measured']:.2f} rpm (phi1 by {summary['phi1_method']}), "
@@ -58,6 +65,10 @@ def process(
                f"{summary['n_spikes']} spikes, {summary['n_clipped_samples']} clipped samples, "
                f"|omega2| vs sqrt(aE_n/DE): {100 * summary['omega2_normal_check_rel_rms']:.1f} % rms of peak")
     typer.echo(_ka_line(summary))
+    typer.echo(_channels_line(summary))
+    speeds = _speed_line(summary)
+    if speeds:
+        typer.echo(speeds)
 
 
 def _progress(recording):
@@ -84,6 +95,55 @@ def _ka_line(attrs) -> str:
         unc = f" +- {float(u):.4g}" if u is not None and u == u else " (uncertainty unknown)"
         parts.append(f"{ch} {float(ka):.6g}{unc} m/s^2/V ({shown(str(attrs.get(f'ka_source_{ch}', '?')))})")
     return "Ka: " + ", ".join(parts)
+
+
+def _channels_line(attrs) -> str:
+    """'channels: as labelled' / 'channels: corrected: aE_n inverted (...)', from the attributes."""
+    verdict = str(attrs.get("channel_check", "?"))
+    inverted = str(attrs.get("channels_inverted", "")).split()
+    said = f" (processed with {' and '.join(inverted)} inverted)" if inverted else ""
+    if verdict == "as labelled":
+        return f"channels: aE_t and aE_n read as labelled{said}"
+    return f"channels: {verdict}{said}: {attrs.get('channel_check_finding', '')}"
+
+
+def _speed_line(attrs) -> str | None:
+    """The per-revolution speed range when it is wider than speed.DRIFT_SAID of the mean, else None."""
+    from labtool.processing.speed import DRIFT_SAID
+
+    lo, hi, mean = (attrs.get(k) for k in ("cam_speed_rpm_min", "cam_speed_rpm_max", "cam_speed_rpm_measured"))
+    if lo is None or hi is None or not mean or (hi - lo) <= DRIFT_SAID * mean:
+        return None
+    return (f"cam speed: {lo:.2f} to {hi:.2f} rpm per revolution (drift {100 * float(attrs.get('cam_speed_drift', 0)):+.1f} "
+            "% over the recording): the cycle statistics span these speeds")
+
+
+def _inverted(text) -> tuple | None:
+    """--invert 'aE_t,aE_n' -> ("aE_t", "aE_n"); None when not given; InputError on anything else."""
+    from labtool.common.errors import InputError
+
+    if text is None:
+        return None
+    names = [c.strip() for c in text.split(",")]
+    bad = [c for c in names if c not in ("aE_t", "aE_n")]
+    if bad:
+        raise InputError(f"--invert: {bad[0]!r} is not aE_t or aE_n (give 'aE_t', 'aE_n' or 'aE_t,aE_n')")
+    return tuple(names)
+
+
+def _unit_map(text) -> dict | None:
+    """--units 'aE_t=V,ai1=g' -> {"aE_t": "V", "ai1": "g"}; None when not given; InputError on anything else."""
+    from labtool.common.errors import InputError
+
+    if text is None:
+        return None
+    pairs = {}
+    for part in text.split(","):
+        name, sep, unit = part.partition("=")
+        if not sep or not name.strip() or not unit.strip():
+            raise InputError(f"--units: '{part}' is not CHANNEL=UNIT (e.g. aE_t=V)")
+        pairs[name.strip()] = unit.strip()
+    return pairs
 
 
 def _channel_map(text: str) -> dict[str, str]:

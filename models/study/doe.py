@@ -34,7 +34,7 @@ import numpy as np
 
 from labtool.common.units import RPM
 
-from labtool.common.errors import FileFormatError, InputError
+from labtool.common.errors import FileFormatError, InputError, interrupt_cause
 
 # symbol -> (Scene field, {unit: scale from the factor's unit to the field's unit}, description)
 SCENE_FACTORS: dict[str, tuple[str, dict[str, float], str]] = {
@@ -259,6 +259,31 @@ def scene_field(f: Factor) -> tuple[str, float, str]:
     return field, units[f.unit], text
 
 
+def _largest_backlash(base) -> float | None:
+    """The largest backlash (m) the groove of ``base``'s mechanism and law takes (the models' own
+    check, labtool.models.dynamics.validity.check_scene, by bisection to 1e-12 relative); None when
+    it takes none (the law itself undercuts the groove)."""
+    from labtool.models.dynamics import validity
+
+    def takes(j: float) -> bool:
+        try:
+            validity.check_scene(base.replace(backlash=j))
+            return True
+        except InputError:
+            return False
+
+    if not takes(0.0):
+        return None
+    lo, hi = 0.0, 1e-3
+    while takes(hi):
+        if hi > 1.0:                 # a groove no backlash undercuts (not a real cam)
+            return math.inf
+        lo, hi = hi, 2.0 * hi
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if takes(mid) else (lo, mid)
+    return lo
+
 
 # --------------------------------------------------------------------------------------------
 # the runs of a design: one simulation per run (execution backends live in the execution layer)
@@ -301,6 +326,9 @@ def simulate_run(scene, model: str) -> dict:
     except LabtoolError as exc:
         return {"ok": False, "error": str(exc)}
     except Exception as exc:  # a bug in a model must not lose the other runs
+        stop = interrupt_cause(exc)
+        if stop is not None:      # Ctrl-C or SIGTERM in the compiled model: the run was stopped, not failed
+            raise stop from None
         return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
     found.pop("wall_s", None)
     ind = {k: (None if v is None else float(v)) for k, v in found.items()
@@ -354,13 +382,35 @@ class Design:
         return math.prod(self.shape)
 
     def validate(self) -> None:
-        """Refuse a factor symbol, unit or level value that no run could use (InputError), before
-        anything runs: each level of each factor is set alone on the base scene (the Scene's checks
-        are per field, so this covers every combination)."""
+        """Refuse a factor symbol, unit or level value that no run could use (InputError naming the
+        factor, the level and its value in the factor's unit), before anything runs: each level of
+        each factor is set alone on the base scene, which applies the bounds ``simulate`` applies
+        (the Scene's, the cam speed range), and the groove is checked as the rigid and elastic models
+        check it (labtool.models.dynamics.validity.check_scene: an undercut, a self-locking pressure
+        angle). Each check depends on one factor alone (the groove on the law and the backlash), so
+        this covers every combination."""
+        from labtool.models.dynamics import validity
+
         for f in self.factors:
             field, scale, _ = scene_field(f)
-            for v in f.levels:
-                self.base.replace(**{field: v * scale})
+            for k, v in enumerate(f.levels, 1):
+                unit = f" {f.unit}" if f.unit not in ("", "-") else ""
+                where = f"factor {f.name} ({f.symbol}) level {k} = {v:g}{unit}"
+                try:
+                    scene = self.base.replace(**{field: v * scale})
+                except InputError as exc:
+                    raise InputError(f"{where}: {exc}") from None
+                if self.model == "kinematic":      # the kinematic level evaluates the law alone (warnings)
+                    continue
+                try:
+                    validity.check_scene(scene)
+                except InputError as exc:
+                    largest = _largest_backlash(self.base) if field == "backlash" else None
+                    if largest is None:
+                        raise InputError(f"{where}: {exc}") from None
+                    raise InputError(f"{where}: the groove's outer flank would be undercut; with the {scene.law} law "
+                                     f"this cam takes a backlash up to {largest / scale:.4g} {f.unit} (the models "
+                                     "refuse more): use levels below it") from None
 
     def level_indices(self, i: int) -> tuple[int, ...]:
         """1-based level index of each factor in run ``i`` (0-based)."""

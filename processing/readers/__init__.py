@@ -78,27 +78,34 @@ def recording_kind(path) -> str | None:
 
 def open_recording(path, sample_rate_hz: float | None = None, group: str | None = None,
                    delimiter: str | None = None, decimal: str | None = None,
-                   time_unit_s: float | None = None, channels: dict | None = None) -> Recording:
+                   time_unit_s: float | None = None, channels: dict | None = None,
+                   units: dict | None = None) -> Recording:
     """Open any supported recording.
 
     sample_rate_hz (Hz): used when the file states none (TDMS, CSV) or to override a text table's
     rate (header and time column); group: the TDMS group; delimiter, decimal, time_unit_s (s per
     unit of a time column): overrides of what the text readers detect; channels: the ``--channels``
-    mapping (chain name: file's name), the channels an LVM file must give at one rate.
+    mapping (chain name: file's name), the channels an LVM file must give at one rate (the others
+    of TDMS, LVM and CSV files may be side channels in any unit); units: the ``--units`` mapping
+    (the file's or the chain's channel name: unit text, V, mV, m/s^2 or g), replacing the file's.
     """
     kind = sniff(path)
+    wanted = list(channels.values()) if channels else None
+    units = {(channels or {}).get(k, k): v for k, v in (units or {}).items()} or None
+    if units and kind == "hdf5":
+        raise InputError(f"{shown(path)}: --units is for TDMS, LVM and CSV files; a labtool recording holds volts")
     if kind == "hdf5":
         from labtool.processing.readers.hdf5_v1 import open_hdf5_v1
         rec = open_hdf5_v1(path)
     elif kind == "tdms":
         from labtool.processing.readers.tdms import open_tdms
-        rec = open_tdms(path, sample_rate_hz, group)
+        rec = open_tdms(path, sample_rate_hz, group, units, wanted)
     elif kind == "lvm":
         from labtool.processing.readers.lvm import open_lvm
-        rec = open_lvm(path, sample_rate_hz, time_unit_s, list(channels.values()) if channels else None)
+        rec = open_lvm(path, sample_rate_hz, time_unit_s, wanted, units)
     else:
         from labtool.processing.readers.csv import open_csv
-        rec = open_csv(path, sample_rate_hz, delimiter, decimal, time_unit_s)
+        rec = open_csv(path, sample_rate_hz, delimiter, decimal, time_unit_s, units, wanted)
     if rec.n_samples == 0:
         rec.close()
         raise FileFormatError(f"{path}: the recording holds no samples")

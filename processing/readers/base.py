@@ -62,9 +62,12 @@ class Recording:
     read_raw: Callable[[int, int, np.ndarray], np.ndarray] | None = None
     raw_dtype: type = np.float64                                         # the dtype read_raw fills
     left_out: list[str] = dataclasses.field(default_factory=list)        # the file's channels not read (side channels)
+    file_names: list[str] = dataclasses.field(default_factory=list)      # the channels' names in the file (before renaming)
 
     def __post_init__(self):
         n = len(self.channel_names)
+        if not self.file_names:
+            self.file_names = list(self.channel_names)
         if not self.channel_units:
             self.channel_units = ["V"] * n
         if not self.unit_sources:
@@ -103,13 +106,20 @@ class Recording:
             f"name the file's channels with --channels {name}=<channel>")
 
     def rename_channels(self, mapping: dict[str, str]) -> None:
-        """Give source channels the names the chain uses, e.g. {"aE_t": "aE180t"} (new: old)."""
+        """Give source channels the names the chain uses, e.g. {"aE_t": "aE180t"} (new: old), all at
+        once: {"aE_t": "aE_n", "aE_n": "aE_t"} swaps two channels."""
         names = list(self.channel_names)
-        for new, old in mapping.items():
-            j = self.channel_index(old)
-            if new in names and names.index(new) != j:
-                raise InputError(f"{self.source}: cannot name channel '{old}' '{new}': another channel has that name")
+        cols = {new: self.channel_index(old) for new, old in mapping.items()}
+        twice = [new for new in cols if list(cols.values()).count(cols[new]) > 1]
+        if twice:
+            raise InputError(f"{self.source}: channel '{mapping[twice[0]]}' is named twice "
+                             f"({', '.join(sorted(twice))}); name each of the file's channels once")
+        for new, j in cols.items():
             names[j] = new
+        for new, j in cols.items():
+            if [k for k, n in enumerate(names) if n.lower() == new.lower()] != [j]:
+                raise InputError(f"{self.source}: cannot name channel '{mapping[new]}' '{new}': another channel has "
+                                 "that name (name that one too, e.g. --channels aE_t=<a>,aE_n=<b> swaps two)")
         self.channel_names = names
 
     def has_channel(self, name: str) -> bool:

@@ -179,6 +179,8 @@ def _num(text, path, what) -> float:
 
 
 def open_csv(path, sample_rate_hz: float | None = None, delimiter: str | None = None, decimal: str | None = None,
-             time_unit_s: float | None = None):
+             time_unit_s: float | None = None, units: dict | None = None, wanted: list | None = None):
+    """A Recording of the CSV file ``path``; ``units``: the user's unit per column (--units);
+    ``wanted``: the columns named with --channels (the others may be side channels)."""
     lay, meta = detect(path, delimiter, decimal)
-    return open_table(path, lay, "csv", meta, sample_rate_hz, time_unit_s, [])
+    return open_table(path, lay, "csv", meta, sample_rate_hz, time_unit_s, [], units, wanted)

@@ -6,7 +6,9 @@ Layout (NI's LVM specification): a file header from ``LabVIEW Measurement`` to
 ``Time``, ``X_Columns`` No/One/Multi), then a channel header to a second ``***End_of_Header***``
 (``Channels``, ``Samples``, ``Date``, ``Time``, ``Y_Unit_Label``, ``X0``, ``Delta_X`` per channel,
 perhaps a ``Notes`` line), then the column names (``X_Value`` columns, the channel names, a
-``Comment`` column) and the data. One segment per file (several are refused).
+``Comment`` column) and the data: one segment. A file of several segments (a channel header, names
+and rows each) is scanned whole for their headers; segments that share channels, units and rate are
+joined in order, placed by their X0 (contiguous, or after a gap event: _joined); others are refused.
 
 What LabVIEW writes and this reader takes as it comes:
 
@@ -26,11 +28,14 @@ import datetime as dt
 import math
 import re
 
+import numpy as np
+
 from labtool.common.errors import FileFormatError, InputError
 from labtool.common.names import shown
 from labtool.processing.readers.csv import read_head
 from labtool.processing.readers.text import Layout, open_table
-from labtool.processing.readers.units import signal_unit
+from labtool.processing.readers.base import Event, Recording
+from labtool.processing.readers.units import other_quantity, signal_unit, usable
 
 END = "***End_of_Header***"
 SEPARATORS = {"tab": "\t", "comma": ",", "semicolon": ";", "space": " "}
@@ -38,29 +43,108 @@ CHAIN = ("aE_t", "aE_n", "tacho")
 
 
 def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | None = None,
-             wanted: list[str] | None = None):
+             wanted: list[str] | None = None, units: dict | None = None):
     """A Recording of the LVM file ``path``; ``wanted``: the file's channel names to read (the
-    sources named by ``--channels``), None to choose as the module says."""
+    sources named by ``--channels``), None to choose as the module says; ``units``: the user's unit
+    per channel (``--units``), replacing the Y_Unit_Label. Several segments are joined when they
+    share channels, units and rate (_joined)."""
     src = shown(str(path))
-    text, bom = read_head(path, 1 << 18)
-    lines = text.splitlines(keepends=True)
-    body = [ln.rstrip("\r\n") for ln in lines]
-    ends = [i for i, ln in enumerate(body) if ln.strip().startswith(END)]
-    if not body or not body[0].startswith("LabVIEW Measurement") or len(ends) < 2:
+    text, _ = read_head(path, 1 << 18)
+    body = [ln.rstrip("\r\n") for ln in text.splitlines()]
+    first = next((i for i, ln in enumerate(body) if ln.strip().startswith(END)), None)
+    if not body or not body[0].startswith("LabVIEW Measurement") or first is None:
         raise FileFormatError(f"{src}: not a complete LabVIEW measurement file (its two headers end with {END})")
-    if len(ends) > 2:
-        raise FileFormatError(f"{src}: the LVM file holds {len(ends) - 1} segments; labtool reads one per file "
-                              "(save the measurement as one segment)")
-    file_head = _pairs(body[1:ends[0]])
+    file_head = _pairs(body[1:first])
     sep = SEPARATORS.get(file_head.get("separator", "tab").lower())
     if sep is None:
         raise FileFormatError(f"{src}: LVM separator {file_head.get('separator')!r} is not known")
     dec = file_head.get("decimal_separator", ".") or "."
-    chan = _fields(body[ends[0] + 1:ends[1]], sep)
-    names_i = next((i for i in range(ends[1] + 1, len(body)) if body[i].strip()), None)
+    heads = _segment_heads(path, src)
+    if not heads:
+        raise FileFormatError(f"{src}: not a complete LabVIEW measurement file (its two headers end with {END})")
+    recs = []
+    try:
+        for k, (h0, h1) in enumerate(heads):
+            stop = heads[k + 1][0] if k + 1 < len(heads) else None
+            recs.append(_open_segment(path, src, file_head, sep, dec, (h0, h1, stop), sample_rate_hz, time_unit_s,
+                                      wanted, units or {}))
+    except BaseException:
+        for r in recs:
+            r.close()
+        raise
+    return recs[0] if len(recs) == 1 else _joined(src, recs)
+
+
+def _segment_heads(path, src) -> list[tuple[int, int]]:
+    """(first byte of the channel header, first byte after its End_of_Header line) of every segment:
+    the whole file is scanned (a later segment's header may lie past any head read)."""
+    marks = _marker_lines(path)
+    heads = []
+    with open(path, "rb") as fh:
+        for k in range(1, len(marks)):
+            start = marks[k - 1][1]
+            if k > 1:
+                # a later segment's header begins at its Channels line, after the previous rows
+                lo = max(marks[k - 1][1], marks[k][0] - (1 << 16))
+                fh.seek(lo)
+                chunk = fh.read(marks[k][0] - lo)
+                i = chunk.rfind(b"\nChannels")
+                if i < 0:
+                    raise FileFormatError(f"{src}: LVM segment {k} has no Channels line before its {END}")
+                start = lo + i + 1
+            heads.append((start, marks[k][1]))
+    return heads
+
+
+def _marker_lines(path) -> list[tuple[int, int]]:
+    """(first byte, first byte after the line) of every line that starts with End_of_Header."""
+    key = END.encode()
+    found, pos, carry = [], 0, b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(1 << 22)
+            if not block:
+                break
+            buf = carry + block
+            base = pos - len(carry)
+            i = buf.find(key)
+            while i >= 0:
+                at = base + i
+                if (i > 0 and buf[i - 1:i] == b"\n" or at == 0) and (not found or at > found[-1]):
+                    found.append(at)
+                i = buf.find(key, i + 1)
+            pos += len(block)
+            carry = buf[-len(key):]
+        out = []
+        for at in found:
+            fh.seek(at)
+            line = fh.readline()
+            out.append((at, at + len(line)))
+    return out
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")    # LabVIEW on a Western Windows: 'Press\xe3o'
+
+
+def _open_segment(path, src, file_head, sep, dec, where, sample_rate_hz, time_unit_s, wanted, given):
+    """The Recording of one segment: its channel header from byte h0, its rows from the names line
+    after byte h1 to ``stop`` (the next segment's header; None: the file's end)."""
+    h0, h1, stop = where
+    with open(path, "rb") as fh:
+        fh.seek(h0)
+        head = fh.read(h1 - h0).split(b"\n")
+        fh.seek(h1)
+        after = fh.read(min(1 << 16, (stop - h1) if stop is not None else 1 << 16))
+    chan = _fields([_decode(ln).rstrip("\r") for ln in head if not _decode(ln).strip().startswith(END)], sep)
+    raw_lines = after.split(b"\n")
+    names_i = next((i for i, ln in enumerate(raw_lines[:-1]) if ln.strip()), None)
     if names_i is None:
         raise FileFormatError(f"{src}: the LVM file holds no data")
-    columns = [c.strip() for c in body[names_i].split(sep)]
+    columns = [c.strip() for c in _decode(raw_lines[names_i]).rstrip("\r").split(sep)]
     x_cols = [i for i, c in enumerate(columns) if c.lower() == "x_value"]
     comment = [i for i, c in enumerate(columns) if c.lower() == "comment" and i == len(columns) - 1]
     chans = [i for i in range(len(columns)) if i not in x_cols and i not in comment]
@@ -70,6 +154,10 @@ def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | Non
     # the data columns (an empty cell under each X_Value)
     multi = file_head.get("x_columns", "one").lower() == "multi"
     info = {j: _channel(chan, j - 1 if multi else k, len(chans), dec) for k, j in enumerate(chans)}
+    mine = {str(k).lower(): str(v) for k, v in given.items()}
+    for j in chans:
+        if columns[j].lower() in mine:
+            info[j]["unit"], info[j]["unit_given"] = mine[columns[j].lower()], True
     picked, left_out, why = _pick(src, columns, chans, info, wanted)
     delta = info[picked[0]]["delta"]
     if delta is not None and not (math.isfinite(delta) and delta > 0):
@@ -82,15 +170,12 @@ def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | Non
     units, unit_sources = {}, {}
     for j in picked:
         label = info[j]["unit"]
-        try:
-            signal_unit(label or "V", "")
-        except InputError:
-            raise InputError(f"{src}: channel {columns[j]!r} is in {label!r}, neither a voltage nor an acceleration "
-                             f"(channels: {_listing(columns, chans, info)}); name "
-                             "the accelerometer channels with --channels aE_t=<channel>,aE_n=<channel>") from None
+        if not usable(label or "V"):
+            _refuse_unit(src, columns, chans, info, j)
         if label:
             units[columns[j]] = label
-            unit_sources[columns[j]] = f"LVM Y_Unit_Label {label!r}"
+            unit_sources[columns[j]] = (f"--units {columns[j]}={label}" if info[j].get("unit_given")
+                                        else f"LVM Y_Unit_Label {label!r}")
     # Samples counts the first write of a segment (a VI appending one row at a time writes Samples 1
     # over many rows): the rows are the samples, cut only where a longer side channel runs on
     samples = {info[j]["samples"] for j in picked}
@@ -102,13 +187,16 @@ def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | Non
                            + ", ".join(f"{columns[j]!r} ({_describe(info[j])})" for j in left_out))
     if comment:
         assumptions.append("the Comment column is read past (text, not samples)")
-    offset = bom + sum(len(ln.encode("utf-8")) for ln in lines[:names_i + 1])
+    offset = h1 + sum(len(ln) + 1 for ln in raw_lines[:names_i + 1])
     lay = Layout(data_start=offset, delimiter=sep, decimal=dec, columns=columns, time_col=time_col,
                  time_unit_s=1.0 if time_col is not None else None, units=units, rate_hz=1.0 / delta if delta else None,
                  assumptions=assumptions, signal_cols=picked, n_rows=n_rows, names_as_written=True,
                  unit_sources=unit_sources, rate_source="the LVM header's Delta_X" if delta else "",
-                 x0_s=info[picked[0]]["x0"], left_out=left_out)
+                 x0_s=info[picked[0]]["x0"], left_out=left_out, data_stop=stop)
     meta = {"lvm_" + k: v for k, v in file_head.items()}
+    x0 = info[picked[0]]["x0_stated"]
+    if x0 is not None and math.isfinite(x0):
+        meta["lvm_segment_x0_s"] = x0     # where the segment starts (s): joined segments are placed by it
     start = _start_time(info[picked[0]]["date"] or file_head.get("date"),
                         info[picked[0]]["time"] or file_head.get("time"))
     if start:
@@ -118,6 +206,89 @@ def open_lvm(path, sample_rate_hz: float | None = None, time_unit_s: float | Non
         lay.assumptions.append(f"the LVM Date/Time {file_head.get('date', '')!r} {file_head.get('time', '')!r} is not "
                                "a date and time: the start time is left out")
     return open_table(path, lay, "lvm", meta, sample_rate_hz, time_unit_s, [])
+
+
+def _refuse_unit(src, columns, chans, info, j):
+    """The channel picked is in a unit labtool cannot read: why, and the option that settles it."""
+    label = info[j]["unit"]
+    listing = _listing(columns, chans, info)
+    if not any(usable(info[i]["unit"] or "V") for i in chans):
+        raise InputError(f"{src}: none of its channels is in a unit of voltage or acceleration ({listing}): not a "
+                         "recording of an accelerometer")
+    if other_quantity(label):
+        raise InputError(f"{src}: channel {columns[j]!r} is in {label!r}, a unit of another quantity than voltage or "
+                         f"acceleration (channels: {listing}); name the accelerometer channels with "
+                         "--channels aE_t=<channel>,aE_n=<channel>")
+    raise InputError(f"{src}: channel {columns[j]!r} is in {label!r}, neither a voltage nor an acceleration "
+                     f"(channels: {listing}): if you know the unit it was recorded in, give it with "
+                     f"--units '{columns[j]}=V' (or mV, m/s^2, g); else name the accelerometer channels with "
+                     "--channels aE_t=<channel>,aE_n=<channel>")
+
+
+def _joined(src, recs):
+    """One Recording of the segments of an LVM file, in order: they must share their channels, units
+    and rate. A segment that starts where the previous one ends (by X0 and Delta_X) continues it; one
+    that starts later is joined after a gap event with the samples lost (processed as a segment of its
+    own, as a recorder's gap is); one whose X0 says nothing of that, after a gap of unknown loss."""
+    first = recs[0]
+    for k, r in enumerate(recs[1:], start=2):
+        differs = [what for what, a, b in (("channels", first.channel_names, r.channel_names),
+                                           ("units", first.channel_units, r.channel_units))
+                   if a != b] + (["sample rate"] if abs(r.sample_rate_hz / first.sample_rate_hz - 1) > 1e-9 else [])
+        if differs:
+            raise InputError(
+                f"{src}: its segment {k} differs from segment 1 in its {' and '.join(differs)} "
+                f"({_describe_rec(r)}; segment 1: {_describe_rec(first)}); labtool joins the segments of one "
+                "measurement: copy the file header and the segment you want into a file of its own and process that")
+    fs = first.sample_rate_hz
+    bounds = np.cumsum([0] + [r.n_samples for r in recs])
+    events, said = [], []
+    for k in range(1, len(recs)):
+        prev, cur = recs[k - 1], recs[k]
+        x_prev, x_cur = prev.attrs.get("lvm_segment_x0_s"), cur.attrs.get("lvm_segment_x0_s")
+        if x_prev is None or x_cur is None:
+            events.append(Event(int(bounds[k]), "gap", f"LVM segment {k + 1}: its X0 does not say where it starts"))
+            said.append(f"segment {k + 1} after a gap of unknown length (no X0)")
+            continue
+        gap = x_cur - (x_prev + prev.n_samples / fs)
+        lost = int(round(gap * fs))
+        if abs(gap) <= 0.5 / fs:
+            said.append(f"segment {k + 1} continuing segment {k}")
+        elif lost > 0:
+            events.append(Event(int(bounds[k]), "gap", f"missing_samples={lost} (LVM segment {k + 1} starts "
+                                                          f"{gap:.6g} s after segment {k} ends)"))
+            said.append(f"segment {k + 1} after a gap of {lost} samples ({gap:.6g} s)")
+        else:
+            events.append(Event(int(bounds[k]), "gap", f"LVM segment {k + 1} starts {-gap:.6g} s before segment {k} "
+                                                        "ends"))
+            said.append(f"segment {k + 1} overlapping segment {k} by {-gap:.6g} s: joined after a gap of unknown "
+                        "length")
+
+    def read(start: int, stop: int) -> np.ndarray:
+        parts = []
+        for k, r in enumerate(recs):
+            a, b = max(start, bounds[k]), min(stop, bounds[k + 1])
+            if a < b:
+                parts.append(r.read(int(a - bounds[k]), int(b - bounds[k])))
+        return np.concatenate(parts) if parts else np.empty((0, first.n_channels))
+
+    def close() -> None:
+        for r in recs:
+            r.close()
+
+    note = f"{len(recs)} LVM segments joined: " + "; ".join(said)
+    warnings = list(dict.fromkeys(w for r in recs for w in r.warnings))
+    return Recording(source=first.source, format=f"lvm ({len(recs)} segments)", sample_rate_hz=fs,
+                     channel_names=list(first.channel_names), n_samples=int(bounds[-1]), read=read,
+                     ka_m_s2_per_v=first.ka_m_s2_per_v, start_time_utc=first.start_time_utc,
+                     cam_speed_rpm=first.cam_speed_rpm, events=events, attrs=dict(first.attrs),
+                     warnings=warnings + [f"{src}: assumed: {note}"], close=close,
+                     channel_units=list(first.channel_units), unit_sources=list(first.unit_sources),
+                     assumptions=list(first.assumptions) + [note], left_out=list(first.left_out))
+
+
+def _describe_rec(r) -> str:
+    return ", ".join(f"{n} [{u}]" for n, u in zip(r.channel_names, r.channel_units)) + f" at {r.sample_rate_hz:g} Hz"
 
 
 def _pick(src, columns, chans, info, wanted):
@@ -199,7 +370,7 @@ def _channel(chan: dict, k: int, n_chans: int, dec: str) -> dict:
 
     samples = number("samples")
     return {"samples": int(samples) if samples is not None and math.isfinite(samples) else None,
-            "delta": number("delta_x"), "x0": number("x0") or 0.0,
+            "delta": number("delta_x"), "x0": number("x0") or 0.0, "x0_stated": number("x0"),
             "unit": cell("y_unit_label") or cell("unit_label"), "date": cell("date"), "time": cell("time")}
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from labtool.common.errors import FileFormatError, InputError
 from labtool.processing.readers.base import Recording, as_text, check_finite, check_sample_rate
-from labtool.processing.readers.units import signal_unit
+from labtool.processing.readers.units import signal_unit, usable
 
 RATE_KEYS = ("sample_rate_hz", "sample rate", "samplerate", "sample_rate", "wf_samplerate", "rate")
 UNIT_KEYS = ("unit_string", "NI_UnitDescription", "unit")
@@ -60,7 +60,11 @@ class _Collect(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def open_tdms(path, sample_rate_hz: float | None = None, group: str | None = None) -> Recording:
+def open_tdms(path, sample_rate_hz: float | None = None, group: str | None = None, units: dict | None = None,
+              wanted: list | None = None) -> Recording:
+    """A Recording of the TDMS file ``path``; ``units``: the user's unit per channel (--units),
+    replacing the file's; ``wanted``: the channels named with --channels (the others may be side
+    channels in any unit, left out)."""
     from nptdms import TdmsFile
 
     src = str(path)
@@ -71,7 +75,7 @@ def open_tdms(path, sample_rate_hz: float | None = None, group: str | None = Non
             raise FileFormatError(f"{src}: not a readable TDMS file: its lead-in or metadata is cut or corrupt "
                                   "(give an undamaged copy)") from None
         try:
-            rec = _build(tf, src, sample_rate_hz, group)
+            rec = _build(tf, src, sample_rate_hz, group, units or {}, wanted)
         except (FileFormatError, InputError):
             tf.close()
             raise
@@ -126,26 +130,50 @@ def _rate(tf, g, chans, src, sample_rate_hz):
     return sample_rate_hz
 
 
-def _units(chans, src):
+def _stated_unit(c, given: dict):
+    """(unit text, where it was read) of channel c: --units, else its unit property, else (None, None)."""
+    mine = {str(k).lower(): v for k, v in given.items()}.get(c.name.lower())
+    if mine is not None:
+        return str(mine), f"--units {c.name}={mine}"
+    key = next((k for k in UNIT_KEYS if str(c.properties.get(k, "")).strip()), None)
+    return (c.properties[key], f"TDMS {key} = {c.properties[key]!r}") if key else (None, None)
+
+
+def _side_channels(chans, given: dict, wanted):
+    """The channels in a unit neither of voltage nor of acceleration that are not the accelerometer's
+    (named with --channels, or called aE_t/aE_n): left out, as LVM side channels are."""
+    names = {c.name.lower() for c in chans}
+    known = {w.lower() for w in wanted} if wanted else ({"ae_t", "ae_n", "tacho"} if {"ae_t", "ae_n"} <= names else None)
+    if known is None:
+        return []
+    return [c for c in chans if c.name.lower() not in known and _stated_unit(c, given)[0] is not None
+            and not usable(_stated_unit(c, given)[0])]
+
+
+def _units(chans, src, given: dict):
     kinds, factors, sources, assumed = [], [], [], []
     for c in chans:
-        key = next((k for k in UNIT_KEYS if str(c.properties.get(k, "")).strip()), None)
-        if key is None:
+        unit, where = _stated_unit(c, given)
+        if unit is None:
             kinds.append("V")
             factors.append(1.0)
             sources.append("none stated: volts assumed")
             assumed.append(f"channel '{c.name}' states no unit_string: read as volts")
             continue
-        kind, f = signal_unit(c.properties[key], f"{src}: TDMS channel '{c.name}'")
+        kind, f = signal_unit(unit, f"{src}: TDMS channel '{c.name}'", c.name)
         kinds.append(kind)
         factors.append(f)
-        sources.append(f"TDMS {key} = {c.properties[key]!r}")
+        sources.append(where)
     return kinds, np.asarray(factors), sources, assumed
 
 
-def _build(tf, src, sample_rate_hz, group_name) -> Recording:
+def _build(tf, src, sample_rate_hz, group_name, given: dict, wanted) -> Recording:
     g = _group(tf, src, group_name)
     chans = list(g.channels())
+    aside = _side_channels(chans, given, wanted)
+    chans = [c for c in chans if c not in aside]
+    if not chans:
+        raise FileFormatError(f"{src}: TDMS group '{g.name}' holds no channel in volts or an acceleration")
     n = max(len(c) for c in chans)
     short = [c.name for c in chans if len(c) != n]
     if short:
@@ -156,7 +184,9 @@ def _build(tf, src, sample_rate_hz, group_name) -> Recording:
         if np.dtype(c.dtype).kind not in "fiu":
             raise FileFormatError(f"{src}: TDMS channel '{c.name}' holds {c.dtype}, not numbers")
     fs = check_sample_rate(_rate(tf, g, chans, src, sample_rate_hz), src)
-    kinds, factors, sources, assumed = _units(chans, src)
+    kinds, factors, sources, assumed = _units(chans, src, given)
+    assumed += [f"channel '{c.name}' is in {_stated_unit(c, given)[0]!r}, not a voltage or an acceleration: left out"
+                for c in aside]
     ka = np.array([float(c.properties.get("ka_m_s2_per_v", math.nan)) for c in chans])
     rpm = float(tf.properties.get("cam_speed_rpm", g.properties.get("cam_speed_rpm", math.nan)))
 
@@ -179,6 +209,7 @@ def _build(tf, src, sample_rate_hz, group_name) -> Recording:
                     n_samples=int(n), read=read, ka_m_s2_per_v=ka, start_time_utc=_iso(start),
                     cam_speed_rpm=rpm if rpm > 0 else math.nan, attrs=attrs, close=tf.close,
                     channel_units=kinds, unit_sources=sources, assumptions=assumed)
+    rec.left_out = [c.name for c in aside]
     rec.warnings.extend(f"{src}: assumed: {a}" for a in assumed)
     return rec
 

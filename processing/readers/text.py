@@ -17,11 +17,12 @@ import numpy as np
 from labtool.common.errors import FileFormatError, InputError
 from labtool.common.names import shown
 from labtool.processing.readers.base import Recording, check_finite, check_sample_rate
-from labtool.processing.readers.units import signal_unit, split_name_unit, time_unit
+from labtool.processing.readers.units import signal_unit, split_name_unit, time_unit, usable
 
 BLOCK = 65536          # rows between two stored offsets
 MIN_PLAUSIBLE_FS = 500.0  # Hz: below it 100 harmonics of a 20 rpm cam do not fit; a time unit is wrong
 TIME_NAMES = ("time", "t", "x_value", "zeit", "timestamp", "datetime", "date/time")
+CHAIN = ("ae_t", "ae_n", "tacho")     # the chain's channel names, lower case
 
 
 @dataclasses.dataclass
@@ -45,6 +46,7 @@ class Layout:
     comment: str | None = None        # lines starting with it are skipped anywhere (CSV: '#')
     x_precision_s: float = 0.0        # half the last printed digit of the time column (s), found when read
     left_out: list = dataclasses.field(default_factory=list)   # channel columns not read (side channels)
+    data_stop: int | None = None      # byte offset where the rows end (None: the file's end; LVM segments)
 
 
 def find_time_column(columns) -> int | None:
@@ -55,18 +57,21 @@ def find_time_column(columns) -> int | None:
     return None
 
 
-def _index_rows(path, start: int, comment: str | None = None) -> tuple[list[int], int]:
-    """Byte offsets of rows 0, BLOCK, 2 BLOCK, ... from ``start``, and the number of data rows.
+def _index_rows(path, start: int, comment: str | None = None, stop: int | None = None) -> tuple[list[int], int]:
+    """Byte offsets of rows 0, BLOCK, 2 BLOCK, ... from ``start`` (to ``stop``, else the end), and the
+    number of data rows.
 
     Blank lines, and lines starting with ``comment``, are skipped wherever they are (exporters
     write them between blocks of rows); pandas skips the same lines when it parses."""
     offsets: list[int] = []
     n, base, buf = 0, start, b""
     mark = ord(comment) if comment else -1
+    left = math.inf if stop is None else stop - start
     with open(path, "rb") as fh:
         fh.seek(start)
         while True:
-            more = fh.read(1 << 22)
+            more = fh.read(int(min(1 << 22, left)))
+            left -= len(more)
             buf += more
             if not more and buf and not buf.endswith(b"\n"):
                 buf += b"\n"
@@ -105,10 +110,14 @@ def _parse(path, offset: int, nrows: int, lay: Layout) -> "object":
 
 
 def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | None, time_unit_s: float | None,
-               warn_list: list) -> Recording:
-    """A Recording over the table; ``sample_rate_hz``/``time_unit_s``: the user's overrides (or None)."""
+               warn_list: list, units: dict | None = None, wanted: list | None = None) -> Recording:
+    """A Recording over the table; ``sample_rate_hz``/``time_unit_s``: the user's overrides (or None);
+    ``units``: the user's unit per column (name as written, or without its unit), replacing the file's;
+    ``wanted``: the columns the user named (--channels). A column in a unit that is neither a voltage
+    nor an acceleration is left out (and said) when the accelerometer's columns are known (named, or
+    called aE_t and aE_n), and refused otherwise, the refusal naming the option that settles it."""
     src = str(path)
-    offsets, n = _index_rows(path, lay.data_start, lay.comment)
+    offsets, n = _index_rows(path, lay.data_start, lay.comment, lay.data_stop)
     if lay.n_rows is not None:
         if lay.n_rows < n:
             offsets = offsets[:(lay.n_rows - 1) // BLOCK + 1] if lay.n_rows else offsets[:1]
@@ -121,19 +130,34 @@ def open_table(path, lay: Layout, fmt: str, meta: dict, sample_rate_hz: float | 
                               f"(delimiter {lay.delimiter!r} right? give --delimiter)")
     keep = list(lay.signal_cols) if lay.signal_cols is not None else \
         [i for i in range(len(lay.columns)) if i != lay.time_col]
-    names, units, factors, sources = [], [], [], []
+    given = {str(k).lower(): str(v) for k, v in (units or {}).items()}
+    split = {i: ((lay.columns[i], None) if lay.names_as_written else split_name_unit(lay.columns[i])) for i in keep}
+    # the accelerometer's columns are known: named with --channels, or called as the chain calls them
+    known = {w.lower() for w in wanted} if wanted else \
+        ({c for c in CHAIN} if {"ae_t", "ae_n"} <= {split[i][0].lower() for i in keep} else None)
+    names, units, factors, sources, aside = [], [], [], [], []
     for i in keep:
-        name, unit = (lay.columns[i], None) if lay.names_as_written else split_name_unit(lay.columns[i])
+        name, unit = split[i]
         unit = unit or lay.units.get(name) or lay.units.get(lay.columns[i])
+        source = None
+        mine = given.get(name.lower(), given.get(lay.columns[i].lower()))
+        if mine is not None:
+            unit, source = mine, f"--units {name}={mine}"
         if unit is None:
             lay.assumptions.append(f"column '{name}' states no unit: read as volts")
             unit = "V"
-        kind, f = signal_unit(unit, f"{src}: column '{name}'")
+        if not usable(unit) and known is not None and name.lower() not in known and lay.columns[i].lower() not in known:
+            aside.append(i)       # a side channel (a temperature, a force) beside the accelerometer's
+            lay.assumptions.append(f"column '{name}' is in {unit!r}, not a voltage or an acceleration: left out")
+            continue
+        kind, f = signal_unit(unit, f"{src}: column '{name}'", name)
         names.append(name)
         units.append(kind)
         factors.append(f)
-        sources.append(lay.unit_sources.get(lay.columns[i], "column header") if unit != "V" or
-                       lay.columns[i] in lay.unit_sources else "column header")
+        sources.append(source or (lay.unit_sources.get(lay.columns[i], "column header") if unit != "V" or
+                                  lay.columns[i] in lay.unit_sources else "column header"))
+    keep = [i for i in keep if i not in aside]
+    lay.left_out = list(lay.left_out) + aside
     if len(set(names)) != len(names):
         raise FileFormatError(f"{src}: channel names {names} are repeated; name the ones to read with --channels")
     fs, t0, start_iso = _rate(src, path, offsets, n, lay, head, sample_rate_hz, time_unit_s)

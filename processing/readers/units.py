@@ -20,15 +20,40 @@ _TIME = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec"
          "milliseconds": 1e-3, "us": 1e-6, "µs": 1e-6, "microseconds": 1e-6, "min": 60.0}
 
 
-def signal_unit(text, where: str) -> tuple[str, float]:
-    """("V" or "m/s^2", factor to that unit) of a channel's unit text; InputError for anything else."""
+# units of other quantities (pressure, force, temperature, volume, length, speed, angle, current,
+# power, time, ratio): a channel in one of them is not an accelerometer's, whatever it is named
+_OTHER = {"pa", "kpa", "mpa", "hpa", "bar", "mbar", "psi", "n", "kn", "lbf", "nm", "n*m", "°c", "degc", "c", "k",
+          "°f", "degf", "ml", "l", "m^3", "m", "cm", "mm", "um", "µm", "in", "m/s", "mm/s", "rpm", "hz", "deg", "°",
+          "rad", "a", "ma", "w", "kw", "ohm", "Ω", "%", "s", "ms", "us", "min", "h", "kg", "g/s", "l/min"}
+
+
+def signal_unit(text, where: str, name: str | None = None) -> tuple[str, float]:
+    """("V" or "m/s^2", factor to that unit) of a channel's unit text; InputError for anything else,
+    whose advice names the channel ``name`` (as the file names it) in the option that settles it."""
     key = re.sub(r"\s+", "", str(text)).lower()
     if key in _VOLT:
         return "V", _VOLT[key]
     if key in _ACCEL:
         return "m/s^2", _ACCEL[key]
-    raise InputError(f"{where}: unit {text!r} is neither a voltage (V, mV) nor an acceleration (m/s^2, g); "
-                     "labtool will not guess its scale: convert the channel or fix its unit")
+    if other_quantity(text):
+        raise InputError(f"{where}: unit {text!r} is a unit of another quantity than voltage or acceleration: not an "
+                         "accelerometer's channel; name the accelerometer's channels with "
+                         "--channels aE_t=<channel>,aE_n=<channel>")
+    named = name if name is not None else "<channel>"
+    raise InputError(f"{where}: unit {text!r} is neither a voltage (V, mV) nor an acceleration (m/s^2, g); labtool "
+                     f"will not guess its scale: if you know the unit it was recorded in, give it with "
+                     f"--units '{named}=V' (or mV, m/s^2, g)")
+
+
+def other_quantity(text) -> bool:
+    """True for the unit of a quantity that no accelerometer channel is in (MPa, degC, N, ml, ...)."""
+    return re.sub(r"\s+", "", str(text)).lower() in _OTHER or str(text).strip() in _OTHER
+
+
+def usable(text) -> bool:
+    """True when signal_unit reads ``text``."""
+    key = re.sub(r"\s+", "", str(text)).lower()
+    return key in _VOLT or key in _ACCEL
 
 
 def time_unit(text) -> float | None:
