@@ -11,6 +11,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
+	# numba compiles labtool's loops once into its cache (beside the sources), here rather than in
+	# the first command of make demo or make test
+	$(BIN)/labtool warmup
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -25,10 +25,13 @@ mostly measure the scheduler; CPU times are the comparable figure then.
 
     git archive main | tar -x -C /tmp/main-check       # main before the change, to compare with
     .venv/bin/python benchmarks/bench_process.py [--minutes 60] [--repeats 2] [--main /tmp/main-check]
+
+Writes its figures to benchmarks/results/process_<minutes>min.json.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import subprocess
@@ -38,6 +41,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+RESULTS_DIR = ROOT / "benchmarks" / "results"
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -310,8 +314,16 @@ def main() -> None:
         if "main" in wall:
             print(f"labtool / main (before) throughput: CPU {cpu['main'] / cpu['labtool']:.2f}x, "
                   f"wall {wall['main'] / wall['labtool']:.2f}x; main / plain CPU {cpu['plain'] / cpu['main']:.2f}x")
+        rss = {}
         for name, peer, root in peers:
-            print(f"peak RSS {name}: {_peak_rss_mb(peer, src, out, root):.0f} MB")
+            rss[name] = _peak_rss_mb(peer, src, out, root)
+            print(f"peak RSS {name}: {rss[name]:.0f} MB")
+        RESULTS_DIR.mkdir(exist_ok=True)
+        (RESULTS_DIR / f"process_{args.minutes:g}min.json").write_text(json.dumps({
+            "minutes": args.minutes, "samples": n, "repeats": args.repeats, "runs": runs,
+            "median_wall_s": wall, "median_cpu_s": cpu, "peak_rss_mb": rss,
+            "labtool_over_plain_throughput": {"cpu": cpu["plain"] / cpu["labtool"], "wall": wall["plain"] / wall["labtool"]},
+            "loadavg_end": os.getloadavg()}, indent=1) + "\n")
         print("goal: >= 2x the plain chain, peak RSS <= 300 MB; "
               f"load average now {os.getloadavg()[0]:.1f}")
         if args.main is not None:

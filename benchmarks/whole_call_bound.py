@@ -81,7 +81,7 @@ def measure(run_ids, repeats, calls, log):
         check = float(np.max(np.abs(full.dataset["omega2"].values[at] - lean["omega2"].values))
                       / np.max(np.abs(lean["omega2"].values)))
         variants = {
-            "full": lambda: accuracy.run_model(scene, "elastic"),
+            "full": lambda: accuracy.run_model(scene, "elastic").dataset,      # the Dataset built too
             "indicators": lambda: indicators(scene, "elastic"),
             "peer-outputs": lambda: peer_outputs_call(scene),
             "loop": lambda: E._solve(scene, "consistent", None, None, {}, raw=True),

@@ -194,10 +194,36 @@ class DaskCluster:
         self._client.close()
 
 
-def backend_for(workers: int | None, scheduler: str | None, connect_timeout_s: float = 10.0):
-    """The backend of ``--workers`` / ``--scheduler`` (None workers: decided later from the cost)."""
-    if scheduler:
+class OnDemand:
+    """A backend made only if the work is worth it: the first chunks run in this process and
+    measure the cost of an item; ``labtool.execution.chunked.map_chunked`` then calls ``make()``
+    when the work left is over ``worth_s`` seconds, else finishes here and says why. ``name``: what
+    ``make`` would start, for that sentence."""
+
+    def __init__(self, make: Callable, worth_s: float, name: str):
+        self.make, self.worth_s, self.name = make, worth_s, name
+
+    def close(self) -> None:
+        pass                     # what ``make`` made is closed by its user (map_chunked)
+
+
+# below this much work (s) a Dask cluster does not pay: the tasks' round trips, the workers' first
+# task (labtool's import and its compiled code loaded, ~1 s) and the client's start cost ~1-2 s,
+# which the design would have finished in (1,024 elastic runs: 1.5 s on 2 workers, 1.2 s here)
+DASK_WORTH_S = 10.0
+
+
+def backend_for(workers: int | None, scheduler: str | None, connect_timeout_s: float = 10.0,
+                scheduler_always: bool = False):
+    """The backend of ``--workers`` / ``--scheduler`` (None workers: decided later from the cost).
+    A scheduler is connected to when the measured work is worth it (``OnDemand``, DASK_WORTH_S),
+    or at once with ``scheduler_always``."""
+    if scheduler and scheduler_always:
         return DaskCluster(scheduler, connect_timeout_s)
+    if scheduler:
+        address = check_scheduler_address(scheduler)
+        return OnDemand(lambda: DaskCluster(address, connect_timeout_s), DASK_WORTH_S,
+                        f"the Dask cluster at {address}")
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be >= 1, got {workers}")
     if workers == 1:

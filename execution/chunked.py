@@ -29,7 +29,7 @@ import numpy as np
 
 from labtool.common.errors import interrupt_cause
 from labtool.common.files import check_interrupted
-from labtool.execution.backends import InProcess, LocalProcesses, TaskFailed
+from labtool.execution.backends import InProcess, LocalProcesses, OnDemand, TaskFailed
 from labtool.execution.parts import DiskFull, PartStore
 
 PROBE_ITEMS = 4          # items in each first chunk, before any cost is known
@@ -131,7 +131,8 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
 
     backend       an ``labtool.execution.backends`` backend; None = decide from the measured cost: this
                   process for work under POOL_WORTH_S, else ``auto_workers`` (default: the cores)
-                  local processes
+                  local processes; an ``OnDemand`` (a Dask scheduler): the same, its backend made
+                  for work over its ``worth_s`` (``Outcome.where`` says which ran, and why)
     chunk_items   items per chunk (None: sized from the measured cost)
     progress      callable(done_items, total_items) after every chunk
     """
@@ -140,7 +141,8 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
     todo = store.missing(n)
     resumed = n - sum(b - a for a, b in todo)
     cost = Cost()
-    auto = backend is None
+    demand = backend if isinstance(backend, OnDemand) else None
+    auto = backend is None or demand is not None
     active = InProcess() if auto else backend
     out = Outcome(n, resumed, active.where)
     state = {"accepted": on_estimate is None, "buffer": [], "done": resumed, "decided": not auto}
@@ -194,14 +196,19 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
             todo = store.missing(n)
             left = sum(b - a for a, b in todo)
             if left:
-                nw = _workers_for(True, active, auto_workers, cost, left)
-                if nw > 1:
-                    active = LocalProcesses(nw)
-                    out.where = f"{active.where} (after {n - left - resumed} items in this process)"
+                if demand is not None:
+                    active, out.where = _on_demand(demand, cost, left, n - left - resumed, unit)
+                else:
+                    nw = _workers_for(True, active, auto_workers, cost, left)
+                    if nw > 1:
+                        active = LocalProcesses(nw)
+                        out.where = f"{active.where} (after {n - left - resumed} items in this process)"
                 tasks = (Chunk(fn, items, a, b) for a, b in plan(todo, cost, active.workers, target_task_s, chunk_items))
                 active.run(tasks, on_result)
         if state["buffer"]:
             accept()
+        if demand is not None and isinstance(active, InProcess):
+            out.where = _stayed(demand, cost, n - resumed, unit)
     except KeyboardInterrupt as exc:    # Ctrl-C, SIGTERM, SIGHUP: the command ends 128 + signal (labtool.cli)
         if state["done"]:
             exc.add_note(f"{state['done']} of {n} {unit} are finished and kept in {store.folder}; "
@@ -212,6 +219,22 @@ def map_chunked(fn: Callable, items: Sequence, store: PartStore, backend=None, *
     out.cost_s = cost.per_item
     out.wall_s = time.perf_counter() - t_start
     return out
+
+
+def _on_demand(demand: OnDemand, cost: Cost, left: int, done_here: int, unit: str):
+    """(backend, where) for the ``left`` items after the probe: ``demand``'s backend when their
+    measured work is over its ``worth_s``, else this process (``_stayed`` says why, at the end)."""
+    if (cost.per_item or 0.0) * left > demand.worth_s:
+        active = demand.make()
+        return active, f"{active.where} (after {done_here} {unit} in this process)"
+    return InProcess(), None
+
+
+def _stayed(demand: OnDemand, cost: Cost, n_here: int, unit: str) -> str:
+    """Why the ``n_here`` items ran in this process, not on ``demand``'s backend."""
+    per = cost.per_item or 0.0
+    return (f"in-process, not {demand.name}: {n_here} {unit} x {per * 1e3:.3g} ms measured = about "
+            f"{format_duration(per * n_here)} of work, under the {demand.worth_s:g} s a cluster needs to pay for its start")
 
 
 def _workers_for(auto: bool, active, auto_workers, cost: Cost, left: int) -> int:

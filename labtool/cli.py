@@ -53,6 +53,7 @@ COMMAND_MODULES = (
     "labtool.commands.export",
     "labtool.commands.bench",
     "labtool.commands.campaign",
+    "labtool.commands.warmup",
 )
 
 
@@ -203,6 +204,8 @@ def _invoke(argv):
     _register_for(args)
     command = typer.main.get_command(_app)
     with running(args), command.make_context("labtool", args) as ctx:
+        from labtool.warmup import announce_for
+        announce_for(args)          # a command about to compile says so at once (labtool.warmup)
         return command.invoke(ctx)
 
 

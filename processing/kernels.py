@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
+
+from labtool.models.dynamics.jit import jit
 
 TWO_PI = 2.0 * math.pi
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def sos_pass_state(sos, z, x, out, reverse):
     """Direct-form-II-transposed SOS pass over the columns of ``x`` (m, nch) into ``out``, all
     channels per sample (independent recursions side by side), from the state z (nch, ns, 2),
@@ -40,7 +41,7 @@ def sos_pass_state(sos, z, x, out, reverse):
             out[i, c] = v
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _sos_pass_2x2(sos, zi, x, mid, pad, out, reverse, skip=0):
     """sos_pass_state for 2 sections and 2 channels (order 4, aE_t and aE_n: the chain's case)
     with the eight state values in registers; the same operations in the same order (2.4x faster).
@@ -83,14 +84,11 @@ def _sos_pass_2x2(sos, zi, x, mid, pad, out, reverse, skip=0):
             out[i - skip, 1] = y
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _sos_pass(sos, zi, x, out, reverse):
     """sos_pass_state from the steady state of the first sample in the pass's direction (zi * x0)."""
     ns = sos.shape[0]
     m, nch = x.shape
-    if ns == 2 and nch == 2:
-        _sos_pass_2x2(sos, zi, x, x, -1, out, reverse)
-        return
     z = np.empty((nch, ns, 2))
     i0 = m - 1 if reverse else 0
     for c in range(nch):
@@ -100,39 +98,68 @@ def _sos_pass(sos, zi, x, out, reverse):
     sos_pass_state(sos, z, x, out, reverse)
 
 
-@nb.njit(cache=True, nogil=True)
 def sosfiltfilt_into(sos, zi, x, padlen, ext, out):
     """scipy.signal.sosfiltfilt(sos, x, axis=0, padtype='odd', padlen=padlen) for x (n, nch) into
-    ``out`` (n, nch); ``ext`` (>= n + 2 padlen, 2 nch) scratch. zi: sosfilt_zi(sos) (n_sections, 2)."""
+    ``out`` (n, nch); ``ext`` (2, >= n + 2 padlen, nch) scratch. zi: sosfilt_zi(sos) (n_sections, 2).
+
+    Two compiled kernels, chosen here: the chain's case (2 sections, 2 channels, ``_filtfilt_2x2``)
+    and any other (``_filtfilt_any``), so that a process compiles the one it runs."""
+    if sos.shape[0] == 2 and x.shape[1] == 2:
+        _filtfilt_2x2(sos, zi, x, padlen, ext, out)
+    else:
+        _filtfilt_any(sos, zi, x, padlen, ext, out)
+
+
+@jit(nogil=True)
+def _odd_extension(x, padlen, e):
+    """e[:n + 2 padlen] = x with its odd extension of padlen samples at both ends (the middle
+    rows left as they are: the caller writes or reads them itself)."""
     n, nch = x.shape
-    m = n + 2 * padlen
-    e = ext[:m, :nch]
-    f = ext[:m, nch:2 * nch]
     for c in range(nch):
         x0, x1 = x[0, c], x[n - 1, c]
-        for k in range(padlen):  # odd extension at both ends
+        for k in range(padlen):
             e[k, c] = 2.0 * x0 - x[padlen - k, c]
             e[padlen + n + k, c] = 2.0 * x1 - x[n - 2 - k, c]
-    if sos.shape[0] == 2 and nch == 2:  # the middle read from x and written to out, not copied
-        _sos_pass_2x2(sos, zi, e, x, padlen, f, False)
-        _sos_pass_2x2(sos, zi, f, f, -1, out, True, padlen)
-        return
-    e[padlen:padlen + n] = x
+
+
+@jit(nogil=True)
+def _filtfilt_2x2(sos, zi, x, padlen, ext, out):
+    """sosfiltfilt_into for 2 sections and 2 channels: the middle read from x and written to out,
+    not copied (``_sos_pass_2x2``)."""
+    m = x.shape[0] + 2 * padlen
+    e, f = ext[0, :m], ext[1, :m]
+    _odd_extension(x, padlen, e)
+    _sos_pass_2x2(sos, zi, e, x, padlen, f, False, 0)
+    _sos_pass_2x2(sos, zi, f, f, -1, out, True, padlen)
+
+
+@jit(nogil=True)
+def _filtfilt_any(sos, zi, x, padlen, ext, out):
+    """sosfiltfilt_into for any number of sections and channels (element loops: a slice copy
+    compiles numba's shape checks and their messages, a second or more of a first run)."""
+    n, nch = x.shape
+    m = n + 2 * padlen
+    e, f = ext[0, :m], ext[1, :m]
+    _odd_extension(x, padlen, e)
+    for i in range(n):
+        for c in range(nch):
+            e[padlen + i, c] = x[i, c]
     _sos_pass(sos, zi, e, f, False)
     _sos_pass(sos, zi, f, e, True)
-    out[:, :] = e[padlen:padlen + n]
+    for i in range(n):
+        for c in range(nch):
+            out[i, c] = e[padlen + i, c]
 
 
-@nb.njit(cache=True, nogil=True)
 def sosfiltfilt(sos, zi, x, padlen):
     """sosfiltfilt_into with its own arrays."""
     n, nch = x.shape
     out = np.empty((n, nch))
-    sosfiltfilt_into(sos, zi, x, padlen, np.empty((n + 2 * padlen, 2 * nch)), out)
+    sosfiltfilt_into(sos, zi, x, padlen, np.empty((2, n + 2 * padlen, nch)), out)
     return out
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def phi1_from_marks_into(first, n, marks, fallback_period, phi1, rev):
     """cam_angle.phi1_from_marks for the contiguous samples first..first+n-1 into phi1 (rad) and
     rev (revolution index, int64)."""
@@ -157,7 +184,7 @@ def phi1_from_marks_into(first, n, marks, fallback_period, phi1, rev):
         rev[i] = k
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def phi1_from_marks(first, n, marks, fallback_period):
     """phi1_from_marks_into with its own arrays: (phi1 rad, revolution)."""
     phi1 = np.empty(n)
@@ -166,7 +193,7 @@ def phi1_from_marks(first, n, marks, fallback_period):
     return phi1, rev
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _runs(mask, value, starts, stops):
     """[start, stop) of every run of mask == value: (starts, stops), views of the scratch arrays
     ``starts``, ``stops`` (>= n // 2 + 1 each)."""
@@ -186,20 +213,30 @@ def _runs(mask, value, starts, stops):
     return starts[:r], stops[:r]
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _subtract_dwell_baseline(acc, moving, middle, min_len, starts, stops):
     """follower.dwell_baseline(acc, ~moving, middle, min_len), subtracted from acc in place."""
     n, nch = acc.shape
     st, sp = _runs(moving, False, starts, stops)
-    full = (st > 0) & (sp < n) & (sp - st >= min_len)
-    use = full if full.any() else (sp - st >= min_len)
-    st, sp = st[use], sp[use]
-    nr = st.shape[0]
+    # the dwells long enough, inside the window if any is (element loops, not numpy's masks: their
+    # broadcasting checks compile numba's error messages, ~1 s of a first run)
+    inside = False
+    for r in range(st.shape[0]):
+        inside = inside or (st[r] > 0 and sp[r] < n and sp[r] - st[r] >= min_len)
+    nr = 0
+    for r in range(st.shape[0]):
+        if sp[r] - st[r] >= min_len and (not inside or (st[r] > 0 and sp[r] < n)):
+            st[nr], sp[nr] = st[r], sp[r]           # in place: the kept runs keep their order
+            nr += 1
     if nr == 0:
         for c in range(nch):
-            acc[:, c] -= acc[:, c].mean()
+            mean = acc[:, c].mean()
+            for i in range(n):
+                acc[i, c] -= mean
         return
-    centres = 0.5 * (st + sp - 1)
+    centres = np.empty(nr)
+    for r in range(nr):
+        centres[r] = 0.5 * (st[r] + sp[r] - 1)
     levels = np.empty((nr, nch))
     for r in range(nr):
         cut = int((sp[r] - st[r]) * (1.0 - middle) / 2.0)
@@ -224,7 +261,7 @@ def _subtract_dwell_baseline(acc, moving, middle, min_len, starts, stops):
             acc[i, c] -= b
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def _integrate_motion(eps, moving, bad, fs, margin, out, starts, stops):
     """follower.integrate_motion(nan_to_num(eps), moving, fs, margin, bad) into ``out`` (zeros)."""
     n = eps.shape[0]
@@ -256,7 +293,7 @@ def _integrate_motion(eps, moving, bad, fs, margin, out, starts, stops):
             out[i] -= (i - lo) / span * end
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE, fs, middle, min_len, margin,
                         acc, moving, bad, eps, omega, absn, starts, stops):
     """The chain after the low-pass, on one window (pipeline._process_window's definition).
@@ -299,7 +336,7 @@ def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table
             absn[i] = math.sqrt(max(acc[i, 1], 0.0) / DE)
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def follower_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE, fs, middle, min_len, margin):
     """follower_chain_into with its own arrays: (acc, epsilon2, omega2, |omega2| from aE_n, moving)."""
     n = lp.shape[0]
@@ -311,7 +348,7 @@ def follower_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE,
     return acc, eps, omega, absn, moving
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def clip_mask(block, cols, lo, hi, rail, min_run, min_drop, out):
     """pipeline._clipped without the recorder's events, on the columns ``cols`` of ``block`` (n, nch)
     (any float dtype), into out (n,) bool: |v| >= rail (rail <= 0: none), or runs of >= min_run
@@ -345,7 +382,7 @@ def clip_mask(block, cols, lo, hi, rail, min_run, min_drop, out):
                 i += 1
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def scaled_columns(block, cols, factors, out):
     """block[:, cols] * factors as float64 into out (n, len(cols)): the Ka-scaled channels of a window."""
     n = block.shape[0]
@@ -354,7 +391,7 @@ def scaled_columns(block, cols, factors, out):
             out[i, j] = float(block[i, cols[j]]) * factors[j]
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def core_outputs(acc, eps, omega, phi1, rev, absn, moving, clipped, c0, c1, rev_offset, t_first, fs,
                  out_f, out_rev, out_clip, out_time, normal):
     """The per-sample outputs of a window's core [c0, c1) in the file's types, and the normal check.
@@ -383,7 +420,7 @@ def core_outputs(acc, eps, omega, phi1, rev, absn, moving, clipped, c0, c1, rev_
             normal[2] = max(normal[2], abs(w))
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
     """pipeline._add_cycles' resampling, compiled: each revolution [m0[k], m1[k]) (window sample
     positions) that is free of clipped and NaN samples, interpolated linearly at m0 + frac (m1 - m0)
@@ -429,7 +466,7 @@ def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
     return used, rejected
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def spikes(phys, lp, clipped, c, k_sigma, floor_fraction, distance, mag):
     """events.detect_spikes on channel c of the window's residual (phys - lp, 0 where clipped),
     compiled: (peak indices, signed residual at them, threshold); mag (>= n) scratch. The scale
@@ -468,7 +505,7 @@ def spikes(phys, lp, clipped, c, k_sigma, floor_fraction, distance, mag):
     return pk, amp, thr
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def welch_accumulate(spec, means, wfft, sum_amp, sum_pow):
     """spectra.WelchAccumulator.feed after the transforms, compiled: X = spec - mean W (each
     segment's mean removed, float32 as the transforms), |X| and |X|^2 summed over the segments in
@@ -492,7 +529,7 @@ def welch_accumulate(spec, means, wfft, sum_amp, sum_pow):
             sum_pow[f, c] += p[f]
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def find_peaks(x, height, distance):
     """scipy.signal.find_peaks(x, height=height, distance=distance)[0] (indices, int64).
 
@@ -538,7 +575,7 @@ def find_peaks(x, height, distance):
     return peaks[keep]
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def scan_block(block, vmin, vmax):
     """Per-channel running min and max of a (n, nch) block, updated in place; returns the flat
     (row-major) index of the first NaN/Inf sample, or -1 (the extremes are then incomplete)."""
@@ -555,7 +592,7 @@ def scan_block(block, vmin, vmax):
     return -1
 
 
-@nb.njit(cache=True, nogil=True)
+@jit(nogil=True)
 def tacho_edges(x, start, state, min_range):
     """cam_angle.TachoEdges.feed(start, x), compiled: rising edges (sub-sample positions) of the
     pulse channel ``x`` (n,), any float dtype. ``state`` (float64, 5): lo, hi, armed (0/1), the

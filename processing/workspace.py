@@ -19,7 +19,7 @@ class Workspace:
         self.block = np.empty((n, n_channels), dtype=raw_dtype)   # the samples as read
         self.phys = np.empty((n, 2))                               # Ka-scaled aE_t, aE_n (m/s^2)
         self.clipped = np.empty(n, dtype=np.bool_)
-        self.ext = np.empty((n + 2 * padlen, 4))                   # zero-phase filter's scratch
+        self.ext = np.empty((2, n + 2 * padlen, 2))                # zero-phase filter's scratch (kernels.sosfiltfilt_into)
         self.lp = np.empty((n, 2))                                 # low-passed
         self.phi1 = np.empty(n)
         self.rev = np.empty(n, dtype=np.int64)

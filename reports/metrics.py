@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from labtool.common.errors import InputError
+from labtool.models.dynamics.jit import jit
 
 # ISO/TS 18571:2014 default parameters (section 6; docs/reports.md)
 ISO_DEFAULTS = {
@@ -198,7 +198,7 @@ def _shifted(m, c, n):
     return m, c
 
 
-@njit(cache=True)
+@jit
 def _dtw_fill(x, y, window):
     """Cumulative cost D (n+1, m+1) of DTW, squared-difference cost, steps (1,0), (0,1), (1,1) of
     weight 1, band |i - j| <= window (1-based i, j). Self-contained (no module globals), so
@@ -220,7 +220,7 @@ def _dtw_fill(x, y, window):
     return D
 
 
-@njit(cache=True)
+@jit
 def _dtw_backtrack(D):
     """Warping path (0-based index arrays) from the end. On a tie the step (i-1, j) first, then
     (i, j-1), then the diagonal: dtwalign's order for the ISO step pattern (objective-rating-metrics),

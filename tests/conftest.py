@@ -8,6 +8,10 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# numba's first compilations are announced on stderr (labtool.models.dynamics.compiling); a test that
+# checks a command's stderr line by line would see them after each edit of the models (an empty
+# cache). tests/test_compiling.py and tests/test_kernel_cache.py turn them on for themselves.
+os.environ.setdefault("LABTOOL_COMPILE_NOTICES", "0")
 # pytest-xdist's workers start with COLUMNS=80 and LINES=24 (seen with pytest-xdist 3.8, even with
 # no conftest), which labtool honours as the user's width: its tables would be cut as in a narrow
 # terminal and a test's "[m/s^2/V]" elided. The tests see a pipe, as without -n; one that wants a

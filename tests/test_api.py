@@ -73,7 +73,27 @@ def test_process_and_report_equal_the_commands(tmp_path):
     with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli:
         np.testing.assert_array_equal(measured["omega2"].values, cli["omega2"].values)
         np.testing.assert_array_equal(in_memory["omega2"].values, cli["omega2"].values)
+    attrs = labtool.process(rec, tmp_path / "attrs.nc", dataset=False)      # the attributes alone
+    with xr.open_dataset(tmp_path / "attrs.nc", engine="h5netcdf") as written:
+        assert attrs == written.attrs and attrs["n_revolutions_averaged"] == measured.attrs["n_revolutions_averaged"]
     rep = labtool.report(tmp_path / "api.nc", tmp_path / "r.html", models=("kinematic",), omega1=("const",),
                          json=tmp_path / "r.json")
     assert (tmp_path / "r.html").exists() and (tmp_path / "r.json").exists()
     assert rep.scene["cam_speed_rpm_source"].startswith("measured")
+
+
+@pytest.mark.slow
+def test_the_process_command_reads_its_summary_without_opening_the_output_as_a_dataset(tmp_path):
+    """Its summary line comes from the written file's attributes: xarray would build the index of
+    the whole time axis for them (~300 MB for a 1-hour recording) and load pandas and dask."""
+    from labtool.cli import main
+
+    rec = tmp_path / "r.h5"
+    assert main(["acquire", "--device", "sim", "--fast", "--duration", "2", "--status-every", "0", "-o", str(rec)]) == 0
+    code = ("import sys\nfrom labtool.cli import main\n"
+            f"assert main(['process', {str(rec)!r}, '-o', {str(tmp_path / 'm.nc')!r}]) == 0\n"
+            "print(sorted(m for m in ('xarray', 'pandas', 'dask') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+    assert out.stdout.startswith(f"wrote {tmp_path / 'm.nc'}: cam ")

@@ -86,3 +86,34 @@ def test_a_netcdf_round_trip_keeps_it(tmp_path):
 def test_what_xarray_refuses_is_refused(data_vars, coords, match):
     with pytest.raises(ValueError, match=match):
         dataset(data_vars, coords)
+
+
+def test_a_simulation_builds_its_dataset_once_when_first_read_with_every_attribute():
+    """labtool.models.dynamics.result: the columns first, the Dataset at the first read of
+    ``result.dataset``, with the attributes added before it (scene, model, warnings) and the very
+    values the indicators were taken from."""
+    from labtool.models.dynamics.result import DatasetParts
+    from labtool.models.dynamics.scene import Scene
+    from labtool.models.dynamics.simulate import simulate
+
+    for model, key, column, scale in (("elastic", "xel_max_mm", "x_el", 1e3), ("rigid", "MR13D_max_Nm", "MR13D", 1.0)):
+        res = simulate(Scene(accuracy="fast"), model)
+        assert isinstance(res._dataset, DatasetParts)                    # not built by the simulation
+        ds = res.dataset
+        assert isinstance(ds, xr.Dataset) and res.dataset is ds          # built once
+        assert ds.attrs["model"] == model and ds.attrs["model_reason"] == f"requested --model {model}"
+        assert "law" in ds.attrs and ds.attrs["validity_warnings"] == res.attrs["validity_warnings"]
+        assert float(ds[column].max()) * scale == res.indicators[key]
+
+
+@pytest.mark.slow
+def test_simulate_without_an_output_file_imports_no_xarray():
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom labtool.cli import main\n"
+            "assert main(['simulate', '--model', 'elastic', '--accuracy', 'fast', '--json']) == 0\n"
+            "print(sorted(m for m in ('xarray', 'dask') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"

@@ -198,11 +198,25 @@ def test_doe_run_on_a_local_dask_cluster(tmp_path):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
                                   host="127.0.0.1", dashboard_address=None) as cluster:
         rc = main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"),
-                   "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "d.csv")])
+                   "--scheduler", cluster.scheduler_address, "--scheduler-always", "-o", str(tmp_path / "d.csv")])
     assert rc == 0
     local = _in_process(tmp_path)
     remote = pd.read_csv(tmp_path / "d.csv")
     assert remote.MR13D_max_Nm.to_numpy() == pytest.approx(local.MR13D_max_Nm.to_numpy(), rel=1e-9)
+
+
+def test_a_small_design_given_a_scheduler_runs_here_and_says_why(tmp_path, capsys):
+    """Its measured work is far under what a cluster's start costs: the scheduler is never
+    contacted (this address has nothing behind it) and the summary says where the runs went."""
+    (tmp_path / "f.toml").write_text(TOML_2x3)
+    rc = main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"),
+               "--scheduler", "tcp://127.0.0.1:1", "-o", str(tmp_path / "d.csv")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "(in-process, not the Dask cluster at tcp://127.0.0.1:1: 6 runs x " in out
+    assert " ms measured = about 0." in out and " s of work, under the 10 s a cluster needs to pay for its start" in out
+    assert pd.read_csv(tmp_path / "d.csv").MR13D_max_Nm.to_numpy() == pytest.approx(
+        _in_process(tmp_path).MR13D_max_Nm.to_numpy(), rel=1e-12)
 
 
 @pytest.mark.slow

@@ -3,15 +3,18 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
-
-import xarray as xr
+from typing import TYPE_CHECKING
 
 from labtool.common.errors import InputError
+
+if TYPE_CHECKING:     # imported where a Dataset is made: reading a result's attributes needs none
+    import xarray as xr
 
 
 def process(recording, output=None, *, calibration=(), channels: dict | None = None, law: str | None = None,
             cam_speed_rpm: float | None = None, lowpass_hz: float | None = None, ac_tau_s: float | None = None,
-            mechanism=None, chunk_samples: int = 1 << 17, progress=None, warn=None, **reader_options) -> xr.Dataset:
+            mechanism=None, chunk_samples: int = 1 << 17, progress=None, warn=None, dataset: bool = True,
+            **reader_options) -> xr.Dataset | dict:
     """Recorded accelerations at E -> the follower's omega2 and epsilon2, the cam angle, spectra,
     cycle statistics and spikes, with every step in the processing history.
 
@@ -42,6 +45,11 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
         ``progress(done, total)``: samples processed of the two passes over the recording [-].
     warn : callable, optional
         ``warn(text)`` for each warning (default: Python warnings, ProcessingWarning).
+    dataset : bool
+        True: return the measurement as an xarray Dataset. False (``output`` given): return the
+        written file's global attributes only (a dict, as the Dataset's ``attrs``), without opening
+        it as a Dataset: no index built over its time axis (~300 MB for a 1-hour recording, more
+        than the processing itself) and no xarray loaded.
     **reader_options
         What the file's reader takes: ``sample_rate_hz``, ``group`` (TDMS), ``delimiter``,
         ``decimal``, ``time_unit_s`` (text tables).
@@ -51,7 +59,8 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
     xarray.Dataset
         ``omega2`` [rad s-1], ``epsilon2`` [rad s-2], ``aE_t``, ``aE_n`` [m s-2], ``phi1`` [rad] over
         ``time``; cycle statistics (``omega2_mean``, ``omega2_std``, ...) on the cam-angle grid;
-        spectra; the operating point and the processing history as attributes.
+        spectra; the operating point and the processing history as attributes. With
+        ``dataset=False``, those attributes alone (dict).
     """
     from labtool.processing.pipeline import ProcessOptions, process_file
 
@@ -72,14 +81,29 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
         progress(count["done"], count["total"])
 
     reader_options.update(on_open=on_open, progress=step if progress is not None else None)
+    if not dataset and output is None:
+        raise InputError("dataset=False returns the written file's attributes: give the output file")
     if output is not None:
         output = Path(output)
         if output.resolve() == Path(recording).resolve():
             raise InputError("the output file must not be the recording itself")
         process_file(recording, output, calibration, channels, opts, warn=warn, **reader_options)
+        if not dataset:
+            return _attributes(output)
+        import xarray as xr
         return xr.open_dataset(output, engine="h5netcdf")
+    import xarray as xr
     with tempfile.TemporaryDirectory(prefix="labtool-") as tmp:
         path = Path(tmp) / "measured.nc"
         process_file(recording, path, calibration, channels, opts, warn=warn, **reader_options)
         with xr.open_dataset(path, engine="h5netcdf") as ds:
             return ds.load()
+
+
+def _attributes(path: Path) -> dict:
+    """The global attributes of the NetCDF file ``path`` as xarray's h5netcdf backend gives them
+    (text read as str)."""
+    import h5netcdf
+
+    with h5netcdf.File(path, "r") as f:
+        return {k: v.decode("utf-8") if isinstance(v, bytes) else v for k, v in f.attrs.items()}

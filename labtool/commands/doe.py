@@ -43,8 +43,11 @@ def run(
     accuracy: str = typer.Option("standard", help="solver preset: fast, standard, reference"),
     elastic_gap: str = typer.Option("physical", help="elastic model: physical (the follower crosses the backlash j) or "
                                                      "closed (no gap: the convention that reproduces Table 3)"),
-    scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786); "
-                                                       "default: local processes"),
+    scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) for a design whose "
+                                                       "measured work is over 10 s (a smaller one runs in this "
+                                                       "process, faster; it says so); default: local processes"),
+    scheduler_always: bool = typer.Option(False, "--scheduler-always",
+                                          help="send every design to --scheduler, however small its measured work"),
     workers: Optional[int] = typer.Option(None, help="local worker processes (default: all cores when the measured "
                                                      "work is over 3 s, else this process; 1 = in-process)"),
     chunk_runs: Optional[int] = typer.Option(None, help="runs per task (default: sized from the measured per-run "
@@ -65,7 +68,7 @@ def run(
     per-run cost / workers) at more than 10 min, or using more than 100 MB of disk, asks for
     confirmation, or needs --yes when not on a terminal.
     """
-    from labtool.common.errors import InputError, SolverError
+    from labtool.common.errors import SolverError
     from labtool.execution.backends import backend_for, check_scheduler_address
     from labtool.execution.design import parts_folder, run_design
     from labtool.common.operating_point import PAPER_EXPERIMENT
@@ -122,7 +125,7 @@ def run(
             err.print(text, highlight=False, markup=False, soft_wrap=True)
         else:
             typer.echo(text, err=True)
-    backend = backend_for(workers, scheduler)
+    backend = backend_for(workers, scheduler, scheduler_always=scheduler_always)
     label = f"doe run ({model})"
     try:
         if err is not None:

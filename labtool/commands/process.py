@@ -57,9 +57,8 @@ def process(
                        warn=lambda msg: typer.echo(f"labtool: warning: {msg}", err=True),
                        sample_rate_hz=sample_rate, group=group, delimiter=_delimiter(delimiter),
                        decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), units=_unit_map(units),
-                       invert=_inverted(invert))
-    summary = measured.attrs
-    measured.close()
+                       invert=_inverted(invert), dataset=False)
+    summary = measured
     typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm_measured']:.2f} rpm (phi1 by {summary['phi1_method']}), "
                f"{summary['n_revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
                f"{summary['n_spikes']} spikes, {summary['n_clipped_samples']} clipped samples, "

@@ -178,6 +178,6 @@ def simulate_auto(scene: Scene, outputs=()):
         reason += "; the reference preset runs the full scipy model (no escalation in time)"
     result.model = level
     result.reason = reason
-    result.dataset.attrs.update(auto_rhs_evaluations=int(stats.get("nfev", 0)),
-                                auto_escalation_phi1_rad=float("nan") if escalation is None else float(escalation))
+    result.attrs.update(auto_rhs_evaluations=int(stats.get("nfev", 0)),
+                        auto_escalation_phi1_rad=float("nan") if escalation is None else float(escalation))
     return result

@@ -46,14 +46,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from labtool.common.datasets import dataset
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics import events, validity
 from labtool.models.dynamics.contact import N_EXP, contact_stiffness, penetration_under
+from labtool.models.dynamics.compiling import announces
 from labtool.models.dynamics.kernels import dopri5 as dp
 from labtool.models.dynamics.kernels import elastic_nb as eq
 from labtool.models.dynamics.kinematic import cam_speed
-from labtool.models.dynamics.result import SimulationResult, empty_indicators
+from labtool.models.dynamics.result import DatasetParts, SimulationResult, empty_indicators
 from labtool.models.dynamics.scene import Scene
 from labtool.models.dynamics.jit import jit, kernel
 from labtool.models.mechanism.cam_profile import cached_sense, pitch_geometry
@@ -126,7 +126,7 @@ def mass_factor(Db1: float, Db2: float, arm: float) -> tuple:
     return c1, 4.0 / (Db2 * Db2), rho, 1.0 / arm
 
 
-_mass_factor = kernel(inline="always")(mass_factor)
+_mass_factor = kernel(mass_factor, inline="always", internal=True)
 
 
 @kernel
@@ -153,9 +153,9 @@ def _reduced_mass(J_cam, inv_J_cam, J_follower, c1, c2, rho):
     return J_cam * c1, M2, M2 / (1.0 + J_follower * inv_J_cam * rho)
 
 
-_point = kernel(inline="always")(operating_point)       # the mechanism's combination, compiled
-_pitch = kernel(inline="always")(pitch_geometry)        # the groove's geometry, compiled
-_load_arm = kernel(inline="always")(load_arm)
+_point = kernel(operating_point, inline="always", internal=True)     # the mechanism's combination, compiled
+_pitch = kernel(pitch_geometry, internal=True)       # the groove's geometry, compiled
+_load_arm = kernel(load_arm, internal=True)
 
 
 @kernel
@@ -333,7 +333,7 @@ def step_caps(contact_cap: float, cap_flight: bool = True) -> np.ndarray:
     return caps
 
 
-@jit
+@jit(internal=True)
 def _nan_min(a, b):
     """np.minimum of two floats (NaN if either is)."""
     if a != a or b != b:
@@ -393,7 +393,7 @@ def bounce_time(kc: float, m: float, v: float) -> float:
     return 2.0 * p_max / v * _BOUNCE_INTEGRAL
 
 
-_bounce_time = kernel(inline="always")(bounce_time)
+_bounce_time = kernel(bounce_time, internal=True)
 
 
 def contact_gap(scene: Scene) -> float:
@@ -460,7 +460,7 @@ def complete_events(rows, phases: "PhaseTable", model: eq.ElasticModel, tab: Tab
     return rows
 
 
-@kernel(inline="always")
+@kernel
 def _interp(x, xp, fp):
     """np.interp(x, xp, fp) at one float x (xp increasing): numpy's own arithmetic (the slope of
     the interval, then from its right end where the left one gives NaN), compiled without numba's
@@ -560,6 +560,7 @@ def _landing_impulses(rows, row, times, v, tg, mass, drive, tab_t, tab_arm, frac
 
 # ---------------------------------------------------------------- the model
 
+@announces("the elastic model")
 def simulate(scene: Scene, reading: str = "consistent", solver: str | None = None, preset: dict | None = None,
              stats: dict | None = None) -> SimulationResult:
     """Elastic-contact model over the rise (or ``scene.revolutions`` cam turns if not rise_only).
@@ -572,13 +573,14 @@ def simulate(scene: Scene, reading: str = "consistent", solver: str | None = Non
     complete_events(run.rows, phases, run.model, run.tab)
     record = events.from_rows(run.rows)
     outputs = _outputs(run.tab, run.segments) if run.raw is None else _raw_outputs(run.tab, run.raw)
-    ds, cols = _dataset(scene, run, reading, record, outputs)
+    parts, cols = _dataset(scene, run, reading, record, outputs)
     ind = _indicators(scene, cols, events.columns(record), phases.starts.size, reading, run.kc)
     warnings = run.warnings + validity.elastic_after(scene, cols, ind)
-    ds.attrs["validity_warnings"] = validity.attribute(warnings)
-    return SimulationResult(ds, ind, "elastic", warnings=warnings)
+    parts.attrs["validity_warnings"] = validity.attribute(warnings)
+    return SimulationResult(parts, ind, "elastic", warnings=warnings)
 
 
+@announces("the elastic model")
 def simulate_indicators(scene: Scene, reading: str = "consistent", solver: str | None = None,
                         preset: dict | None = None, stats: dict | None = None) -> dict:
     """The paper's Table 3 indicators of ``simulate`` (result.INDICATORS; those this model does not
@@ -1067,7 +1069,7 @@ def _step_terms(on_grid, grid_index, psi, dpsi, ddpsi, direction, phi2_0, knots,
     return True
 
 
-@kernel(inline="always")
+@kernel(internal=True)
 def _cubic(coeffs, interval, column, s):
     """A PPoly cubic's value at s (rad) into its interval: scipy's evaluate_poly1 (the powers of s
     accumulated, the highest-order coefficient first in coeffs)."""
@@ -1101,8 +1103,9 @@ def _arm_rate(scene: Scene, tab: Tables) -> np.ndarray:
 
 
 def _dataset(scene, run: _Run, reading, record: dict, outputs):
-    """The Dataset of a run sampled at ``outputs`` (``_outputs``): (dataset, its time series as
-    numpy arrays by name, 'time' included)."""
+    """The Dataset of a run sampled at ``outputs`` (``_outputs``), not built yet: (its
+    result.DatasetParts, its time series as numpy arrays by name, 'time' included; the very arrays
+    the Dataset will hold)."""
     tab, model = run.tab, run.model
     t, x, v, phase, grid_index = outputs
     # kinematics at the output instants, not interpolated in time (the linkage from its stroke
@@ -1123,27 +1126,29 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
 
     cols = {"time": t, "grid_index": grid_index}
 
-    def var(data, units, long_name):
-        return ("time", np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
+    def var(name, data, units, long_name):
+        values = np.asarray(data, dtype=float)
+        cols[name] = values
+        return ("time", values, {"units": units, "long_name": long_name})
 
-    ds = dataset(
+    parts = DatasetParts(
         data_vars={
-            "phi1": var(tab.omega1 * t, "rad", "cam angle (0 at rise start)"),
-            "omega1": var(np.full(t.size, tab.omega1), "rad/s", "cam angular velocity"),
-            "x_el": var(x, "m", "follower-cam relative displacement along the normal (+ towards the exterior flank)"),
-            "dx_el": var(v, "m/s", "rate of x_el"),
-            "contact_force": var(F, "N", "groove-on-follower normal force (+ pushes in the rise direction)"),
-            "deformation": var(deformation, "m", "contact deformation of the flank in contact"),
-            "contact_phase": var(phase, "1", "0 interior flank, 1 flight in the gap, 2 exterior flank"),
-            "MR13D": var(F * arm, "N m", "moment about D of the cam-on-follower contact force"),
-            "MR13D_static": var(exact.MR13D, "N m", "moment about D of the static reaction R31 (kinetostatic)"),
-            "R31": var(R31, "N", "static reaction of the cam on the follower along the normal (+ rise)"),
-            "reduced_mass": var(M, "kg", "reduced mass M of eq. (16)"),
-            "phi2": var(phi2, "rad", "follower angle, eq. (19)"),
-            "omega2": var(omega2, "rad/s", "follower angular velocity, eq. (19)"),
-            "epsilon2": var(epsilon2, "rad/s^2", "follower angular acceleration (time derivative of eq. 19)"),
-            "phi2_kin": var(exact.phi2, "rad", "kinematic follower angle"),
-            "omega2_kin": var(exact.omega2, "rad/s", "kinematic follower angular velocity"),
+            "phi1": var("phi1", tab.omega1 * t, "rad", "cam angle (0 at rise start)"),
+            "omega1": var("omega1", np.full(t.size, tab.omega1), "rad/s", "cam angular velocity"),
+            "x_el": var("x_el", x, "m", "follower-cam relative displacement along the normal (+ towards the exterior flank)"),
+            "dx_el": var("dx_el", v, "m/s", "rate of x_el"),
+            "contact_force": var("contact_force", F, "N", "groove-on-follower normal force (+ pushes in the rise direction)"),
+            "deformation": var("deformation", deformation, "m", "contact deformation of the flank in contact"),
+            "contact_phase": var("contact_phase", phase, "1", "0 interior flank, 1 flight in the gap, 2 exterior flank"),
+            "MR13D": var("MR13D", F * arm, "N m", "moment about D of the cam-on-follower contact force"),
+            "MR13D_static": var("MR13D_static", exact.MR13D, "N m", "moment about D of the static reaction R31 (kinetostatic)"),
+            "R31": var("R31", R31, "N", "static reaction of the cam on the follower along the normal (+ rise)"),
+            "reduced_mass": var("reduced_mass", M, "kg", "reduced mass M of eq. (16)"),
+            "phi2": var("phi2", phi2, "rad", "follower angle, eq. (19)"),
+            "omega2": var("omega2", omega2, "rad/s", "follower angular velocity, eq. (19)"),
+            "epsilon2": var("epsilon2", epsilon2, "rad/s^2", "follower angular acceleration (time derivative of eq. 19)"),
+            "phi2_kin": var("phi2_kin", exact.phi2, "rad", "kinematic follower angle"),
+            "omega2_kin": var("omega2_kin", exact.omega2, "rad/s", "kinematic follower angular velocity"),
             **record,
         },
         coords={"time": ("time", t, {"units": "s", "long_name": "time from the start of the rise"})},
@@ -1154,6 +1159,4 @@ def _dataset(scene, run: _Run, reading, record: dict, outputs):
             "event_record": events.RECORD_VERSION,
         },
     )
-    cols.update({name: ds.variables[name].values for name in ("x_el", "dx_el", "deformation", "MR13D", "contact_force",
-                                                             "MR13D_static", "R31", "reduced_mass", "contact_phase", "phi1")})
-    return ds, cols
+    return parts, cols

@@ -44,13 +44,13 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # xarray is loaded where a Dataset is built (the indicator path of a sweep needs none)
     import xarray as xr
 
-from labtool.common.datasets import dataset
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics import events, validity
 from labtool.models.dynamics.contact import contact_stiffness
+from labtool.models.dynamics.compiling import announces
 from labtool.models.dynamics.kernels import dopri5 as dp
 from labtool.models.dynamics.kernels import rigid_nb as eq
-from labtool.models.dynamics.result import SimulationResult, empty_indicators
+from labtool.models.dynamics.result import DatasetParts, SimulationResult, empty_indicators
 from labtool.models.dynamics.rigid_tables import cam_table, follower_table
 from labtool.models.dynamics.scene import Scene
 from labtool.models.mechanism.cam_profile import cached_sense
@@ -276,6 +276,7 @@ def _in_rise(program: CamProgram, phi1):
     return np.mod(phi1, TWO_PI) < program.rise_angle
 
 
+@announces("the rigid model")
 def simulate(scene: Scene, solver: str | None = None, preset: dict | None = None, stats: dict | None = None,
              integrate_with=None) -> SimulationResult:
     """Run the rigid model on a scene.
@@ -287,12 +288,13 @@ def simulate(scene: Scene, solver: str | None = None, preset: dict | None = None
     """
     t_start = _time.perf_counter()
     run, s, rfj, record, ind = _run(scene, solver, preset, stats, integrate_with)
-    ds = _dataset(scene, run.info, run.omega1_0, run.times, s, rfj, record)
+    parts = _dataset(scene, run.info, run.omega1_0, run.times, s, rfj, record)
     warnings = run.warnings + validity.rigid_after(scene, s, ind)
-    ds.attrs.update(wall_s_model=_time.perf_counter() - t_start, validity_warnings=validity.attribute(warnings))
-    return SimulationResult(ds, ind, "rigid", warnings=warnings)
+    parts.attrs.update(wall_s_model=_time.perf_counter() - t_start, validity_warnings=validity.attribute(warnings))
+    return SimulationResult(parts, ind, "rigid", warnings=warnings)
 
 
+@announces("the rigid model")
 def simulate_indicators(scene: Scene, solver: str | None = None, preset: dict | None = None, stats: dict | None = None) -> dict:
     """The indicators of ``simulate`` (Table 2's, result.INDICATORS and the event counts), the same
     values from the same samples, without building the Dataset; the same refusals
@@ -375,7 +377,8 @@ def indicators(program, s, rfj, ev: dict, model0, phases0) -> dict:
     }
 
 
-def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> xr.Dataset:
+def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> DatasetParts:
+    """The run's Dataset, not built yet (result.DatasetParts)."""
     def var(data, units, long_name, dims=("time",), **extra):
         return (dims, np.asarray(data), {"units": units, "long_name": long_name, **extra})
 
@@ -404,11 +407,10 @@ def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> xr.Dataset:
         "domega1": var(s["omega1"] - r["omega1"], "rad/s", "omega1rcj - omega1rfj (Figure 8c)"),
         **record,
     }
-    ds = dataset(data, coords={"time": ("time", times, {"units": "s", "long_name": "time from the start of the rise"})})
-    ds.attrs.update({
+    return DatasetParts(data, coords={"time": ("time", times, {"units": "s", "long_name": "time from the start of the rise"})},
+                        attrs={
         "title": "labtool rigid-element dynamic model (paper sec. 2.1.1, eqs 1-11)",
         "omega1_start_rad_s": omega1_0, "no_load_cam_speed_rad_s": no_load_cam_speed(scene.mechanism, scene.omega1_nominal),
         "cam_sense": int(info["sense"]), "transmission_ratio": info["transmission_ratio"],
         "J_cam_kgm2": info["J_cam"], "event_record": events.RECORD_VERSION,
     })
-    return ds

@@ -71,9 +71,9 @@ def simulate(scene: Scene, model: str = "auto", **options) -> SimulationResult:
     else:
         raise InputError(f"unknown model '{model}'; known: auto, {', '.join(LEVELS)}")
     result.wall_s = time.perf_counter() - t0
-    result.dataset.attrs.update(scene_attributes(scene))
-    result.dataset.attrs.update(model=result.model, model_reason=result.reason)
-    result.dataset.attrs.setdefault("validity_warnings", "[]")
+    result.attrs.update(scene_attributes(scene))             # into the Dataset, built or not yet
+    result.attrs.update(model=result.model, model_reason=result.reason)
+    result.attrs.setdefault("validity_warnings", "[]")
     return result
 
 

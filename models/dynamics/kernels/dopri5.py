@@ -246,7 +246,7 @@ def dense_eval(y0, h, Q, s, out):
         out[i] = y0[i] + h * s * (Q[i, 0] + s * (Q[i, 1] + s * (Q[i, 2] + s * Q[i, 3])))
 
 
-@kernel(inline="always")
+@kernel
 def new_step_factor(err, rejected):
     """Step-size factor after a step with error norm ``err`` (scipy's controller).
 
@@ -263,29 +263,34 @@ def new_step_factor(err, rejected):
     return max(MIN_FACTOR, SAFETY * math.exp(ERROR_EXPONENT * math.log(err)))
 
 
-@jit
+@jit(internal=True)
 def grow(a, n_new):
-    """A copy of ``a`` with its first axis enlarged to n_new (the stores double as they fill)."""
+    """A copy of ``a`` (C-contiguous) with its first axis enlarged to n_new (the stores double as
+    they fill); the new rows are zero. Copied element by element over the flat arrays: a slice
+    assignment compiles numba's broadcasting checks and their error message (~2 s of the first
+    compile, four array types, for a copy that happens once in a long run)."""
     b = np.zeros((n_new,) + a.shape[1:], dtype=a.dtype)
-    b[: a.shape[0]] = a
+    fa, fb = a.ravel(), b.ravel()
+    for i in range(fa.size):
+        fb[i] = fa[i]
     return b
 
 
-@kernel
-def rms(v, scale):
+@kernel(internal=True)
+def rms(v, atol, y0, rtol):
+    """RMS of v / scale, scale = atol + |y0| rtol (scipy's, element by element: no array made)."""
     acc = 0.0
     for i in range(v.size):
-        r = v[i] / scale[i]
+        r = v[i] / (atol[i] + abs(y0[i]) * rtol)
         acc += r * r
     return np.sqrt(acc / v.size)
 
 
-@jit
+@kernel(internal=True)
 def first_step(model, ph, t0, y0, f0, t_bound, max_step, rtol, atol, y1, f1):
     """scipy's initial step (Hairer, Norsett & Wanner II.4, order 4); y1, f1 are work arrays."""
-    scale = atol + np.abs(y0) * rtol
-    d0 = rms(y0, scale)
-    d1 = rms(f0, scale)
+    d0 = rms(y0, atol, y0, rtol)
+    d1 = rms(f0, atol, y0, rtol)
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h0 = min(h0, t_bound - t0)
     for i in range(y0.size):
@@ -293,12 +298,31 @@ def first_step(model, ph, t0, y0, f0, t_bound, max_step, rtol, atol, y1, f1):
     rhs(model, ph, t0 + h0, y1, f1)
     for i in range(y0.size):
         f1[i] -= f0[i]
-    d2 = rms(f1, scale) / h0
+    d2 = rms(f1, atol, y0, rtol) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
         h1 = max(1e-6, h0 * 1e-3)
     else:
         h1 = (0.01 / max(d1, d2)) ** 0.2
     return min(100.0 * h0, h1, t_bound - t0, max_step)
+
+
+@kernel(internal=True)
+def _phase_size(model, ph):
+    """(state size, number of events) of the phase ``ph``. The model's hooks are called from
+    functions compiled without reference counting only (``kernel``): numba compiles an overload
+    once per set of its caller's compile flags, so a hook called from ``run`` as well would be
+    compiled twice."""
+    return state_size(model, ph), n_events(model, ph)
+
+
+@kernel(internal=True)
+def _phase_start(model, ph, t, yv, K, tmp, y_new, t_bound, max_step, rtol, atol, ne, g):
+    """A phase's start at (t, yv): K[0] = f(t, yv), the first step's size (returned, s) and the
+    events' values g[0] (``_phase_size``: why here)."""
+    rhs(model, ph, t, yv, K[0])
+    for e in range(ne):
+        g[0, e] = event(model, ph, e, t, yv)
+    return first_step(model, ph, t, yv, K[0], t_bound, max_step, rtol, atol, tmp, y_new)
 
 
 @kernel(inline="always")
@@ -340,7 +364,7 @@ def attempt(model, ph, t, y, h_abs, rtol, t_bound, atol, max_step, K, y_new, tmp
         rejected = True
 
 
-@kernel(inline="always")
+@kernel(internal=True)
 def _fires(g0, g1, dirn):
     return (g0 <= 0.0 and g1 >= 0.0 and dirn > 0) or (g0 >= 0.0 and g1 <= 0.0 and dirn < 0)
 
@@ -352,7 +376,7 @@ def _event_at(model, ph, which, t, y0, h, Q, s, tmp):
     return event(model, ph, which, t + s * h, tmp)
 
 
-@kernel
+@kernel(internal=True)
 def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     """Step fraction in (lo, hi] where event ``which`` changes sign (bisection on the dense output)."""
     for _ in range(60):
@@ -367,7 +391,7 @@ def bisect(model, ph, which, t, y0, h, Q, lo, hi, g_lo, tmp):
     return hi
 
 
-@kernel
+@kernel(internal=True)
 def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     """First step fraction s in (0, 1] where event ``which`` changes sign in its direction, 2.0 if
     none; the sign is read at ``nsub`` points of the step (its end value g1 given)."""
@@ -382,7 +406,7 @@ def crossing(model, ph, which, t, y0, h, Q, g0, g1, nsub, tmp):
     return 2.0
 
 
-@kernel
+@kernel(internal=True)
 def crossing_bounded(model, ph, which, t, y0, h, Q, g0, g1, c, ds_min, tmp):
     """``crossing`` for an event g = y[c] - const (``event_offset``): the sign is read at points
     no sign change can lie between, since |dg/ds| <= |h| (|Q0| + 2|Q1| + 3|Q2| + 4|Q3|) = D over
@@ -421,7 +445,7 @@ def event_many(model, ph, which, ts, Y, out):
         out[i] = event(model, ph, which, ts[i], Y[i])
 
 
-@kernel
+@kernel(internal=True)
 def _steps(model, ph, n, ne, rtol, t_bound, max_steps, nsub, atol, max_step, span, t, yv, y_new, tmp, Q, K,
            h_abs, g, st_t, st_h, st_y, st_Q, nst):
     """Steps of one phase from (t, yv) (K[0] = f(t, yv), g[0] its event values; g[1] receives
@@ -504,17 +528,29 @@ def run(model, ctl, ph0, y0, t0):
     ph_t0 = np.zeros(pcap)
     ph_t1 = np.zeros(pcap)
     ph_first = np.zeros(pcap, dtype=np.int64)
-    ev = np.full((pcap, EV_WIDTH), np.nan)
+    ev = np.empty((pcap, EV_WIDTH))
+    ev[:] = np.nan
     ynew_all = np.empty(nmax)
     tmp_all = np.empty(nmax)
     Q_all = np.empty((nmax, 4))
     g = np.empty((2, MAX_EVENTS_PER_PHASE))
     y = np.zeros(nmax)
-    y[: y0.size] = y0
-    span = ctl.max_step.min()
-    ph = ph0.copy()
+    for i in range(y0.size):
+        y[i] = y0[i]
+    span = np.inf                          # ctl.max_step.min(), NaN if one is (numpy's)
+    for i in range(ctl.max_step.size):
+        cap = ctl.max_step[i]
+        if cap != cap:
+            span = cap
+            break
+        span = min(span, cap)
+    ph = np.empty(PHASE_WIDTH)
+    for i in range(PHASE_WIDTH):
+        ph[i] = ph0[i]
     t = t0
-    nst, nph, nev, ntr, nfev, short = 0, 0, 0, 0, 0, 0
+    # counters start as int64, not as the literal 0: a literal argument compiles a callee (_steps)
+    # once for it and once more for int64 (~2 s of the first compile)
+    nst = nph = nev = ntr = nfev = short = np.int64(0)
     status = OK
     while True:
         if nph == ph_t0.size:
@@ -524,21 +560,18 @@ def run(model, ctl, ph0, y0, t0):
             old = ev.shape[0]
             ev = grow(ev, 2 * old)
             ev[old:] = np.nan
-        n = state_size(model, ph)
-        ne = n_events(model, ph)
+        n, ne = _phase_size(model, ph)
         atol = ctl.atol[int(ph[0]), :n]
         max_step = ctl.max_step[int(ph[0])]
         yv, y_new, tmp, Q = y[:n], ynew_all[:n], tmp_all[:n], Q_all[:n]
         K = np.empty((7, n))          # contiguous: the stages' inner loops run over it
-        ph_row[nph] = ph
+        for i in range(PHASE_WIDTH):
+            ph_row[nph, i] = ph[i]
         ph_t0[nph] = t
         ph_first[nph] = nst
         t_ph0 = t
-        rhs(model, ph, t, yv, K[0])
-        h_abs = first_step(model, ph, t, yv, K[0], ctl.t_bound, max_step, ctl.rtol, atol, tmp, y_new)
+        h_abs = _phase_start(model, ph, t, yv, K, tmp, y_new, ctl.t_bound, max_step, ctl.rtol, atol, ne, g)
         nfev += 2
-        for e in range(ne):
-            g[0, e] = event(model, ph, e, t, yv)
         hit = -1
         while True:
             status, full, t, h_abs, nst, calls, hit = _steps(model, ph, n, ne, ctl.rtol, ctl.t_bound, ctl.max_steps,
@@ -680,7 +713,7 @@ def evaluate_at_runs(runs, which, times):
     return evaluate_steps(*store, times, first[which], (first + sizes - 1)[which])
 
 
-@jit
+@jit(internal=True)
 def merge_outputs(grid, starts, ends, first, last, t0s, hs, y0s, Qs, out_t, out_y, out_seg, out_grid):
     """The samples of consecutive phases on a time grid plus each phase's own step times, in time
     order, in one pass: what ``evaluate_runs`` on (the grid points of each phase, its steps),
@@ -746,8 +779,9 @@ def merge_run(grid, out, width):
     nst, nph = out[3], out[4]
     first = out[14][:nph]
     last = np.empty(nph, dtype=np.int64)
-    last[:-1] = first[1:] - 1
-    last[-1] = nst - 1
+    for k in range(nph - 1):                # element by element: a slice assignment would compile
+        last[k] = first[k + 1] - 1          # numba's shape check and its message (~1 s once)
+    last[nph - 1] = nst - 1
     return merged(grid, out[12][:nph], out[13][:nph], first, last, out[7], out[8], out[9][:, :width],
                   out[10][:, :width], nst)
 

@@ -71,7 +71,7 @@ def interp_rows(t, tab, row_a, row_b, rate):
             tab[row_b, i] + w * (tab[row_b, i + 1] - tab[row_b, i]))
 
 
-@kernel
+@kernel(internal=True)
 def flank_force(phase, x, v, kc, gap, damping):
     """Groove-on-follower normal force along +x (N) in ``phase`` at the normal offset x (m) from the
     interior flank, moving at v (m/s): the contact law (labtool.models.dynamics.contact.normal_force) on the
@@ -84,7 +84,7 @@ def flank_force(phase, x, v, kc, gap, damping):
     return 0.0
 
 
-@kernel
+@kernel(internal=True)
 def force(m, phase, x, v):
     """``flank_force`` with the model's contact law and gap."""
     return flank_force(phase, x, v, m.kc, m.gap, m.damping)
@@ -97,7 +97,7 @@ def rhs(model, ph, t, y, out):
     out[1] = (force(model, int(ph[0]), y[0], y[1]) - d) / mass
 
 
-@kernel
+@kernel(internal=True)
 def _on_zero(phase, which):
     """Is event ``which`` of ``phase`` the boundary x = 0 (else x = j)?"""
     return phase == INTERIOR or (phase == FLIGHT and which == 0)
@@ -136,7 +136,7 @@ def state_size(model, ph):
     return 2
 
 
-@kernel
+@kernel(internal=True)
 def next_phase(m, phase, which):
     if phase == INTERIOR:
         return FLIGHT if m.gap > 0.0 else EXTERIOR
@@ -145,7 +145,7 @@ def next_phase(m, phase, which):
     return INTERIOR if which == 0 else EXTERIOR
 
 
-@kernel
+@kernel(internal=True)
 def restart_position(m, at_zero, new_phase):
     """x (m) just inside ``new_phase`` at the boundary x = 0 (at_zero) or x = j."""
     eps = m.nudge if m.gap == 0.0 else min(m.nudge, 0.25 * m.gap)

@@ -55,7 +55,7 @@ RigidModel = namedtuple("RigidModel", [
 ])
 
 
-@kernel
+@kernel(internal=True)
 def _cell(tab, x):
     """Row of the cell [x_i, x_{i+1}) of a packed table that holds x, clipped. The nodes are
     uniform, or uniform piece by piece with nearly the same spacing (rigid_tables): a direct guess
@@ -75,7 +75,7 @@ def _cell(tab, x):
     return i
 
 
-@kernel
+@kernel(internal=True)
 def _cubic(tab, i, col, t):
     k = 2 + 4 * col
     return tab[i, k] + t * (tab[i, k + 1] + t * (tab[i, k + 2] + t * tab[i, k + 3]))
@@ -100,7 +100,7 @@ def follower_row(m, phi2):
     return _cubic(c, i, 0, t), _cubic(c, i, 1, t), _cubic(c, i, 2, t), _cubic(c, i, 3, t)
 
 
-@kernel
+@kernel(internal=True)
 def flank_offset(m, flank, A2, dA2, ddA2):
     """Angular offset of the flank in contact from the pitch curve and its two phi1 derivatives."""
     if flank == OUTER and m.j > 0.0:
@@ -191,7 +191,7 @@ def state_size(model, ph):
     return 2 if int(ph[0]) == CONTACT_MODE else 4
 
 
-@kernel
+@kernel(internal=True)
 def settles(m, phi1, omega1_held, flank, v_rebound, G1, A2, J2):
     """The settle rule (module doc): is a rebound at ``v_rebound`` (m/s) off ``flank`` below the
     contact's resolution, with the flank pressing on the follower held on it?"""
@@ -203,7 +203,7 @@ def settles(m, phi1, omega1_held, flank, v_rebound, G1, A2, J2):
     return v_rebound * v_rebound < 2.0 * abs(lam) * inv_mass * penetration_under(abs(lam), m.kc)
 
 
-@jit
+@jit(internal=True)
 def _row(ev, nev, t, phi1, kind, flank, v_rel, domega2, percussion, persistent):
     r = ev[nev]
     r[ev_layout.COL_TIME] = t
@@ -217,7 +217,7 @@ def _row(ev, nev, t, phi1, kind, flank, v_rel, domega2, percussion, persistent):
     return r
 
 
-@jit
+@jit(internal=True)
 def _lift_off(m, ph, t, y, ev, nev):
     """Contact loss: the flank's force changed sign; the follower flies from the flank's position."""
     flank = int(ph[1])
@@ -232,7 +232,7 @@ def _lift_off(m, ph, t, y, ev, nev):
     return nev + 1
 
 
-@jit
+@jit(internal=True)
 def _impact_on(m, ph, flank, t, y, ev, nev):
     """The gap closed on ``flank``: Newton's impact, or settling on the flank (module doc)."""
     phi1, omega1, q, omega2 = y[0], y[1], y[2], y[3]
