@@ -33,6 +33,7 @@ class PointRecord:
     summary: dict               # labtool.reports.summary.build_summary(...)
     cycles: xr.Dataset          # labtool.campaign.steps.cycles_dataset(...)
     page: str | None = None     # the per-point report, relative to the campaign page
+    fit: dict | None = None     # the point's labtool fit result (fit.json in its folder), if fitted
 
     @property
     def op(self) -> dict:
@@ -78,7 +79,29 @@ def load_point_folder(folder: Path, name: str | None = None, page_base: Path | N
     _check_summary(summary, folder)
     _check_cycles(cycles, folder)
     page = str(_relative(folder / "report.html", page_base)) if (folder / "report.html").is_file() else None
-    return PointRecord(name or folder.name, str(_relative(folder, page_base)), summary, cycles, page)
+    return PointRecord(name or folder.name, str(_relative(folder, page_base)), summary, cycles, page,
+                       _point_fit(folder))
+
+
+FIT_FILE = "fit.json"
+
+
+def _point_fit(folder: Path) -> dict | None:
+    """The point's fit (``labtool fit points/NAME/measured.nc ... -o points/NAME/fit.json``), or None;
+    a file there that is not a fit result is refused, naming it."""
+    f = folder / FIT_FILE
+    if not f.is_file():
+        return None
+    try:
+        doc = json.loads(f.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"point {shown(folder.name)}: {FIT_FILE} is unreadable ({shown(str(exc))}); "
+                              f"fit the point again with 'labtool fit ... -o {shown(str(f))} --force'") from None
+    if not (isinstance(doc, dict) and doc.get("format") == "labtool.fit" and isinstance(doc.get("parameters"), dict)
+            and isinstance(doc.get("measured"), dict)):
+        raise FileFormatError(f"point {shown(folder.name)}: {FIT_FILE} is not a labtool fit result; fit the point "
+                              f"again with 'labtool fit ... -o {shown(str(f))} --force' or move the file away")
+    return doc
 
 
 def _check_summary(summary, folder: Path) -> None:

@@ -46,6 +46,7 @@ class CampaignReport:
     changes: list                  # collect.closest_changes
     notes: list
     missing: list                  # points of the plan without a comparison yet
+    identification: dict | None = None   # the points' fits across the campaign (labtool.identification.joint)
 
     @property
     def passed(self) -> bool | None:
@@ -153,7 +154,8 @@ def summary(rep: CampaignReport, files: dict | None = None) -> dict:
     return _clean({"format": FORMAT, "format_version": FORMAT_VERSION, "campaign": {"name": rep.name,
                    "description": rep.description}, "test": rep.test, "points": points,
                    "closest_changes": rep.changes, "passed": rep.passed, "notes": rep.notes,
-                   "missing_points": rep.missing, "files": files or {}, "table": table})
+                   "missing_points": rep.missing, "files": files or {}, "table": table,
+                   "identification": rep.identification})
 
 
 def to_json(rep: CampaignReport, files: dict | None = None) -> str:

@@ -1,4 +1,13 @@
-"""The parameters a fit can free: names, models, units, bounds and the search scale.
+"""The parameters a fit can free: names, models, the search's bounds and scale.
+
+A scene parameter is a field of the operating point, and its unit, its scale to SI, its key in
+the operating point and JSON, and the values it can take are that field's
+(labtool.common.operating_point.FIELDS, the one owner); what is the fit's own is here: the
+search's default bounds, whether it searches on a log scale, where it starts when neither the
+scene nor the user says, and whether the parameter is a property of the stand (the same at every
+operating point, ``stand``) or an effective value that may change with the operating point (a
+joint fit over several measurements shares the first kind by default). The chain parameters (Ka
+gain, delay) are not operating-point fields; their units and limits are here.
 
 Edge units (mm, s/m, ms, -) are what a user types and reads (CLI, JSON); inside, values are SI
 (m, s/m, s, -), converted here once. The search works in the unit box u in [0, 1]^p: u = 0 at the
@@ -17,6 +26,18 @@ import math
 import numpy as np
 
 from labtool.common.errors import InputError
+from labtool.common.operating_point import FIELD, Field
+
+
+@dataclasses.dataclass(frozen=True)
+class Chain:
+    """A measuring-side quantity that is not an operating-point field: its JSON key (edge unit in
+    the name), edge unit, SI value of one edge unit, and possible values (edge units, inclusive)."""
+
+    key: str
+    unit: str
+    scale: float
+    limits: tuple
 
 
 @dataclasses.dataclass(frozen=True)
@@ -24,32 +45,62 @@ class FreeParameter:
     """One identifiable parameter.
 
     name      CLI name (``--free backlash,...``)
-    key       JSON key, with the edge unit (``backlash_mm``)
-    unit      edge unit, as printed
-    si_per_unit  SI value of one edge unit (1e-3 for mm, ms)
     models    the models it exists in
-    kind      "scene" (a Scene field, needs a model run) or "chain" (applied to the simulated cycle)
-    op_key    its key in the report's operating point (labtool.reports.pipeline.operating_point: the
-              owner's attribute name, edge units)
     bounds    default search bounds (edge units)
-    limits    physically possible values (edge units, inclusive): user bounds must lie inside
     log       search on a log scale
     start     the value used when neither the scene nor the user gives one (edge units)
+    stand     a property of the stand, the same at every operating point (shared by a joint fit
+              unless told otherwise); False: an effective value that may change with it
     meaning   one line for --help and the docs
+    field     a scene parameter's operating-point field (unit, scale, key, limits: its owner's)
+    chain     a chain parameter's own unit and limits
     """
 
     name: str
-    key: str
-    unit: str
-    si_per_unit: float
     models: tuple
-    kind: str
-    op_key: str
     bounds: tuple
-    limits: tuple
     log: bool
     start: float
+    stand: bool
     meaning: str
+    field: Field | None = None
+    chain: Chain | None = None
+
+    @property
+    def kind(self) -> str:
+        """"scene" (a Scene field, needs a model run) or "chain" (applied to the simulated cycle)."""
+        return "scene" if self.field is not None else "chain"
+
+    @property
+    def key(self) -> str:
+        """JSON key, with the edge unit (``backlash_mm``); also its key in the report's operating
+        point (labtool.reports.pipeline.operating_point: the owner's attribute name, edge units)."""
+        return self.field.attr if self.field is not None else self.chain.key
+
+    op_key = key
+
+    @property
+    def unit(self) -> str:
+        """Edge unit, as printed ("-" for a pure number)."""
+        u = self.field.edge_unit if self.field is not None else self.chain.unit
+        return u or "-"
+
+    @property
+    def si_per_unit(self) -> float:
+        """SI value of one edge unit (1e-3 for mm, ms)."""
+        return self.field.scale if self.field is not None else self.chain.scale
+
+    @property
+    def limits(self) -> tuple:
+        """Physically possible values (edge units), and whether the lower one is excluded."""
+        if self.field is not None:
+            hi = math.inf if self.field.hi is None else self.field.hi
+            return (self.field.lo, hi)
+        return self.chain.limits
+
+    @property
+    def lo_open(self) -> bool:
+        return bool(self.field is not None and self.field.lo_open)
 
     def to_edge(self, si: float) -> float:
         return float(si) / self.si_per_unit
@@ -60,20 +111,20 @@ class FreeParameter:
 
 
 CATALOGUE = {p.name: p for p in (
-    FreeParameter("backlash", "backlash_mm", "mm", 1e-3, ("rigid", "elastic"), "scene", "backlash_mm",
-                  (0.01, 0.6), (0.0, 5.0), True, 0.128, "groove backlash j (the gap the follower crosses)"),
-    FreeParameter("restitution", "restitution", "-", 1.0, ("rigid",), "scene", "restitution",
-                  (0.0, 1.0), (0.0, 1.0), False, 0.5, "Newton's restitution k of the rigid model's impacts"),
-    FreeParameter("contact_damping", "contact_damping_s_per_m", "s/m", 1.0, ("elastic",), "scene", "contact_damping_s_per_m",
-                  (0.0, 400.0), (0.0, 1e5), False, 40.0, "Hunt-Crossley damping of the elastic contact"),
-    FreeParameter("contact_length", "contact_length_mm", "mm", 1e-3, ("elastic",), "scene", "contact_length_mm",
-                  (1.0, 30.0), (1e-3, 1e3), True, 6.0, "roller-groove contact length lw behind Kc = 8.05e4 lw^(8/9)"),
-    FreeParameter("ka_gain", "ka_gain", "-", 1.0, ("rigid", "elastic"), "chain", "ka_gain",
-                  (0.5, 2.0), (1e-3, 1e3), True, 1.0,
-                  "true Ka over the Ka the processing used (the measured signals are the truth divided by it)"),
-    FreeParameter("delay", "delay_ms", "ms", 1e-3, ("rigid", "elastic"), "chain", "delay_ms",
-                  (-5.0, 5.0), (-1e3, 1e3), False, 0.0,
-                  "delay of the acceleration channels behind the tacho (> 0: the measurement is late)"),
+    FreeParameter("backlash", ("rigid", "elastic"), (0.01, 0.6), True, 0.128, True,
+                  "groove backlash j (the gap the follower crosses)", field=FIELD["backlash"]),
+    FreeParameter("restitution", ("rigid",), (0.0, 1.0), False, 0.5, False,
+                  "Newton's restitution k of the rigid model's impacts", field=FIELD["restitution"]),
+    FreeParameter("contact_damping", ("elastic",), (0.0, 400.0), False, 40.0, False,
+                  "Hunt-Crossley damping of the elastic contact", field=FIELD["contact_damping"]),
+    FreeParameter("contact_length", ("elastic",), (1.0, 30.0), True, 6.0, True,
+                  "roller-groove contact length lw behind Kc = 8.05e4 lw^(8/9)", field=FIELD["contact_length"]),
+    FreeParameter("ka_gain", ("rigid", "elastic"), (0.5, 2.0), True, 1.0, True,
+                  "true Ka over the Ka the processing used (the measured signals are the truth divided by it)",
+                  chain=Chain("ka_gain", "-", 1.0, (1e-3, 1e3))),
+    FreeParameter("delay", ("rigid", "elastic"), (-5.0, 5.0), False, 0.0, True,
+                  "delay of the acceleration channels behind the tacho (> 0: the measurement is late)",
+                  chain=Chain("delay_ms", "ms", 1e-3, (-1e3, 1e3))),
 )}
 
 MODELS = ("rigid", "elastic")
@@ -175,7 +226,12 @@ class Space:
         if math.isinf(u):
             return 0.0 if self.params[i].log and u < 0 else float(u)
         lo, hi = float(self.lo[i]), float(self.hi[i])
-        return lo * (hi / lo) ** u if self.params[i].log else lo + u * (hi - lo)
+        if not self.params[i].log:
+            return lo + u * (hi - lo)
+        try:
+            return lo * (hi / lo) ** u
+        except OverflowError:          # far beyond the bounds (a widened interval): no finite value
+            return math.inf
 
 
     def as_dict(self, edge) -> dict:
@@ -194,9 +250,10 @@ def make_space(free: list[FreeParameter], bounds: dict | None = None) -> Space:
         unit = "" if p.unit == "-" else f" {p.unit}"
         if not (math.isfinite(a) and math.isfinite(b) and a < b):
             raise InputError(f"--bounds {p.name}={a:g}:{b:g}: need finite lo < hi{unit}")
-        if a < p.limits[0] or b > p.limits[1]:
+        low, high = p.limits
+        if a < low or (p.lo_open and a <= low) or b > high:
             raise InputError(f"--bounds {p.name}={a:g}:{b:g}{unit} leaves the possible range "
-                             f"[{p.limits[0]:g}, {p.limits[1]:g}]{unit}")
+                             f"{'(' if p.lo_open else '['}{low:g}, {high:g}]{unit}")
         if p.log and a <= 0:
             raise InputError(f"--bounds {p.name}={a:g}:{b:g}: its lower bound must be > 0{unit} "
                              f"(it is searched on a log scale); e.g. {p.bounds[0]:g}")

@@ -32,6 +32,21 @@ far it holds, and the profile's own interval edge is t sd_i / sqrt(rho) from the
 side. The other parameters follow the ridge of the objective (u_j + G_ji / G_ii (u_i - u_i*),
 G = (J^T J)^-1) and take one Gauss-Newton step with the optimum's Jacobian: two model runs a point.
 
+**The model's discrepancy** (``discrepancy``): where the model cannot reproduce the measurement
+(the objective S well above the N residuals' noise expectation), the misfit is not noise that
+averages out: part of what the model misses lies along the parameters' own directions, where the
+fit absorbs it as a bias nobody sees. With no preference for a direction, that part has the size
+per direction of the part left over: the discrepancy's variance per degree of freedom is
+(S - N) / (K - p), K the number of independent features the misfit is made of, and the bias of
+u_i has variance (J^T J)^-1_ii (S - N) / (K - p) (the classical residual-variance estimate, with
+the misfit's features in place of the residual points). K is the residuals' participation ratio
+(sum r^2)^2 / sum r^4 (the number of points that carry the misfit; for a misfit at a few impacts,
+a few) over the residuals' correlation inflation (the points one feature spans), at least
+p + MIN_FEATURE_DOF (a variance from one or two features is no estimate: its t quantile reaches
+12.7 and 4.3, and the interval the bounds); its 95 % half-width uses t(0.975, K - p). A model that explains the measurement (S ~ N) adds
+nothing. The objective's rise at that half-width joins the acceptance threshold (every evaluated
+point below it widens the interval, other basins of a misfit objective included).
+
 Not identifiable (the ``notes`` say which): the objective does not depend on the parameter (a zero
 column of J), its profile is flat (S_i at both bounds below its threshold), its interval is wider
 than the bounds or spans more than half of them (``MOST_OF_BOUNDS``, on the search scale), or it is
@@ -54,6 +69,7 @@ PROFILE_AGREES = (0.5, 2.0)     # rho within this: the linear interval's edge is
 BOUND_TOL = 1e-3                # u this close to 0 or 1 is at the bound
 BOUNDS_CHECK = 0.25             # the profile visits the bounds when the interval spans more than this of them
 MOST_OF_BOUNDS = 0.5            # an interval spanning more than this of the bounds identifies nothing
+MIN_FEATURE_DOF = 3             # the discrepancy's degrees of freedom, at least (t(0.975, 3) = 3.18)
 
 
 @dataclasses.dataclass
@@ -74,6 +90,9 @@ class Linear:
     conv_u: np.ndarray | None = None    # (p,) the Gauss-Newton step still left at the optimum (convergence)
     rough_u: np.ndarray | None = None   # (p,) where the objective's roughness hides the minimum (roughness)
     rough: float = 0.0                  # the roughness R itself (objective units)
+    disc_u: np.ndarray | None = None    # (p,) the model's discrepancy: the bias its misfit may hide (unit box)
+    disc_rise: float = 0.0              # the objective's rise at the discrepancy's half-width (objective units)
+    disc_info: dict | None = None       # what the discrepancy is estimated from (``discrepancy``)
     hull_lo: np.ndarray | None = None   # (p,) range of the points evaluated within R + threshold of the optimum
     hull_hi: np.ndarray | None = None
 
@@ -106,9 +125,17 @@ class Linear:
         parts = [v for v in (self.rev_u, self.preset_u, self.conv_u, self.rough_u) if v is not None]
         return np.sqrt(sum(v ** 2 for v in parts)) if parts else np.zeros(self.u.size)
 
+    @property
+    def added_u(self) -> np.ndarray:
+        """What widens the measurement's half-width (unit box): the numerical resolution and the
+        model's discrepancy in quadrature."""
+        disc = np.zeros(self.u.size) if self.disc_u is None else self.disc_u
+        return np.sqrt(self.numerical_u ** 2 + disc ** 2)
+
     def half_u(self) -> np.ndarray:
-        """The 95 % half-width (unit box): the measurement's (t sd) and the numerical one in quadrature."""
-        return np.sqrt((self.t * self.sd_u) ** 2 + self.numerical_u ** 2)
+        """The 95 % half-width (unit box): the measurement's (t sd), the numerical one and the
+        model's discrepancy in quadrature."""
+        return np.sqrt((self.t * self.sd_u) ** 2 + self.added_u ** 2)
 
     def interval_u(self) -> tuple[np.ndarray, np.ndarray]:
         """The 95 % interval (unit box): u +- half_u, widened to every point evaluated whose
@@ -133,15 +160,17 @@ class Linear:
         """The objective's margin above the optimum that counts as acceptable: R + the largest finite threshold."""
         thr = [self.threshold(i) for i in range(self.u.size)]
         thr = [t for t in thr if math.isfinite(t)]
-        return self.rough + (max(thr) if thr else 0.0)
+        return self.rough + (max(thr) if thr else 0.0) + self.disc_rise
 
     def sources(self, i: int) -> dict:
-        """Shares of parameter i's interval variance: measurement, model revolutions, solver preset."""
+        """Shares of parameter i's interval variance: measurement, model revolutions, solver preset,
+        convergence, roughness, the model's discrepancy."""
         parts = {"measurement": float((self.t * self.sd_u[i]) ** 2),
                  "model_revolutions": 0.0 if self.rev_u is None else float(self.rev_u[i] ** 2),
                  "solver_preset": 0.0 if self.preset_u is None else float(self.preset_u[i] ** 2),
                  "convergence": 0.0 if self.conv_u is None else float(self.conv_u[i] ** 2),
-                 "roughness": 0.0 if self.rough_u is None else float(self.rough_u[i] ** 2)}
+                 "roughness": 0.0 if self.rough_u is None else float(self.rough_u[i] ** 2),
+                 "model_discrepancy": 0.0 if self.disc_u is None else float(self.disc_u[i] ** 2)}
         total = sum(parts.values())
         return {k: (v / total if total > 0 and math.isfinite(total) else None) for k, v in parts.items()}
 
@@ -189,6 +218,28 @@ def roughness(problem, lin: "Linear", J: np.ndarray, u0: np.ndarray, r: np.ndarr
     R = float(np.sqrt(np.mean(np.square(gaps))))
     g = np.diag(lin.gn_inv)
     return np.where(np.isfinite(g) & (g > 0), np.sqrt(R * np.where(np.isfinite(g), g, 0.0)), 0.0), R
+
+
+def discrepancy(J: np.ndarray, r: np.ndarray, lin: "Linear") -> tuple[np.ndarray, float, dict]:
+    """The model's discrepancy at the optimum (module doc): the 95 % half-widths (unit box, per
+    parameter), the objective's rise at them, and the figures behind them (the misfit beyond the
+    noise S - N, the misfit's independent features K, the t quantile)."""
+    n, p = J.shape
+    S = float(r @ r)
+    excess = max(S - n, 0.0)
+    r4 = float(np.sum(np.asarray(r, float) ** 4))
+    ratio = S * S / r4 if r4 > 0 else float(n)
+    infl = lin.inflation
+    infl = infl[np.isfinite(infl) & (infl > 0)]
+    features = max(ratio / max(float(np.mean(infl)) if infl.size else 1.0, 1.0), p + MIN_FEATURE_DOF)
+    dof = features - p
+    t = float(stats.t.ppf(0.975, dof))
+    per = excess / dof
+    g = np.diag(lin.gn_inv)
+    half = np.where(np.isfinite(g) & (g > 0), t * np.sqrt(per * np.where(np.isfinite(g), g, 0.0)), 0.0)
+    half = np.where(lin.sensitive, half, 0.0)
+    info = {"objective_beyond_noise": excess, "features": features, "t": t, "per_feature": per}
+    return half, t * t * per, info
 
 
 def autocorrelation_lags(r: np.ndarray, groups: list[tuple[int, int]]) -> int:
@@ -265,7 +316,7 @@ class Profile:
         """The profile's 95 % interval (unit box): quadratic on each side through the checked point."""
         i = self.index
         u0, half = float(lin.u[i]), float(lin.t * lin.sd_u[i])
-        num = float(lin.numerical_u[i])
+        num = float(lin.added_u[i])
         out = []
         for sign, rho in ((-1, self.rho_low), (1, self.rho_high)):
             if rho is None or not math.isfinite(half):
@@ -352,9 +403,12 @@ def interval(lin: Linear, prof: Profile | None, i: int) -> tuple[float, float, l
     return lo, hi, notes
 
 
-def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str], lo: float, hi: float) -> list[str]:
+def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str], lo: float, hi: float,
+            others: list[int] | None = None) -> list[str]:
     """Why parameter ``i`` is not identifiable from this measurement (empty: it is); ``lo``, ``hi``:
-    its interval (unit box, ``interval``)."""
+    its interval (unit box, ``interval``); ``others``: the parameters whose correlation with it
+    counts (default all; a joint fit's shared parameter: the other shared ones, its correlation
+    with one file's own parameters being in its marginal interval already)."""
     notes = []
     if not lin.sensitive[i]:
         return ["the objective does not depend on it at the optimum (no jump or contact it changes)"]
@@ -371,6 +425,8 @@ def verdict(lin: Linear, prof: Profile | None, i: int, names: list[str], lo: flo
             notes.append("flat profile: the objective rises less than its 95 % threshold over the whole bounds")
     c = lin.correlation()
     for j, name in enumerate(names):
+        if others is not None and j not in others:
+            continue
         if j != i and np.isfinite(c[i, j]) and abs(c[i, j]) > MAX_CORRELATION:
             notes.append(f"correlated with {name} (r = {c[i, j]:+.3f}): only a combination of the two is identified")
     return notes

@@ -26,6 +26,7 @@ _EXPORTS = {
     "process": "labtool.api.processing",
     "report": "labtool.api.reporting",
     "fit": "labtool.api.fitting",
+    "suggest": "labtool.api.design",
     "OperatingPoint": "labtool.common.operating_point",
     "DEFAULT": "labtool.common.operating_point",
     "PAPER_EXPERIMENT": "labtool.common.operating_point",

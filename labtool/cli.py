@@ -44,6 +44,7 @@ COMMAND_MODULES = (
     "labtool.commands.demo",
     "labtool.commands.report",
     "labtool.commands.fit",
+    "labtool.commands.suggest",
     "labtool.commands.doe",
     "labtool.commands.acquire",
     "labtool.commands.devices",

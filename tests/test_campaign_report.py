@@ -151,3 +151,54 @@ def test_the_page_in_a_real_browser(page, tmp_path):
 
     assert count((230, 159, 0), tol=25) > 300 and count((86, 180, 233), tol=25) > 300   # omega1 const and var curves
     assert count((227, 244, 227)) > 1000                                  # the 'excellent' grade band
+
+
+def _fit_doc(value, ci, file, rpm):
+    return {"format": "labtool.fit", "format_version": 1, "model": "rigid", "omega1": "const",
+            "free": ["backlash", "restitution"],
+            "measured": {"file": file, "cam_speed_rpm_measured": rpm},
+            "parameters": {"backlash_mm": {"value": value, "ci95": ci, "bounds": [0.01, 0.6], "identifiable": True},
+                           "restitution": {"value": 0.3, "ci95": [0.2, 0.4], "bounds": [0.0, 1.0],
+                                           "identifiable": True}}}
+
+
+@pytest.mark.slow
+def test_a_campaign_whose_points_are_fitted_says_whether_they_agree_about_the_backlash(tmp_path, capsys):
+    from tests.test_campaign_run import quick_plan
+    out = tmp_path / "c"
+    assert main(["campaign", "run", str(quick_plan(tmp_path)), "-o", str(out)]) == 0
+    points = sorted((out / "points").iterdir())
+    # the points' fits disagree: 0.10 [0.095, 0.105] at 180 rpm against 0.13 [0.125, 0.135] at 300 rpm
+    for p, (v, ci, rpm) in zip(points, ((0.10, [0.095, 0.105], 180.0), (0.13, [0.125, 0.135], 300.0))):
+        (p / "fit.json").write_text(json.dumps(_fit_doc(v, ci, str(p / "measured.nc"), rpm)))
+    capsys.readouterr()
+    assert main(["campaign", "report", str(out), "--force"]) == 0
+    text = capsys.readouterr().out
+    assert "backlash_mm (rigid model, 2 points): these measurements disagree about backlash_mm" in text
+    doc = json.loads((out / "campaign.json").read_text())
+    j = doc["identification"]["groups"][0]["parameters"]["backlash_mm"]
+    assert j["consistency"]["consistent"] is False and [f["point"] for f in j["files"]] == [p.name for p in points]
+    assert "these measurements disagree about backlash_mm" in (out / "campaign.html").read_text()
+    # a joint fit in the campaign folder takes precedence; anything else there is refused, naming it
+    (out / "fit.json").write_text(json.dumps({"format": "labtool.fit"}))
+    assert main(["campaign", "report", str(out), "--force"]) == 2
+    assert "is not a joint fit of the campaign's measurements" in capsys.readouterr().err
+    # a point's fit.json that is not a fit result is refused, naming the point
+    (out / "fit.json").unlink()
+    (points[0] / "fit.json").write_text("[]")
+    assert main(["campaign", "report", str(out), "--force"]) == 2
+    err = capsys.readouterr().err
+    assert points[0].name in err and "fit.json is not a labtool fit result" in err
+
+
+def test_the_points_fits_combine_only_within_one_model_and_set_of_parameters():
+    from labtool.identification.joint import campaign_identification
+    a = _fit_doc(0.1, [0.095, 0.105], "a.nc", 180.0)
+    b = _fit_doc(0.102, [0.097, 0.107], "b.nc", 300.0)
+    c = {**_fit_doc(0.2, [0.19, 0.21], "c.nc", 500.0), "model": "elastic", "free": ["backlash", "contact_damping"]}
+    out = campaign_identification([("a", a), ("b", b), ("c", c)])
+    assert len(out["groups"]) == 1 and out["groups"][0]["points"] == ["a", "b"]
+    j = out["groups"][0]["parameters"]["backlash_mm"]
+    assert j["consistency"]["consistent"] and 0.1 < j["value"] < 0.102
+    assert list(out["groups"][0]["parameters"]) == ["backlash_mm"]          # the stand's property only
+    assert campaign_identification([("a", a)]) is None

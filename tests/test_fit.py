@@ -101,8 +101,7 @@ def test_the_fit_finds_the_known_parameters_and_writes_the_issue_keys(measured, 
 
 @pytest.mark.slow
 def test_the_intervals_cover_the_truth_over_noise_realisations(tmp_path, monkeypatch):
-    # nominal 95 %; measured (20 seeds) 85 % for j, 95 % for k: a 0.3 sigma bias of j between the
-    # sampled, interpolated measurement and the stand-in (docs/identification.md)
+    # nominal 95 %; measured (20 seeds) 95 % for j and for k (docs/identification.md)
     stand_in(monkeypatch)
     hits = {k: 0 for k in TRUTH}
     for seed in range(20):

@@ -1,24 +1,30 @@
-"""``labtool.fit``: model parameters identified from a measurement, with 95 % intervals."""
+"""``labtool.fit``: model parameters identified from a measurement, or from several at once,
+with 95 % intervals."""
 from __future__ import annotations
 
 from pathlib import Path
 
 
-def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str = "standard", revolutions: int = 3,
+def fit(measured, *, model: str, free: str, shared: str | None = None, omega1: str = "const", accuracy: str = "standard", revolutions: int = 3,
         bounds: dict | None = None, start="scan", scan: bool = True, max_runs: int = 200, ka_gain: float = 1.0,
         delay_ms: float = 0.0, progress=None, **changes):
     """Identify a model's parameters from a processed measurement.
 
     Parameters
     ----------
-    measured : path
-        measured.nc (``labtool.process``): the measurement the models are fitted to.
+    measured : path or list of paths
+        measured.nc (``labtool.process``): the measurement the models are fitted to; several:
+        a joint fit, the ``shared`` parameters fitted once for all files, the others per file,
+        and the files tested for agreement.
     model : {"rigid", "elastic"}
         The model whose parameters are identified.
     free : str
         The parameters to identify, comma-separated: ``backlash`` [mm], ``restitution`` [-]
         (rigid), ``contact_damping`` [s/m], ``contact_length`` [mm] (elastic), ``ka_gain`` [-],
         ``delay`` [ms].
+    shared : str, optional
+        Several files: the free parameters they share, comma-separated (default: those that are
+        the stand's properties: backlash, contact_length, ka_gain, delay).
     omega1 : {"const", "var"}
         The model's cam speed mode.
     accuracy : {"fast", "standard"}
@@ -46,9 +52,17 @@ def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str
 
     Returns
     -------
-    labtool.identification.fit.FitOutcome
+    labtool.identification.fit.FitOutcome or labtool.identification.joint.JointOutcome
         ``summary``: the result as a JSON-ready dict (values, 95 % intervals, identifiability,
-        metrics before and after, notes); what the figures need.
+        metrics before and after, notes; for several files the joint values, each file's own
+        fit and the consistency test); what the figures need.
+
+    Examples
+    --------
+    >>> import labtool
+    >>> out = labtool.fit(["a.nc", "b.nc", "c.nc"], model="rigid", free="backlash,restitution",
+    ...                   shared="backlash")                                     # doctest: +SKIP
+    >>> out.summary["consistency"]["backlash_mm"]["verdict"]                       # doctest: +SKIP
     """
     import math
 
@@ -64,7 +78,17 @@ def fit(measured, *, model: str, free: str, omega1: str = "const", accuracy: str
 
     if isinstance(bounds, str):
         bounds = parse_assignments(bounds, "bounds", ranges=True)
-    req = FitRequest(Path(measured), model, free, omega1, accuracy, int(revolutions), dict(bounds or {}), start,
-                     {k: v for k, v in changes.items() if v is not None},
-                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, int(max_runs), scan=scan)
-    return identify(req, progress=progress)
+    common = dict(omega1=omega1, accuracy=accuracy, revolutions=int(revolutions), bounds=dict(bounds or {}),
+                  start=start, overrides={k: v for k, v in changes.items() if v is not None},
+                  chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=int(max_runs), scan=scan)
+    if isinstance(measured, (list, tuple)):
+        if len(measured) > 1:
+            from labtool.identification.joint import JointRequest, identify_joint
+            return identify_joint(JointRequest([Path(m) for m in measured], model, free, shared, **common),
+                                  progress=progress)
+        if not measured:
+            raise InputError("fit: no measured file given")
+        measured = measured[0]
+    if shared is not None:
+        raise InputError("shared needs several measured files (a joint fit)")
+    return identify(FitRequest(Path(measured), model, free, **common), progress=progress)

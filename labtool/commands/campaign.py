@@ -147,6 +147,31 @@ def report_cmd(
                   kc_factor=kc_factor, elastic_gap=elastic_gap))
 
 
+def _identification(inputs, records) -> dict | None:
+    """The points' fits across the campaign: a joint fit in the campaign folder (fit.json, from
+    'labtool fit points/*/measured.nc ... --shared backlash -o CAMPAIGN/fit.json'), else the points'
+    own fit.json combined (labtool.identification.joint.campaign_identification)."""
+    import json
+
+    from labtool.common.errors import InputError
+    from labtool.identification.joint import FORMAT, campaign_identification
+
+    joint, source = None, ""
+    for p in inputs:
+        f = Path(p) / "fit.json"
+        if Path(p).is_dir() and (Path(p) / "points").is_dir() and f.is_file():
+            try:
+                doc = json.loads(f.read_text(encoding="utf-8"))
+            except (OSError, ValueError) as exc:
+                raise InputError(f"{f} is unreadable ({exc}); fit again with 'labtool fit ... -o {f} --force'") from None
+            if not (isinstance(doc, dict) and doc.get("format") == FORMAT):
+                raise InputError(f"{f} is not a joint fit of the campaign's measurements (format {FORMAT}); move it "
+                                 "away, or make it with 'labtool fit POINTS/*/measured.nc --model ... --free ... "
+                                 f"--shared ... -o {f}'")
+            joint, source = doc, str(f)
+    return campaign_identification([(r.name, r.fit) for r in records if r.fit is not None], joint, source)
+
+
 def _split(text: str) -> list[str]:
     return [v.strip() for v in text.split(",") if v.strip()]
 
@@ -163,6 +188,7 @@ def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, co
         check_output_path(p, force)
     say = _reporter().say if sys.stderr.isatty() else None   # progress on a terminal, quiet when piped
     rep = collect_inputs(inputs, compare, overrides, page_base=html.parent, say=say)
+    rep.identification = _identification(inputs, rep.records)
     write_outputs(rep, html, json_path, csv_path)
     for r in rep.records:
         best = r.summary.get("closest")
@@ -170,6 +196,9 @@ def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, co
     for c in rep.changes:
         typer.echo(f"the closest model changes from {c['from']} ({c['from_rpm']:g} rpm) to {c['to']} "
                    f"({c['to_rpm']:g} rpm), {c['group']}")
+    for g in (rep.identification or {}).get("groups", []):
+        for key, p in g["parameters"].items():
+            typer.echo(f"{key} ({g['model']} model, {len(p['files'])} points): {p['verdict']}")
     for n in rep.notes:
         typer.echo(f"note: {n}")
     typer.echo(f"wrote {html}, {json_path}, {csv_path}")

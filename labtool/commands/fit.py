@@ -1,10 +1,14 @@
-"""``labtool fit``: identify a model's parameters from a measurement (labtool.identification.fit).
+"""``labtool fit``: identify a model's parameters from a measurement (labtool.identification.fit),
+or from several at once (labtool.identification.joint).
 
 Prints the identified parameters with their 95 % intervals, whether this measurement identifies
 them, the objective and the grades before and after; ``-o fit.json`` writes the result (and the
 figure beside it, ``fit.png``, unless ``--figure`` names another file); ``--json`` prints the
-result as one JSON object on stdout. Exit 0: the fit ran (its notes say what it could not
-identify); exit 2: bad input or a model that fails everywhere, one line, nothing written.
+result as one JSON object on stdout. With several files the ``--shared`` parameters are fitted
+once for all and the others per file, and the files' own estimates are tested against the joint
+one. Exit 0: the fit ran (its notes say what it could not identify); exit 1: a joint fit whose
+measurements disagree about a shared parameter beyond their intervals; exit 2: bad input or a
+model that fails everywhere, one line, nothing written.
 """
 from __future__ import annotations
 
@@ -26,7 +30,8 @@ def register(app: typer.Typer) -> None:
 
 
 def fit(
-    measured: Path = typer.Argument(..., help="measured.nc written by 'labtool process'"),
+    measured: list[Path] = typer.Argument(..., help="measured.nc written by 'labtool process'; several files: a joint "
+                                          "fit (--shared)"),
     model: str = typer.Option(..., help="model to identify: rigid or elastic"),
     free: str = typer.Option(..., help="parameters to identify, comma-separated: backlash [mm], restitution [-] (rigid), "
                              "contact_damping [s/m], contact_length [mm] (elastic), ka_gain [-] (true Ka / the Ka "
@@ -40,6 +45,9 @@ def fit(
                                          "contact_length 1:30 mm, ka_gain 0.5:2, delay -5:5 ms)"),
     start: str = typer.Option("scan", help="scan (a coarse scan of the bounds, default), scene (the scene's values) or "
                               "name=value,... (edge units): searched from first, beside the scan's best points"),
+    shared: Optional[str] = typer.Option(None, help="with several files: the free parameters fitted once for all "
+                                         "of them, comma-separated (the others are fitted per file); default: those "
+                                         "that are the stand's properties (backlash, contact_length, ka_gain, delay)"),
     scan: bool = typer.Option(True, "--scan/--no-scan", help="also search from the coarse scan's best points (with "
                               "--no-scan a given start alone: the answer may then depend on it)"),
     rpm: Optional[float] = op_option("cam_speed", default_note="default: the measured mean speed of the whole "
@@ -79,9 +87,11 @@ def fit(
     overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
                       restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
                       kc_factor=kc_factor, elastic_gap=elastic_gap)
-    req = FitRequest(measured, model, free, omega1, accuracy, revolutions,
-                     parse_assignments(bounds, "--bounds", ranges=True), start_value, overrides,
-                     {"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs, scan=scan)
+    common = dict(omega1=omega1, accuracy=accuracy, revolutions=revolutions,
+                  bounds=parse_assignments(bounds, "--bounds", ranges=True), start=start_value, overrides=overrides,
+                  chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=max_runs, scan=scan)
+    if len(measured) == 1 and shared is not None:
+        raise InputError("--shared needs several measured files (a joint fit); give two or more, or drop --shared")
     from labtool.common.files import check_interrupted
 
     err = console(stderr=True)
@@ -89,13 +99,17 @@ def fit(
         def progress(msg: str) -> None:
             check_interrupted()        # a Ctrl-C that Python dropped (in a weakref callback) stops the search here
             status.update(msg)
-        outcome = identify(req, progress=progress)
+        if len(measured) == 1:
+            outcome = identify(FitRequest(measured[0], model, free, **common), progress=progress)
+        else:
+            from labtool.identification.joint import JointRequest, identify_joint
+            outcome = identify_joint(JointRequest(list(measured), model, free, shared, **common), progress=progress)
         text = json.dumps(outcome.summary, indent=1, allow_nan=False)
         fig = None
         if figure is not None:
             status.update("drawing the figure")
-            from labtool.identification.figures import fit_figure
-            fig = fit_figure(outcome)
+            from labtool.identification.figures import fit_figure, joint_figure
+            fig = fit_figure(outcome) if len(measured) == 1 else joint_figure(outcome)
         # both outputs are ready before either is written, and are renamed together (both or
         # neither: a rerun after an interruption finds no JSON without its figure)
         with OutputSet() as outputs:
@@ -103,14 +117,17 @@ def fit(
                 outputs.write_text(output, text + "\n")
             if fig is not None:
                 outputs.write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    joint = len(measured) > 1
     if as_json:
         typer.echo(text)
-        return
-    for line in summary_lines(outcome.summary):
-        typer.echo(line)
-    wrote = [str(p) for p in (output, figure) if p is not None]
-    if wrote:
-        typer.echo("wrote " + ", ".join(wrote))
+    else:
+        for line in (joint_lines(outcome.summary) if joint else summary_lines(outcome.summary)):
+            typer.echo(line)
+        wrote = [str(p) for p in (output, figure) if p is not None]
+        if wrote:
+            typer.echo("wrote " + ", ".join(wrote))
+    if joint and not outcome.summary["consistent"]:
+        raise typer.Exit(1)
 
 
 def _outputs(output: Path | None, figure: Path | None, force: bool) -> Path | None:
@@ -131,6 +148,15 @@ def _num(v, fmt=".4g") -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _verdict(p: dict) -> str:
+    """A parameter's verdict as a line prints it."""
+    if not p["identifiable"]:
+        return "NOT identifiable: " + "; ".join(p["notes"])
+    if p.get("misfit"):
+        return "NOT the stand's: " + "; ".join(n for n in p["notes"] if n.startswith("misfit"))
+    return "identified"
+
+
 def summary_lines(s: dict) -> list[str]:
     """The result in plain lines: each parameter with its interval and verdict, then the fit."""
     lines = [f"{s['model']} model, omega1 {s['omega1']}, {s['accuracy']} preset (search at {s['search_accuracy']}), "
@@ -138,8 +164,7 @@ def summary_lines(s: dict) -> list[str]:
     for key, p in s["parameters"].items():
         lo, hi = p["ci95"]
         bound = f", at its {p['bound']} bound" if p["bound_hit"] else ""
-        verdict = "identified" if p["identifiable"] else "NOT identifiable: " + "; ".join(p["notes"])
-        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % [{_num(lo)}, {_num(hi)}]{bound}  {verdict}")
+        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % [{_num(lo)}, {_num(hi)}]{bound}  {_verdict(p)}")
     names = list(s["correlation"])
     for i, a in enumerate(names):
         for b in names[i + 1:]:
@@ -156,6 +181,33 @@ def summary_lines(s: dict) -> list[str]:
         lines.append(f"  events: measured {_num(ev['measured_impacts_per_rev'], '.2f')} visible impacts/rev, first at "
                      f"{_num(ev['measured_first_impact_deg'], '.1f')} deg; fitted model {_num(ev['impacts_per_rev'], '.2f')}, "
                      f"first at {_num(ev['first_impact_deg'], '.1f')} deg")
+    for n in s["notes"]:
+        lines.append(f"note: {n}")
+    return lines
+
+
+def _interval(lo, hi) -> str:
+    return f"[{_num(lo)}, {_num(hi)}]"
+
+
+def joint_lines(s: dict) -> list[str]:
+    """A joint fit in plain lines: each shared parameter, the files' own estimates and the test,
+    then each file's own parameters."""
+    lines = [f"{s['model']} model, omega1 {s['omega1']}, {s['accuracy']} preset, joint fit of {len(s['files'])} "
+             f"measurements (shared: {', '.join(s['shared'])}; per file: {', '.join(s['per_file']) or '-'})"]
+    for key, p in s["parameters"].items():
+        lines.append(f"  {key:24s} {_num(p['value']):>10s}  95 % {_interval(*p['ci95'])}  {_verdict(p)}")
+        if p["ci95"] != p["ci95_joint"]:
+            lines.append(f"  {'':24s} {'':>10s}  (joint fit alone: {_interval(*p['ci95_joint'])})")
+        for f in s["consistency"][key]["files"]:
+            lines.append(f"    {f['file']} ({_num(f['cam_speed_rpm'], '.1f')} rpm) alone: {_num(f['value'])} "
+                         f"{_interval(*f['ci95'])}{'' if f['identifiable'] else ' (not identifiable)'}")
+        lines.append(f"    {s['consistency'][key]['verdict']}")
+    for f, own in zip(s["files"], s["per_file_parameters"]):
+        for key, p in own.items():
+            lines.append(f"  {f}: {key} {_num(p['value'])} 95 % {_interval(*p['ci95'])} ({p['verdict']})")
+    lines.append(f"objective {_num(s['objective_after'])} ({s['degrees_of_freedom']:.0f} effective degrees of freedom), "
+                 f"{s['evaluations']} model runs, {s['wall_s']:.1f} s")
     for n in s["notes"]:
         lines.append(f"note: {n}")
     return lines

@@ -1,0 +1,165 @@
+"""Does following ``labtool suggest`` pay? A simulated campaign loop on the simulated stand.
+
+For each seed (a stand with its own backlash j and energy loss: the twin, docs/twin.md, with its
+contact damping, or ``--truth rigid``, the rigid model's own physics through the stand's chain,
+with its restitution):
+
+* **suggested**: a first recording at 180 rpm, no load; ``labtool suggest --goal identify``
+  on it (120-600 rpm by 40, at the measured load, its default; ``--loads`` adds others) gives the
+  second point; ``labtool suggest`` on the two gives the third;
+* **fixed**: the same first recording, then 300 and 500 rpm, no load (the paper's speeds);
+
+each arm's three recordings are fitted jointly (``labtool fit a b c --model rigid --free
+backlash,restitution --shared backlash``) and the backlash's 95 % interval compared: its width
+(on the log scale, ln(hi / lo), as the fit searches it) and whether it holds the truth.
+
+Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and writes
+``benchmarks/results/suggest_loop.json``.
+
+    nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
+    .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+LABTOOL = str(ROOT / ".venv" / "bin" / "labtool")
+DURATION_S = 4.0
+FIRST = (180.0, 0.0)
+FIXED = ((300.0, 0.0), (500.0, 0.0))
+RESULTS = ROOT / "benchmarks" / "results" / "suggest_loop.json"
+FIT = ["--model", "rigid", "--free", "backlash,restitution", "--shared", "backlash", "--accuracy", "fast"]
+SUGGEST = ["--model", "rigid", "--free", "backlash,restitution", "--shared", "backlash", "--rpm-range", "120:600:40",
+           "--accuracy", "fast"]
+
+
+TRUTH = {"model": "twin"}     # the stand's truth: twin or rigid (--truth)
+
+
+def truth(seed: int) -> dict:
+    rng = np.random.default_rng([2026, seed])
+    out = {"backlash_mm": round(float(np.exp(rng.uniform(math.log(0.06), math.log(0.2)))), 4),
+           "contact_damping": round(float(rng.uniform(20.0, 60.0)), 1)}
+    if TRUTH["model"] == "rigid":
+        out = {"backlash_mm": out["backlash_mm"], "restitution": round(float(rng.uniform(0.2, 0.6)), 3)}
+    return out
+
+
+def _run(args: list[str]) -> subprocess.CompletedProcess:
+    r = subprocess.run([LABTOOL, *args], capture_output=True, text=True)
+    if r.returncode not in (0, 1):
+        raise RuntimeError(f"labtool {' '.join(args[:2])}: {r.stderr.strip().splitlines()[-1]}")
+    return r
+
+
+def record(folder: Path, seed: int, rpm: float, Fu: float, tag: str = "") -> Path:
+    """measured.nc of the seed's stand at (rpm, Fu), made once (the stated backlash removed);
+    ``tag`` tells apart a second recording at the same point (its own noise)."""
+    from benchmarks.fit_coverage import _forget_backlash
+
+    t = truth(seed)
+    nc = folder / f"{rpm:g}rpm_{Fu:g}N{tag}.nc"
+    if not nc.exists():
+        h5 = nc.with_suffix(".h5")
+        loss = (["--truth", "rigid", "--restitution", str(t["restitution"])] if "restitution" in t
+                else ["--contact-damping", str(t["contact_damping"])])
+        _run(["acquire", "--device", "sim", "--fast", "--duration", str(DURATION_S), "--rpm", f"{rpm:g}", "--fu",
+              f"{Fu:g}", "--backlash-mm", str(t["backlash_mm"]), *loss,
+              "--seed", str(seed * 100_000 + int(rpm) * 100 + int(Fu) + (11 * int(tag[-1]) if tag else 0)),
+              "-o", str(h5), "--force"])
+        _run(["process", str(h5), "-o", str(nc), "--force"])
+        _forget_backlash(nc)
+    return nc
+
+
+def suggested_point(folder: Path, files: list[Path], step: int) -> tuple[float, float]:
+    out = folder / f"suggest_{step}.json"
+    if not out.exists():
+        _run(["suggest", *map(str, files), *SUGGEST, "-o", str(out), "--force"])
+    p = json.loads(out.read_text())["point"]
+    return float(p["cam_speed_rpm"]), float(p["Fu_N"])
+
+
+def joint(folder: Path, name: str, files: list[Path]) -> dict:
+    out = folder / f"joint_{name}.json"
+    if not out.exists():
+        _run(["fit", *map(str, files), *FIT, "-o", str(out), "--force"])
+    return json.loads(out.read_text())
+
+
+def one_seed(root: Path, seed: int) -> dict:
+    folder = root / f"seed_{seed:02d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    first = record(folder, seed, *FIRST)
+    files = [first]
+    for step in (1, 2):
+        files.append(record(folder, seed, *suggested_point(folder, files, step), tag=f"_s{step}"))
+    fixed = [first] + [record(folder, seed, *p) for p in FIXED]
+    out = {"seed": seed, "truth": truth(seed)}
+    for name, fs in (("suggested", files), ("fixed", fixed)):
+        s = joint(folder, name, fs)
+        j = s["parameters"]["backlash_mm"]
+        lo, hi = j["ci95"]
+        t = truth(seed)["backlash_mm"]
+        out[name] = {"points": [f.stem for f in fs], "value": j["value"], "ci95": [lo, hi],
+                     "ci95_joint": j["ci95_joint"], "log_width": math.log(hi / lo) if lo and hi and lo > 0 else None,
+                     "holds": lo is not None and hi is not None and lo <= t <= hi, "consistent": s["consistent"]}
+    (folder / "result.json").write_text(json.dumps(out, indent=1))
+    return out
+
+
+def table(root: Path) -> list[dict]:
+    rows = [json.loads(p.read_text()) for p in sorted(root.glob("seed_*/result.json"))]
+    for p in sorted(root.glob("seed_*/error.txt")):
+        print(f"{p.parent.name}: left out: {p.read_text().strip()}")
+    print("| seed | true j [mm] | suggested points | j (95 %), suggested | fixed 180/300/500 | j (95 %), fixed "
+          "| width ratio suggested / fixed |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        s, f = r["suggested"], r["fixed"]
+
+        def cell(x):
+            return (f"{x['value']:.4g} [{x['ci95'][0]:.4g}, {x['ci95'][1]:.4g}]" + ("" if x["holds"] else " misses")
+                    + ("" if x["consistent"] else ", files disagree"))
+        ratio = s["log_width"] / f["log_width"] if s["log_width"] and f["log_width"] else float("nan")
+        print(f"| {r['seed']} | {r['truth']['backlash_mm']:.4g} | {', '.join(s['points'][1:])} | {cell(s)} | "
+              f"{', '.join(f['points'][1:])} | {cell(f)} | {ratio:.2f} |")
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dir", type=Path, required=True)
+    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--table", action="store_true")
+    ap.add_argument("--truth", default="twin", choices=("twin", "rigid"), help="the simulated stand's truth")
+    args = ap.parse_args()
+    TRUTH["model"] = args.truth
+    if args.table:
+        rows = table(args.dir)
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        RESULTS.write_text(json.dumps(rows, indent=1) + "\n")
+        print(f"wrote {RESULTS}")
+        return
+    for seed in range(args.seeds):
+        try:
+            r = one_seed(args.dir, seed)
+        except RuntimeError as exc:       # a recording the processing cannot use: said, not hidden
+            (args.dir / f"seed_{seed:02d}" / "error.txt").write_text(str(exc) + "\n")
+            print(f"seed {seed}: {exc}", flush=True)
+            continue
+        print(json.dumps({k: r[k] for k in ("seed", "truth")}), "suggested", r["suggested"]["points"],
+              r["suggested"]["ci95"], "fixed", r["fixed"]["ci95"], flush=True)
+
+
+if __name__ == "__main__":
+    main()
