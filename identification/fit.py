@@ -330,7 +330,10 @@ def _parameter_entry(space, i: int, lin, prof, names: list[str], chi2: float, ot
                          "could make up for, so the value is the closest model's and may be biased by that much"]
     return {
         "value": space.value(i, float(lin.u[i])),
-        "ci95": [space.value(i, lo), space.value(i, hi)],
+        # held to the search bounds (a restitution of -4 is no answer); the verdict says when the
+        # interval reached past them, and ci95_unbounded keeps it as computed
+        "ci95": [space.value(i, max(lo, 0.0)), space.value(i, min(hi, 1.0))],
+        "ci95_unbounded": [space.value(i, lo), space.value(i, hi)],
         "ci95_linear": [space.value(i, lin_lo[i]), space.value(i, lin_hi[i])],
         "bound_hit": bound is not None,
         "bound": bound,

@@ -258,7 +258,7 @@ def file_estimates(summaries: list[dict], key: str) -> tuple[np.ndarray, np.ndar
     for s in summaries:
         e = s["parameters"][key]
         x.append(_unit(p, lo, hi, e["value"]))
-        ci = e.get("ci95")
+        ci = e.get("ci95_unbounded") or e.get("ci95")      # the spread as computed, not held to the bounds
         if not e.get("identifiable", True) or not ci or None in ci:
             sd.append(math.inf)
             continue

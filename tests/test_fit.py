@@ -154,6 +154,10 @@ def test_a_parameter_the_model_does_not_depend_on_is_not_identifiable(measured, 
     k = s["parameters"]["restitution"]
     assert not k["identifiable"] and "does not depend" in k["notes"][0]
     assert s["parameters"]["backlash_mm"]["identifiable"]
+    # the interval it gives is the whole search range, not a restitution below 0 or above 1
+    assert k["ci95"] == pytest.approx(k["bounds"])
+    lo, hi = k["ci95_unbounded"]                # None: no finite end (the JSON's null for inf)
+    assert (lo is None or lo <= k["bounds"][0]) and (hi is None or hi >= k["bounds"][1])
 
 
 def test_two_parameters_seen_only_together_are_flagged_as_correlated(measured, monkeypatch):
