@@ -85,6 +85,7 @@ def test_variable_speed_without_contact_loss_runs_only_the_one_dof_model():
         assert res.indicators[key] == pytest.approx(full.indicators[key], rel=1e-9, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_contact_outputs_escalate_to_the_elastic_model():
     scene = paper_scene()
     assert choose_level(scene, needs_contact_outputs=True)[0] == "elastic"

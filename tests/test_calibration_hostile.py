@@ -241,6 +241,7 @@ def test_two_channels_from_one_call_make_one_file_with_both_uncertainties(tmp_pa
     assert "aE_t" in out and "aE_n" in out
 
 
+@pytest.mark.slow
 def test_several_reference_recordings_merge_per_channel_with_their_uncertainties(tmp_path):
     # aE_t on the exciter twice (two mounts), aE_n once, from its own recording
     r1 = sine_recording(tmp_path / "t1.h5", volts_peak=9.81 / 86.0, seed=1, noise_v=2e-3)

@@ -110,6 +110,7 @@ def test_cache_is_bounded():
     assert len(memo._cache) == memo.CACHE_SIZE
 
 
+@pytest.mark.slow
 def test_batched_dense_output_equals_each_run_including_a_shared_boundary():
     from labtool.models.dynamics.elastic import integrate
     from labtool.models.dynamics.kernels.dopri5 import evaluate_runs
@@ -205,6 +206,7 @@ def test_compiled_step_terms_equal_angle_terms_with_the_stroke_spline(law, rise_
     np.testing.assert_allclose(factors[3], 1.0 / want_arm, rtol=4.5e-16, atol=0)
 
 
+@pytest.mark.slow
 def test_compiled_step_terms_refuse_a_stroke_beyond_the_spline():
     s = paper_scene()
     sp = cam_tables.stroke_spline(s.mechanism)

@@ -340,6 +340,7 @@ def test_contact_stiffness_rejects_bad_values(lw, f):
         contact_stiffness(6e-3, f)
 
 
+@pytest.mark.slow
 def test_endless_chatter_is_a_solver_error(monkeypatch):
     """Restarting exactly on a boundary (no nudge) makes solve_ivp's boundary event re-fire from
     rounding; the guard turns that into a SolverError (one line, exit 2) instead of an endless loop.
@@ -483,6 +484,7 @@ def _numpy_energy_error(cols) -> float:
     return float(np.max(np.abs(En - En[0] - W)) / scale)
 
 
+@pytest.mark.slow
 def test_energy_error_is_the_numpy_expression_on_a_run():
     ds = simulate(paper_scene(backlash=0.016e-3, omega1_mode="var"), "elastic").dataset
     assert E.energy_error(ds, 1.0) == _numpy_energy_error(ds)

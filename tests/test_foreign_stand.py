@@ -35,6 +35,7 @@ def test_the_exact_gap_is_the_mechanisms_arm_to_first_order():
     assert 1e-4 < share.max() < 0.01
 
 
+@pytest.mark.slow
 def test_without_losses_and_with_the_cam_standing_the_energy_is_constant():
     st = fsd.ForeignStand(restitution=1.0, width_variation=0.0, mode_zeta=0.0, friction_torque=0.0,
                           friction_viscous=0.0, Fu=0.0, ripple=0.0)

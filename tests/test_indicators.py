@@ -32,6 +32,7 @@ def _same(a: dict, b: dict, where: str) -> None:
 
 @pytest.mark.parametrize("model,gap", [("rigid", "physical"), ("elastic", "physical"), ("elastic", "closed")])
 @pytest.mark.parametrize("preset", ["fast", "standard"])
+@pytest.mark.slow
 def test_table1_indicators_equal_the_dataset_paths(model, gap, preset):
     for run in RUNS:
         scene = _scene(run, accuracy=preset, elastic_gap=gap)
@@ -115,6 +116,7 @@ def test_the_compiled_indicator_pass_is_the_general_path(reading):
             assert a == b, (run.run, gap, a, b)
 
 
+@pytest.mark.slow
 def test_a_drive_zero_at_the_start_goes_to_the_general_path(monkeypatch):
     """The compiled pass leaves a run that starts at rest (no drive at t = 0, kernels.elastic_nb.start)
     to the general path, which begins it with an AtRest phase; the answer is the general path's."""

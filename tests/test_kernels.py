@@ -112,6 +112,7 @@ def test_elastic_compiled_loop_is_scipy_rk45_on_the_same_equations(run):
 
 
 @pytest.mark.parametrize("run", [1, 12, 16])
+@pytest.mark.slow
 def test_rigid_compiled_loop_is_scipy_rk45_on_the_same_equations(run):
     s = _scene(run)
     model, _ = rigid.build_model(s)

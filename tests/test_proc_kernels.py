@@ -105,6 +105,7 @@ def _numpy_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE, f
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(200, 6000), period=st.floats(150, 1500), seed=st.integers(0, 999),
        n_clip=st.integers(0, 5), irr=st.integers(0, 3))
+@pytest.mark.slow
 def test_follower_chain_equals_numpy(n, period, seed, n_clip, irr):
     rng = np.random.default_rng(seed)
     N = 1 << 12
@@ -152,6 +153,7 @@ def test_clip_mask_equals_numpy(rail):
     assert rail or not got[2000:2002].any()
 
 
+@pytest.mark.slow
 def test_clip_mask_a_rounded_top_is_not_a_clip_a_flat_cut_is():
     """A run at the extreme whose neighbours are one level below (a quantised smooth peak) is not
     a clip when min_drop asks for a steeper entry; a run entered by a big step is."""
@@ -170,6 +172,7 @@ def test_clip_mask_a_rounded_top_is_not_a_clip_a_flat_cut_is():
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(1, 6000), block=st.integers(1, 3000), noise=st.floats(0, 0.5), offset=st.floats(-3, 3),
        seed=st.integers(0, 999), f32=st.booleans())
+@pytest.mark.slow
 def test_compiled_tacho_edges_equal_numpy(n, block, noise, offset, seed, f32):
     """The same edges over any split into blocks: pulses, noise, a silent start, float32 input."""
     rng = np.random.default_rng(seed)

@@ -58,6 +58,7 @@ CHAINS = {
 
 @pytest.mark.hostile("real_file")
 @pytest.mark.parametrize("name", sorted(CHAINS))
+@pytest.mark.slow
 def test_a_real_file_goes_as_far_as_its_data_allow(tmp_path, capsys, name):
     opts: list[str] = []
     for added, says in CHAINS[name]:
