@@ -205,6 +205,12 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     rec = read_recording(p)
     assert rec["signals"].shape[0] == 7000 and not rec["attrs"]["complete"]
     assert rec["events"][-1][1] == "stop" and "Ctrl-C" in rec["events"][-1][2]
+    # a reader says why it is short: the user stopped it, not a recorder that did not close
+    from labtool.processing.readers import open_recording
+    r = open_recording(p)
+    warned = " ".join(r.warnings)
+    r.close()
+    assert "stopped short: stopped by the user (Ctrl-C)" in warned and "did not close cleanly" not in warned
 
 
 def test_ctrl_c_ends_a_recording_without_a_duration_complete(tmp_path):

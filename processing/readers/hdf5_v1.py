@@ -75,8 +75,12 @@ def _build(f: h5py.File, src: str) -> Recording:
     complete = _complete_flag(a.get("complete", False), src)
     warns = []
     if not complete:
-        warns.append(f"{src}: recording is marked incomplete (its recorder did not close cleanly); "
-                     "processing the samples that were written")
+        reason = a.get("stop_reason", "")
+        reason = reason.decode("utf-8", "replace") if isinstance(reason, bytes) else str(reason)
+        # "recording (not closed)" is what the recorder writes first: it never reached its close
+        why = (f"stopped short: {reason}" if reason and reason != "recording (not closed)"
+               else "its recorder did not close cleanly")
+        warns.append(f"{src}: recording is marked incomplete ({why}); processing the samples that were written")
     rpm = math.nan
     if "cam_speed_rpm" in a:
         try:
