@@ -153,6 +153,7 @@ def test_a_factor_level_past_the_models_bounds_is_named_with_its_unit(tmp_path, 
     path.write_text(f"factor,symbol,unit,level_1,level_2\nA,Fu,N,0,65\nB,Jt,-,1,4\n{row}\n")
     line = one_error_line(*cli(["doe", "run", "--factors", path, "-o", tmp_path / "r.csv"], capsys))
     assert said in line
+    assert "(--" not in line            # a factor file's level is not set by a command-line option
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]
 
 

@@ -399,7 +399,9 @@ class Design:
                 try:
                     scene = self.base.replace(**{field: v * scale})
                 except InputError as exc:
-                    raise InputError(f"{where}: {exc}") from None
+                    # the owner names the command-line option that sets the field; a factor file is
+                    # fixed by its level, not by that option
+                    raise InputError(f"{where}: {re.sub(r' [(]--[a-z0-9-]+[)]$', '', str(exc))}") from None
                 if self.model == "kinematic":      # the kinematic level evaluates the law alone (warnings)
                     continue
                 try:
