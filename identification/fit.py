@@ -160,14 +160,7 @@ def _uncertainty(ev: Evaluator, space, req: FitRequest, u_best, say):
                           f"{after.error}")
     J = final.jacobian(u_best, central=True)
     u_j, r_j = u_best, after.residuals
-    # one Gauss-Newton step with the central Jacobian: the search stops within its tolerance
-    # (xtol 2e-3 of the range), which can exceed a smooth objective's interval
-    step = -np.linalg.pinv(J, rcond=1e-10) @ after.residuals
-    u_gn = np.clip(u_best + step, 0.0, 1.0)
-    if np.max(np.abs(u_gn - u_best)) > 1e-6:
-        e_gn = final.at(u_gn)
-        if e_gn.ok and e_gn.objective < after.objective:
-            u_best, after = u_gn, e_gn
+    u_best, after = search.gauss_newton_step(final, u_best, after, J)
     lin = uncertainty.linear(J, after.residuals, u_best, ev.blocks(None))
     other = search.Problem(ev, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u_best)
     lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals,

@@ -38,6 +38,7 @@ from scipy import stats
 
 from labtool.common.errors import InputError, SolverError
 from labtool.identification import search, uncertainty
+from labtool.identification.objective import Scored
 from labtool.identification.fit import (FitOutcome, FitRequest, OTHER_PRESET, POLISH_NFEV, SEARCH_PRESET,
                                         identify, _parameter_entry)
 from labtool.identification.parameters import CATALOGUE, Space, make_space, parse_free
@@ -100,19 +101,11 @@ def parse_shared(text: str | None, free: list) -> np.ndarray:
 # --------------------------------------------------------------------------- the joint problem
 
 @dataclasses.dataclass
-class JointEvaluation:
+class JointEvaluation(Scored):
     residuals: np.ndarray
     parts: list                       # each file's Evaluation
     error: str | None = None
     model_run: bool = False
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
-    @property
-    def objective(self) -> float:
-        return float(self.residuals @ self.residuals)
 
 
 class JointProblem:
@@ -418,12 +411,7 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
         raise SolverError(f"the {req.model} model fails at the joint optimum: {after.error}")
     J = final.jacobian(u, central=True)
     u_j, r_j = u, after.residuals
-    step = -np.linalg.pinv(J, rcond=1e-10) @ after.residuals
-    u_gn = np.clip(u + step, 0.0, 1.0)
-    if np.max(np.abs(u_gn - u)) > 1e-6:
-        e_gn = final.at(u_gn)
-        if e_gn.ok and e_gn.objective < after.objective:
-            u, after = u_gn, e_gn
+    u, after = search.gauss_newton_step(final, u, after, J)
     lin = uncertainty.linear(J, after.residuals, u, final.blocks())
     other = JointProblem(evs, shared, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u)
     revs = _revolution_residuals(final, u, after)

@@ -145,15 +145,9 @@ def event_residuals(target: Target, predicted: dict | None, delay_deg: float = 0
     return np.array([r_angle, r_count])
 
 
-@dataclasses.dataclass
-class Evaluation:
-    """One point of the objective: residuals, the model's cycle as the chain shows it, its events."""
-
-    residuals: np.ndarray
-    cycle: object | None              # align.SimulatedCycles with the chain parameters applied
-    events: dict | None
-    error: str | None = None
-    model_run: bool = False           # a new model run was needed (not in the cache)
+class Scored:
+    """What a search reads of an evaluation: ``ok`` (no ``error``) and the ``objective``, the sum of
+    its squared ``residuals``."""
 
     @property
     def ok(self) -> bool:
@@ -162,6 +156,17 @@ class Evaluation:
     @property
     def objective(self) -> float:
         return float(self.residuals @ self.residuals)
+
+
+@dataclasses.dataclass
+class Evaluation(Scored):
+    """One point of the objective: residuals, the model's cycle as the chain shows it, its events."""
+
+    residuals: np.ndarray
+    cycle: object | None              # align.SimulatedCycles with the chain parameters applied
+    events: dict | None
+    error: str | None = None
+    model_run: bool = False           # a new model run was needed (not in the cache)
 
 
 def _hashable(v):

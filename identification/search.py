@@ -132,3 +132,18 @@ def minimize(problem: Problem, u0: np.ndarray, max_nfev: int = 40, xtol: float =
         return problem.best.u, None
     u = res.x if problem.best.u is None else problem.best.u
     return u, res
+
+
+def gauss_newton_step(problem, u: np.ndarray, at_u, jacobian: np.ndarray):
+    """One Gauss-Newton step from ``u`` (unit box, clipped to it) with ``jacobian`` (the central
+    one the intervals use): the search stops within its tolerance (xtol 2e-3 of the range), which
+    can exceed a smooth objective's interval. ``problem.at`` evaluates a point, ``at_u`` is its
+    evaluation at ``u``; returns the better of the two points and its evaluation."""
+    step = -np.linalg.pinv(jacobian, rcond=1e-10) @ at_u.residuals
+    u_gn = np.clip(u + step, 0.0, 1.0)
+    if np.max(np.abs(u_gn - u)) > 1e-6:
+        e_gn = problem.at(u_gn)
+        if e_gn.ok and e_gn.objective < at_u.objective:
+            return u_gn, e_gn
+    return u, at_u
+
