@@ -41,7 +41,7 @@ from labtool.common.operating_point import STATED, OperatingPoint
 from labtool.common.units import RPM
 from labtool.models.dynamics.twin import TwinPhysics
 from labtool.models.mechanism.kinematics import check_load_and_inertia, follower_motion
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
@@ -256,6 +256,12 @@ def cam_angle(scene: StandScene, t):
     return phi1, omega1, epsilon1
 
 
+def _at_E(mech: Mechanism, omega2, epsilon2) -> dict:
+    """{aE_t, aE_n} (m/s^2) of an ideal sensor at E (labtool.models.mechanism.sensor_point)."""
+    aE_t, aE_n = sensor_point.acceleration_at_E(mech.DE, omega2, epsilon2)
+    return {"aE_t": aE_t, "aE_n": aE_n}
+
+
 def truth(scene: StandScene, t, seed: int | None = None, interval: float | None = None) -> dict:
     """The noise-free truth at times t (s): what an ideal sensor at E would see, no gravity.
 
@@ -283,8 +289,7 @@ def truth(scene: StandScene, t, seed: int | None = None, interval: float | None 
     phi1, omega1, epsilon1 = cam_angle(scene, t)
     phi2, omega2, epsilon2, psi = follower_motion(scene.program, mech, phi1, omega1, epsilon1)
     return {"phi1": phi1, "omega1": omega1, "epsilon1": epsilon1, "phi2": phi2, "psi": psi,
-            "omega2": omega2, "epsilon2": epsilon2,
-            "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
+            "omega2": omega2, "epsilon2": epsilon2, **_at_E(mech, omega2, epsilon2)}
 
 
 # ---- the twin (labtool.models.dynamics.twin), streamed
@@ -353,7 +358,7 @@ def twin_truth(scene: StandScene, t, interval: float | None = None, run=None) ->
         res[k][order] = v
     res["epsilon1"] = np.full_like(t, np.nan)   # not tabulated: the cam's speed varies with the load
     res["psi"] = res["phi2"] - mech.phiD - mech.psi0
-    res["aE_n"] = res["omega2"] ** 2 * mech.DE
+    res["aE_n"] = sensor_point.acceleration_at_E(mech.DE, res["omega2"], 0.0)[1]
     return res
 
 
@@ -444,10 +449,8 @@ def _model_truth(scene: StandScene, t, interval: float | None = None) -> dict:
     out["phi1"] = scene.omega1_nominal * np.asarray(t, dtype=float)
     out["epsilon1"] = np.zeros_like(out["omega1"])
     out["psi"] = out["phi2"] - mech.phiD - mech.psi0
-    out["aE_t"] = out["epsilon2"] * mech.DE
-    if interval is not None:
-        out["aE_t"] = boxcar_epsilon2(scene, t, interval) * mech.DE
-    out["aE_n"] = out["omega2"] ** 2 * mech.DE
+    eps2 = out["epsilon2"] if interval is None else boxcar_epsilon2(scene, t, interval)
+    out.update(_at_E(mech, out["omega2"], eps2))
     return out
 
 
@@ -583,14 +586,14 @@ def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
     """Specific force along the sensor axes (n, 2) in m/s^2: truth minus gravity, on the moving axes.
 
     On the follower the axes turn with phi2: f_t = aE_t + g cos(phi2), f_n = aE_n - g sin(phi2)
-    (g along -y). On the shaker the calibrated axis is vertical: gravity is constant, and the AC
+    (g along -y; labtool.models.mechanism.sensor_point.sensor_reading). On the shaker the calibrated axis is vertical: gravity is constant, and the AC
     coupling removes it like any constant.
     """
     g = scene.mechanism.g
     if scene.mode == "calibration":
         return np.column_stack([tr["aE_t"], tr["aE_n"]]) + np.array([g, 0.0]) * (scene.cal_channel == "aE_t") \
             + np.array([0.0, g]) * (scene.cal_channel == "aE_n")
-    return np.column_stack([tr["aE_t"] + g * np.cos(tr["phi2"]), tr["aE_n"] - g * np.sin(tr["phi2"])])
+    return np.column_stack(sensor_point.sensor_reading(tr["aE_t"], tr["aE_n"], tr["phi2"], g))
 
 
 TACHO_ANGLE_TOL = 1e-9   # rad: a phi1 this far below 2 pi k (rounding of an integrated angle) is at it

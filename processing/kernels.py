@@ -324,7 +324,7 @@ def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table
             acc[i, 1] = np.nan
             eps[i] = 0.0
         else:
-            eps[i] = acc[i, 0] / DE
+            eps[i] = acc[i, 0] / DE      # sensor_point.epsilon2_from_tangential, inline: compiled loop
         omega[i] = 0.0
     _integrate_motion(eps, moving, bad, fs, margin, omega, starts, stops)
     for i in range(n):
@@ -333,7 +333,7 @@ def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table
             omega[i] = np.nan
             absn[i] = np.nan
         else:
-            absn[i] = math.sqrt(max(acc[i, 1], 0.0) / DE)
+            absn[i] = math.sqrt(max(acc[i, 1], 0.0) / DE)   # sensor_point.omega2_abs_from_normal
 
 
 @jit(nogil=True)

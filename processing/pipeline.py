@@ -36,7 +36,7 @@ from labtool.common.errors import InputError
 from labtool.common.files import atomic_write
 from labtool.common.invocation import command_line
 from labtool.common.names import shown
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, orientation, speed, spectra
 from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
@@ -368,8 +368,8 @@ def _process_window(w: dict, ext, wa, marks, period, chain: Chain, irregular) ->
     writing into the workspace's views ``w`` (phys and clipped filled; ext the filter's scratch).
 
     Defined by the pure functions it fuses: filters.zero_phase, cam_angle.phi1_from_marks,
-    follower.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
-    follower.omega2_from_normal (tests/test_proc_kernels.py checks the equality).
+    sensor_point.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
+    sensor_point.omega2_abs_from_normal (tests/test_proc_kernels.py checks the equality).
     """
     phys, lp, n = w["phys"], w["lp"], len(w["phys"])
     kernels.sosfiltfilt_into(chain.sos, chain.zi, phys, min(chain.padlen, n - 1), ext, lp)
@@ -545,7 +545,7 @@ class KinematicTables:
     def __init__(self, mech, program):
         grid = 2.0 * math.pi * np.arange(self.N) / self.N
         psi = program(grid)[0]
-        gt, gn = follower.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
+        gt, gn = sensor_point.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
         self.gravity = np.ascontiguousarray(np.column_stack([gt, gn]))
         self.moving = program.direction(grid) != 0
 

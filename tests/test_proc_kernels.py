@@ -11,6 +11,7 @@ from scipy import signal
 import scipy.fft as scipy_fft
 
 from labtool.processing import accumulators, cam_angle, cycles, events, filters, follower, kernels
+from labtool.models.mechanism import sensor_point
 
 
 @settings(max_examples=20, deadline=None)
@@ -97,7 +98,7 @@ def _numpy_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE, f
     eps = acc[:, 0] / DE
     omega = follower.integrate_motion(np.nan_to_num(eps), moving, fs, margin, bad=bad)
     omega[bad] = np.nan
-    absn = follower.omega2_from_normal(np.nan_to_num(acc[:, 1]), DE)
+    absn = sensor_point.omega2_abs_from_normal(np.nan_to_num(acc[:, 1]), DE)
     absn[bad] = np.nan
     return acc, eps, omega, absn, moving
 
