@@ -39,6 +39,7 @@ from scipy import signal
 from labtool.common.errors import InputError
 from labtool.common.operating_point import STATED, OperatingPoint
 from labtool.common.units import RPM
+from labtool.models.dynamics import periodicity
 from labtool.models.dynamics.twin import TwinPhysics
 from labtool.models.mechanism.kinematics import check_load_and_inertia, follower_motion
 from labtool.models.mechanism import Mechanism, sensor_point
@@ -54,9 +55,6 @@ TRUTH_MODELS = ("twin", "kinematic", "rigid", "elastic")
 MODEL_TRUTHS = ("rigid", "elastic")
 MODEL_TRUTH_REVOLUTIONS = 8      # turns a model truth simulates by default (the last one repeats)
 MAX_MODEL_REVOLUTIONS = 200
-PERIODIC_EVENT_TOL = 1e-2        # rad: the last two turns' events at the same cam angles (the
-                                 # elastic model's dwell micro-bounces drift 0.2 deg a turn at 300 rpm)
-PERIODIC_OMEGA2_TOL = 5e-3       # of max |omega2|, away from events: the last two turns alike
 
 
 @dataclasses.dataclass(frozen=True)
@@ -371,8 +369,8 @@ def model_table(scene: StandScene) -> dict:
     """The dynamic model's run behind a rigid/elastic truth (labtool.models.dynamics.simulate, omega1
     constant, ``model_revolutions`` turns): time (s), phi1, omega1, phi2, omega2, epsilon2, the
     event record (labtool.models.dynamics.events names, times in s of the run), ``period`` (s), and ``periodic``: the
-    last two turns have the same events (to PERIODIC_EVENT_TOL rad) and omega2 away from them (to
-    PERIODIC_OMEGA2_TOL of its maximum). Cached per scene: the model runs once per process and
+    last two turns have the same events and omega2 away from them (labtool.models.dynamics.periodicity's
+    REPEAT_TOL and EVENT_ANGLE_TOL). Cached per scene: the model runs once per process and
     scene. Points at repeated times (impacts of the rigid model) keep the later state.
     """
     key = (repr(scene), repr(scene.mechanism))
@@ -397,9 +395,7 @@ def _is_periodic(tab: dict) -> bool:
     T, R = tab["period"], tab["revolutions"]
     te, ph = tab["events"]["event_time"], tab["events"]["event_phi1"]
     last, prev = (te >= (R - 1) * T), (te >= (R - 2) * T) & (te < (R - 1) * T)
-    if last.sum() != prev.sum():
-        return False
-    if last.any() and np.max(np.abs((ph[last] - TWO_PI) - ph[prev])) > PERIODIC_EVENT_TOL:
+    if not periodicity.events_repeat(ph[last] - TWO_PI, ph[prev]):
         return False
     tt = np.linspace((R - 1) * T, R * T, 4001)[:-1]
     a = np.interp(tt, tab["time"], tab["omega2"])
@@ -408,7 +404,7 @@ def _is_periodic(tab: dict) -> bool:
     for x in np.concatenate([te[last], te[prev] + T]):
         away &= np.abs(tt - x) > 1e-3
     scale = max(np.abs(tab["omega2"]).max(), 1e-12)
-    return bool(np.max(np.abs(a - b)[away], initial=0.0) <= PERIODIC_OMEGA2_TOL * scale)
+    return periodicity.revolution_change(a, b, "max", keep=away, scale=scale) <= periodicity.REPEAT_TOL
 
 
 def model_events(ds) -> dict:

@@ -28,6 +28,7 @@ import xarray as xr
 from labtool.common.errors import InputError
 from labtool.common.history import History, Lowpass
 from labtool.common.names import shown
+from labtool.models.dynamics import periodicity
 from labtool.processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
@@ -36,7 +37,7 @@ DEFAULT_GRID = 720          # 0.5 deg of cam angle
 DEFAULT_HARMONICS = 60      # 180 Hz at 180 rpm; about 10 harmonics of the 58 deg rise
 # a model's motion is periodic when its last two revolutions differ by less than this fraction of
 # the signal's rms, for omega2 and epsilon2 (after the common conditioning); docs/reports.md
-PERIODIC_TOL = 0.05
+PERIODIC_TOL = periodicity.STEADY_CYCLE_TOL
 SIM_RATE_HZ = 10_000.0      # uniform resampling of a simulation when the measurement records no rate
 
 
@@ -546,10 +547,7 @@ def steady_cycles(revs: dict, grid: np.ndarray, tol: float = PERIODIC_TOL) -> Si
     K = next(iter(revs.values())).shape[0]
     change = 0.0
     if K >= 2:
-        for v in revs.values():
-            rms = float(np.sqrt(np.mean(v[-1] ** 2)))
-            if rms > 0:
-                change = max(change, float(np.sqrt(np.mean((v[-1] - v[-2]) ** 2))) / rms)
+        change = max(periodicity.revolution_change(v[-1], v[-2]) for v in revs.values())
     periodic = K >= 2 and change < tol
     if periodic or K < 3:
         cyc = {n: v[-1].copy() for n, v in revs.items()}
