@@ -46,7 +46,7 @@ from labtool.processing.readers.base import MAX_SAMPLE, check_finite, stated_num
 from labtool.processing.workspace import Workspace
 from labtool.processing.writer import CoreBlock, MeasuredWriter
 
-CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
+CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.resample_cycles' order
 
 
 class ProcessingWarning(UserWarning):
@@ -521,7 +521,8 @@ def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
 
 
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
-    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.add_cycles).
+    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.resample_cycles)
+    and add them to the cycle statistics.
 
     phi1 is linear in the sample index within a revolution, so linear interpolation in the sample
     index at m_k + (phi/2 pi)(m_{k+1} - m_k) is linear interpolation in phi1.
@@ -529,10 +530,11 @@ def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
     k = np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b))
     if len(k) == 0:
         return
-    used, rejected = kernels.add_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
-                                        clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
-                                        cyc.sums, cyc.sumsqs)
-    cyc.count += used
+    rows = np.empty((len(k), len(cyc.names), cyc.grid.size))
+    used, rejected = kernels.resample_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
+                                             clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
+                                             rows)
+    cyc.add_rows(rows[:used])
     cyc.rejected += rejected
 
 
