@@ -547,7 +547,7 @@ def truth_settings(table: dict, source: str = "scene file") -> dict:
 def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandScene:
     """The StandScene a simulated recording was made with, from its root attributes.
 
-    ``truth(scene_from_attrs(read_recording(p)["attrs"]), t)`` is the noise-free truth behind
+    ``truth(scene_from_attrs(recording_format.load(p)["attrs"]), t)`` is the noise-free truth behind
     recording p (t = row / sample_rate_hz when there are no gaps), exactly: every truth parameter
     is an attribute. InputError if the recording does not come from the simulated stand. The
     mechanism is the default one unless given. Recordings made before the twin (no truth_model
