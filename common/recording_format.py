@@ -28,12 +28,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
-import h5py
 import numpy as np
 
 from labtool.common.errors import FileFormatError, InputError
 from labtool.common.hdf5 import open_file
+
+if TYPE_CHECKING:
+    import h5py
+# h5py is imported where a file is written or read: the readers of other formats share as_text and
+# check_sample_rate and should not load it
 
 FORMAT = "labtool.recording"
 FORMAT_VERSION = 1
@@ -52,6 +57,7 @@ MAX_EVENTS_BASE = 100_000   # events beyond this plus two per sample: the datase
 
 def attr_value(value):
     """An attribute value h5py stores: lists as arrays, text arrays as UTF-8 strings."""
+    import h5py
     if isinstance(value, (list, tuple)):
         value = np.asarray(value)
     if isinstance(value, np.ndarray) and value.dtype.kind in "UO":
@@ -84,6 +90,7 @@ def create_layout(f: h5py.File, channel_names, rate_hz: float, start_time_utc: s
     -------
     signals, events : h5py.Dataset
     """
+    import h5py
     nch = len(channel_names)
     f.attrs["format"] = FORMAT
     f.attrs["format_version"] = FORMAT_VERSION
@@ -217,6 +224,7 @@ def load(path) -> dict:
 
 
 def _checked(f: h5py.File, src: str) -> RecordingFile:
+    import h5py
     a = f.attrs
     fmt = as_text(a.get("format", ""))
     if fmt != FORMAT:
@@ -327,6 +335,7 @@ def _written_rows(sig: h5py.Dataset, src: str, warns: list[str]) -> int:
 
 
 def _events(f: h5py.File, src: str, warns: list[str], max_events: int) -> list[tuple[int, str, str]]:
+    import h5py
     if "events" not in f:
         return []
     node = f["events"]
