@@ -15,8 +15,7 @@ import dataclasses
 import numpy as np
 
 from labtool.common.errors import InputError
-
-EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
+from labtool.common.recording_format import EVENT_KINDS
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,35 +1,22 @@
-"""The recorder: writes recording format v1 (HDF5; docs/architecture.md) while acquiring, losing nothing.
+"""The recorder: writes recording format v1 (labtool.common.recording_format, which holds the layout
+and its reader; docs/architecture.md) while acquiring, losing nothing.
 
-Layout written (format_version 1):
+What it adds to the format's root attributes: anything the device adds (scene, seed, chain
+parameters), ``writer_lock``, and, on close, ``stop_time_utc``, ``n_samples``, ``samples_lost``,
+``stop_reason``. Where a device lost samples (overrun, dropped block) a ``gap`` event at the first
+row after the loss says so, with ``missing_samples=N`` at the start of its detail (an ``overrun``
+event from the device sits at the same row). Without gaps, row i is the sample taken at
+i / sample_rate_hz.
 
-- root attributes ``format = "labtool.recording"``, ``format_version = 1``, ``sample_rate_hz``
-  (the rate the device really runs at), ``start_time_utc`` (ISO 8601, UTC), ``complete`` (False
-  while writing; True after a clean close), ``cam_speed_rpm`` (when known), plus anything the
-  device adds (scene, seed, chain parameters) and, on close, ``stop_time_utc``, ``n_samples``,
-  ``stop_reason``;
-- dataset ``signals`` (n_samples, n_channels) float32 volts, chunked, resizable along axis 0, with
-  attributes ``channel_names`` and ``ka_m_s2_per_v`` (NaN where no calibration);
-- dataset ``events``: one-dimensional, resizable, compound dtype with fields ``index`` (int64,
-  row of ``signals``), ``kind`` (fixed-length ASCII bytes, 16) and ``detail`` (fixed-length UTF-8
-  bytes, 256, truncated). Fixed-length strings, not variable-length ones, because HDF5's SWMR mode
-  does not support appending variable-length data.
-
-Rows are the samples received, in order. Where a device lost samples (overrun, dropped block) the
-rows before and after are NOT contiguous in time: a ``gap`` event at the first row after the loss
-says so, with ``missing_samples=N`` at the start of its detail (an ``overrun`` event from the device
-sits at the same row). Readers split the data at these events; nothing is joined silently. Without
-gaps, row i is the sample taken at i / sample_rate_hz.
-
-The file is written with HDF5 file-format bounds ``libver=("v110", "v110")`` (the oldest SWMR
-needs; HDF5 1.10+ tools read it) and switched to SWMR mode, so another process can read it while it
-grows; it is flushed at least every ``flush_interval_s`` (0.5 s default) of wall time. A killed
-process leaves a file that opens, with every sample up to the last flush and ``complete`` False.
-The closing attributes (``complete``, ``stop_time_utc``, ``stop_reason``, ``n_samples``,
-``samples_lost``, the headroom figures) exist from the start and are modified in place at the close,
-still in SWMR mode, so a live reader never blocks it. One writer at a time: ``writer_lock`` holds
-an exclusive lock on the file while it is recorded. The disk's free space is checked before every
-write: below ``reserve_bytes`` the run stops with DiskFull and the file closes cleanly
-(``complete`` False, ``n_samples`` = the rows in ``signals``), instead of HDF5 meeting ENOSPC.
+The file is switched to SWMR mode, so another process can read it while it grows; it is flushed at
+least every ``flush_interval_s`` (0.5 s default) of wall time. A killed process leaves a file that
+opens, with every sample up to the last flush and ``complete`` False. The closing attributes
+(``complete``, ``stop_time_utc``, ``stop_reason``, ``n_samples``, ``samples_lost``, the headroom
+figures) exist from the start and are modified in place at the close, still in SWMR mode, so a live
+reader never blocks it. One writer at a time: ``writer_lock`` holds an exclusive lock on the file
+while it is recorded. The disk's free space is checked before every write: below ``reserve_bytes``
+the run stops with DiskFull and the file closes cleanly (``complete`` False, ``n_samples`` = the
+rows in ``signals``), instead of HDF5 meeting ENOSPC.
 
 Headroom (for reports): ``signals`` carries per-channel ``input_range_v`` (+-V the device really
 has), ``peak_abs_v``, ``rms_v`` (V, over the whole recording), ``peak_fraction_of_range`` and
@@ -52,14 +39,8 @@ import numpy as np
 
 from labtool.acquisition.device import Block, Event
 from labtool.acquisition.writer_lock import WriterLock
+from labtool.common import recording_format as fmt
 from labtool.common.hdf5 import open_file
-
-FORMAT = "labtool.recording"
-FORMAT_VERSION = 1
-# HDF5 file-format bounds: v110 is the oldest that SWMR needs; anything newer (HDF5 2.0's "latest")
-# writes datatype and attribute messages that HDF5 1.10-1.14 tools (HDFView, MATLAB, LabVIEW) cannot read
-LIBVER = ("v110", "v110")
-EVENT_DTYPE = np.dtype([("index", "<i8"), ("kind", "S16"), ("detail", "S256")])
 
 
 class DiskFull(OSError):
@@ -68,15 +49,6 @@ class DiskFull(OSError):
 
 def utc_now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
-
-
-def _attr(value):
-    """h5py-friendly attribute value (None -> skipped by the caller); text arrays as UTF-8 strings."""
-    if isinstance(value, (list, tuple)):
-        value = np.asarray(value)
-    if isinstance(value, np.ndarray) and value.dtype.kind in "UO":
-        return np.array([str(v) for v in value.ravel()], dtype=h5py.string_dtype("utf-8")).reshape(value.shape)
-    return value
 
 
 class Recorder:
@@ -146,15 +118,8 @@ class Recorder:
 
     def _create_layout(self, attrs: dict, ka, nch: int, chunk_rows: int) -> None:
         f = self._f
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["sample_rate_hz"] = self.rate_hz
-        f.attrs["start_time_utc"] = utc_now()
-        f.attrs["complete"] = False
+        self._sig, self._ev = fmt.create_layout(f, self.channel_names, self.rate_hz, utc_now(), ka, chunk_rows, attrs)
         f.attrs["writer_lock"] = "exclusive while recording" if self._lock.held else f"none: {self._lock.reason}"
-        for k, v in attrs.items():
-            if v is not None:
-                f.attrs[k] = _attr(v)
         # everything the close sets exists from the start: SWMR forbids new objects later, and the
         # close modifies values in place (no reopen, so a live SWMR reader cannot block it)
         f.attrs["stop_time_utc"] = ""
@@ -162,18 +127,11 @@ class Recorder:
         f.attrs["samples_lost"] = 0
         f.attrs["stop_reason"] = "recording (not closed)"
         f.attrs["headroom_summary"] = ""
-        self._sig = f.create_dataset("signals", shape=(0, nch), maxshape=(None, nch), dtype="f4",
-                                     chunks=(chunk_rows, nch))
         sa = self._sig.attrs
-        sa["channel_names"] = np.array(self.channel_names, dtype=h5py.string_dtype("utf-8"))
-        sa["ka_m_s2_per_v"] = ka
-        sa["units"] = "V"
         sa["input_range_v"] = self.input_range_v
         for name in HEADROOM_ATTRS:
             sa[name] = np.full(nch, np.nan)
         sa["clipped"] = np.zeros(nch, np.int8)
-        self._ev = f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(256,))
-        self._ev.attrs["fields"] = "index: row of signals (int64); kind: ASCII; detail: UTF-8 (fixed-length bytes)"
         f.swmr_mode = True
 
     # -- writing
@@ -215,11 +173,11 @@ class Recorder:
         if ev.kind == "clip":
             self.clipped.add(ev.detail.split(":")[0])
         # events are not held to the reserve: it is there so that the stop and fault events fit
-        row = np.array([(ev.index, ev.kind.encode("ascii"), ev.detail.encode("utf-8")[:256])], dtype=EVENT_DTYPE)
+        row = fmt.event_row(ev.index, ev.kind, ev.detail)
         try:
             n = self._ev.shape[0]
             self._ev.resize((n + 1,))
-            self._ev[n] = row[0]
+            self._ev[n] = row
         except (OSError, RuntimeError) as exc:
             raise self._failed(exc) from exc
 
@@ -415,7 +373,7 @@ def _create_hdf5(path: Path):
     create is tried again for up to 1 s instead of failing the recording."""
     for attempt in range(CREATE_TRIES):
         try:
-            return h5py.File(path, "w", libver=LIBVER)
+            return h5py.File(path, "w", libver=fmt.LIBVER)
         except OSError as exc:
             busy = exc.errno == errno.EAGAIN or "unable to lock file" in str(exc)
             if not busy or attempt == CREATE_TRIES - 1:
@@ -433,30 +391,6 @@ def _classify(exc: Exception) -> OSError:
     if isinstance(exc, OSError):
         return exc
     return OSError(errno.EIO, " ".join(str(exc).split())[:200])
-
-
-def read_recording(path) -> dict:
-    """Minimal reader for tests and tools: attrs, signals (float64), channel names, Ka, events.
-
-    Opened through labtool.common.hdf5.open_file (superblock and file size checked first, so a truncated
-    file is one FileFormatError, never a hang; SWMR read for a file still marked open for writing).
-    The full reader, with checks and warnings, is processing's.
-    """
-    from labtool.common.errors import FileFormatError
-
-    f, _note = open_file(path)
-    with f:
-        if f.attrs.get("format") != FORMAT:
-            raise FileFormatError(f"{path} is not a labtool recording (format attribute missing)")
-        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["signals"].attrs["channel_names"]]
-        ev = f["events"][...]
-        return {
-            "attrs": {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()},
-            "signals": f["signals"][...].astype(np.float64),
-            "channel_names": names,
-            "ka_m_s2_per_v": np.asarray(f["signals"].attrs["ka_m_s2_per_v"], float),
-            "events": [(int(e["index"]), e["kind"].decode(), e["detail"].decode("utf-8", "replace")) for e in ev],
-        }
 
 
 def unfinished(path) -> str | None:
@@ -477,7 +411,7 @@ def unfinished(path) -> str | None:
         return None
     try:
         with f:
-            if f.attrs.get("format") != FORMAT or "signals" not in f:
+            if f.attrs.get("format") != fmt.FORMAT or "signals" not in f:
                 return None
             if f.attrs.get("complete") not in (False, 0):
                 return None

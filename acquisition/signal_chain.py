@@ -39,9 +39,10 @@ from scipy import signal
 from labtool.common.errors import InputError
 from labtool.common.operating_point import STATED, OperatingPoint
 from labtool.common.units import RPM
+from labtool.models.dynamics import periodicity
 from labtool.models.dynamics.twin import TwinPhysics
 from labtool.models.mechanism.kinematics import check_load_and_inertia, follower_motion
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 
 TWO_PI = 2.0 * math.pi
@@ -54,9 +55,6 @@ TRUTH_MODELS = ("twin", "kinematic", "rigid", "elastic")
 MODEL_TRUTHS = ("rigid", "elastic")
 MODEL_TRUTH_REVOLUTIONS = 8      # turns a model truth simulates by default (the last one repeats)
 MAX_MODEL_REVOLUTIONS = 200
-PERIODIC_EVENT_TOL = 1e-2        # rad: the last two turns' events at the same cam angles (the
-                                 # elastic model's dwell micro-bounces drift 0.2 deg a turn at 300 rpm)
-PERIODIC_OMEGA2_TOL = 5e-3       # of max |omega2|, away from events: the last two turns alike
 
 
 @dataclasses.dataclass(frozen=True)
@@ -256,6 +254,12 @@ def cam_angle(scene: StandScene, t):
     return phi1, omega1, epsilon1
 
 
+def _at_E(mech: Mechanism, omega2, epsilon2) -> dict:
+    """{aE_t, aE_n} (m/s^2) of an ideal sensor at E (labtool.models.mechanism.sensor_point)."""
+    aE_t, aE_n = sensor_point.acceleration_at_E(mech.DE, omega2, epsilon2)
+    return {"aE_t": aE_t, "aE_n": aE_n}
+
+
 def truth(scene: StandScene, t, seed: int | None = None, interval: float | None = None) -> dict:
     """The noise-free truth at times t (s): what an ideal sensor at E would see, no gravity.
 
@@ -283,8 +287,7 @@ def truth(scene: StandScene, t, seed: int | None = None, interval: float | None 
     phi1, omega1, epsilon1 = cam_angle(scene, t)
     phi2, omega2, epsilon2, psi = follower_motion(scene.program, mech, phi1, omega1, epsilon1)
     return {"phi1": phi1, "omega1": omega1, "epsilon1": epsilon1, "phi2": phi2, "psi": psi,
-            "omega2": omega2, "epsilon2": epsilon2,
-            "aE_t": epsilon2 * mech.DE, "aE_n": omega2**2 * mech.DE}
+            "omega2": omega2, "epsilon2": epsilon2, **_at_E(mech, omega2, epsilon2)}
 
 
 # ---- the twin (labtool.models.dynamics.twin), streamed
@@ -353,7 +356,7 @@ def twin_truth(scene: StandScene, t, interval: float | None = None, run=None) ->
         res[k][order] = v
     res["epsilon1"] = np.full_like(t, np.nan)   # not tabulated: the cam's speed varies with the load
     res["psi"] = res["phi2"] - mech.phiD - mech.psi0
-    res["aE_n"] = res["omega2"] ** 2 * mech.DE
+    res["aE_n"] = sensor_point.acceleration_at_E(mech.DE, res["omega2"], 0.0)[1]
     return res
 
 
@@ -366,8 +369,8 @@ def model_table(scene: StandScene) -> dict:
     """The dynamic model's run behind a rigid/elastic truth (labtool.models.dynamics.simulate, omega1
     constant, ``model_revolutions`` turns): time (s), phi1, omega1, phi2, omega2, epsilon2, the
     event record (labtool.models.dynamics.events names, times in s of the run), ``period`` (s), and ``periodic``: the
-    last two turns have the same events (to PERIODIC_EVENT_TOL rad) and omega2 away from them (to
-    PERIODIC_OMEGA2_TOL of its maximum). Cached per scene: the model runs once per process and
+    last two turns have the same events and omega2 away from them (labtool.models.dynamics.periodicity's
+    REPEAT_TOL and EVENT_ANGLE_TOL). Cached per scene: the model runs once per process and
     scene. Points at repeated times (impacts of the rigid model) keep the later state.
     """
     key = (repr(scene), repr(scene.mechanism))
@@ -392,9 +395,7 @@ def _is_periodic(tab: dict) -> bool:
     T, R = tab["period"], tab["revolutions"]
     te, ph = tab["events"]["event_time"], tab["events"]["event_phi1"]
     last, prev = (te >= (R - 1) * T), (te >= (R - 2) * T) & (te < (R - 1) * T)
-    if last.sum() != prev.sum():
-        return False
-    if last.any() and np.max(np.abs((ph[last] - TWO_PI) - ph[prev])) > PERIODIC_EVENT_TOL:
+    if not periodicity.events_repeat(ph[last] - TWO_PI, ph[prev]):
         return False
     tt = np.linspace((R - 1) * T, R * T, 4001)[:-1]
     a = np.interp(tt, tab["time"], tab["omega2"])
@@ -403,7 +404,7 @@ def _is_periodic(tab: dict) -> bool:
     for x in np.concatenate([te[last], te[prev] + T]):
         away &= np.abs(tt - x) > 1e-3
     scale = max(np.abs(tab["omega2"]).max(), 1e-12)
-    return bool(np.max(np.abs(a - b)[away], initial=0.0) <= PERIODIC_OMEGA2_TOL * scale)
+    return periodicity.revolution_change(a, b, "max", keep=away, scale=scale) <= periodicity.REPEAT_TOL
 
 
 def model_events(ds) -> dict:
@@ -444,10 +445,8 @@ def _model_truth(scene: StandScene, t, interval: float | None = None) -> dict:
     out["phi1"] = scene.omega1_nominal * np.asarray(t, dtype=float)
     out["epsilon1"] = np.zeros_like(out["omega1"])
     out["psi"] = out["phi2"] - mech.phiD - mech.psi0
-    out["aE_t"] = out["epsilon2"] * mech.DE
-    if interval is not None:
-        out["aE_t"] = boxcar_epsilon2(scene, t, interval) * mech.DE
-    out["aE_n"] = out["omega2"] ** 2 * mech.DE
+    eps2 = out["epsilon2"] if interval is None else boxcar_epsilon2(scene, t, interval)
+    out.update(_at_E(mech, out["omega2"], eps2))
     return out
 
 
@@ -548,7 +547,7 @@ def truth_settings(table: dict, source: str = "scene file") -> dict:
 def scene_from_attrs(attrs: dict, mechanism: Mechanism | None = None) -> StandScene:
     """The StandScene a simulated recording was made with, from its root attributes.
 
-    ``truth(scene_from_attrs(read_recording(p)["attrs"]), t)`` is the noise-free truth behind
+    ``truth(scene_from_attrs(recording_format.load(p)["attrs"]), t)`` is the noise-free truth behind
     recording p (t = row / sample_rate_hz when there are no gaps), exactly: every truth parameter
     is an attribute. InputError if the recording does not come from the simulated stand. The
     mechanism is the default one unless given. Recordings made before the twin (no truth_model
@@ -583,14 +582,14 @@ def sensed_acceleration(scene: StandScene, tr: dict) -> np.ndarray:
     """Specific force along the sensor axes (n, 2) in m/s^2: truth minus gravity, on the moving axes.
 
     On the follower the axes turn with phi2: f_t = aE_t + g cos(phi2), f_n = aE_n - g sin(phi2)
-    (g along -y). On the shaker the calibrated axis is vertical: gravity is constant, and the AC
+    (g along -y; labtool.models.mechanism.sensor_point.sensor_reading). On the shaker the calibrated axis is vertical: gravity is constant, and the AC
     coupling removes it like any constant.
     """
     g = scene.mechanism.g
     if scene.mode == "calibration":
         return np.column_stack([tr["aE_t"], tr["aE_n"]]) + np.array([g, 0.0]) * (scene.cal_channel == "aE_t") \
             + np.array([0.0, g]) * (scene.cal_channel == "aE_n")
-    return np.column_stack([tr["aE_t"] + g * np.cos(tr["phi2"]), tr["aE_n"] - g * np.sin(tr["phi2"])])
+    return np.column_stack(sensor_point.sensor_reading(tr["aE_t"], tr["aE_n"], tr["phi2"], g))
 
 
 TACHO_ANGLE_TOL = 1e-9   # rad: a phi1 this far below 2 pi k (rounding of an integrated angle) is at it

@@ -89,7 +89,7 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
     import numpy as np
     from scipy import signal
 
-    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism, sensor_point
     from labtool.models.mechanism.motion_laws import CamProgram
 
     f = h5py.File(src, "r")
@@ -119,7 +119,7 @@ def plain_chain(src: str, out: str, chunk: int = 1 << 19) -> dict:
     grid = 2 * np.pi * np.arange(N) / N
     psi = prog(grid)[0]
     phi2 = mech.phiD + mech.psi0 + psi
-    grav = np.column_stack([mech.g * np.cos(phi2), -mech.g * np.sin(phi2)])
+    grav = np.column_stack(sensor_point.gravity_reading(phi2, mech.g))
     moving_tab = prog.direction(grid) != 0
     dm = max(1, int(round(10 / 360 * period)))
     g = h5py.File(out, "w")

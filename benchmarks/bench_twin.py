@@ -34,7 +34,7 @@ def record(scene, seconds, path):
     """(wall s, CPU s, peak volts per channel, clip events) of a --fast recording to HDF5."""
     from labtool.acquisition import session
     from labtool.acquisition import signal_chain as sc
-    from labtool.acquisition.recorder import read_recording
+    from labtool.common import recording_format
     from labtool.acquisition.sim_stand import SimStand
 
     params = sc.ChainParams(resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
@@ -42,7 +42,7 @@ def record(scene, seconds, path):
     cpu0, wall0 = time.process_time(), time.perf_counter()
     session.run(dev, path, 10000, seconds)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-    rec = read_recording(path)
+    rec = recording_format.load(path)
     clips = [e for e in rec["events"] if e[1] == "clip"]
     return wall, cpu, np.abs(rec["signals"][:, :2]).max(axis=0), clips
 

@@ -46,6 +46,7 @@ from labtool.common.errors import InputError, LabtoolError
 from labtool.identification import search
 from labtool.identification.objective import MODEL_FLOOR, SIGNALS
 from labtool.identification.parameters import parse_free
+from labtool.processing.cycles import cycle_statistics
 from labtool.reports import align, pipeline
 
 FORMAT = "labtool.suggest"
@@ -131,10 +132,10 @@ def noise_model(targets: list) -> dict:
     minutes = []
     for t in targets:
         for s in SIGNALS:
-            revs = align.harmonic_lowpass(t.cycles.signals[s], t.cond.n_harmonics)
-            rms = float(np.sqrt(np.mean(revs.mean(axis=0) ** 2)))
+            stats = cycle_statistics(align.harmonic_lowpass(t.cycles.signals[s], t.cond.n_harmonics))
+            rms = float(np.sqrt(np.mean(stats.mean ** 2)))
             if rms > 0:
-                rel[s].append(float(np.median(revs.std(axis=0))) / rms)
+                rel[s].append(float(np.median(stats.std)) / rms)
         minutes.append(t.n_revolutions / t.cycles.cam_speed_rpm)
     return {"scatter": {s: float(np.median(v)) if v else 0.0 for s, v in rel.items()},
             "minutes": float(np.mean(minutes))}

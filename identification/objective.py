@@ -35,6 +35,7 @@ import numpy as np
 from labtool.common.operating_point import SOURCE_SUFFIX
 from labtool.common.errors import LabtoolError
 from labtool.identification.parameters import Space
+from labtool.processing.cycles import cycle_statistics
 from labtool.reports import align, events, pipeline
 
 SIGNALS = pipeline.SIGNALS
@@ -101,9 +102,10 @@ def _level(cycles: align.MeasuredCycles, cond: align.Conditioning, h: int) -> Le
     mean, sigma = {}, {}
     for s in SIGNALS:
         revs = cycles.signals[s] if h >= cond.n_harmonics else align.harmonic_lowpass(cycles.signals[s], h)
-        m = revs.mean(axis=0)
+        stats = cycle_statistics(revs)
+        m = stats.mean
         rms = float(np.sqrt(np.mean(m ** 2)))
-        sem = revs.std(axis=0) / math.sqrt(n) if n >= 2 else np.zeros_like(m)
+        sem = stats.std / math.sqrt(n) if n >= 2 else np.zeros_like(m)
         floor = MODEL_FLOOR * rms if rms > 0 else 1.0
         mean[s], sigma[s] = m[sub], np.sqrt(sem ** 2 + floor ** 2)[sub]
     return Level(h, sub, mean, sigma)

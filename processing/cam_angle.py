@@ -16,7 +16,8 @@ import scipy.fft as sfft
 
 from labtool.common.errors import InputError
 from labtool.common.names import shown
-from labtool.processing import follower, kernels
+from labtool.models.mechanism import sensor_point
+from labtool.processing import kernels
 
 TWO_PI = 2.0 * math.pi
 
@@ -97,20 +98,20 @@ def template_aE_t(mech, program, n_per_rev: int) -> np.ndarray:
     """Ideal aE_t (m/s^2 at 1 rad/s cam speed, i.e. d2psi/dphi1^2 * DE) over one revolution, phi1 = 2 pi k / n."""
     phi1 = TWO_PI * np.arange(n_per_rev) / n_per_rev
     _, _, ddpsi, _ = program(phi1)
-    t = ddpsi * mech.DE
+    t = sensor_point.acceleration_at_E(mech.DE, 0.0, ddpsi)[0]
     return t - t.mean()
 
 
 def template_reading(mech, program, n_per_rev: int, omega1: float) -> np.ndarray:
     """What the tangential sensor reads over one revolution (m/s^2, mean removed) at the cam speed
-    omega1 (rad/s): d2psi/dphi1^2 DE omega1^2 plus gravity's g cos(phi2) (follower.gravity_reading).
+    omega1 (rad/s): d2psi/dphi1^2 DE omega1^2 plus gravity's g cos(phi2) (sensor_point.gravity_reading).
 
     At a few rpm gravity's reading changes by 2.5 m/s^2 over the stroke while the motion's peak is
     0.08 m/s^2 (5 rpm): a template of the motion alone then matches nothing."""
     phi1 = TWO_PI * np.arange(n_per_rev) / n_per_rev
     psi, _, ddpsi, _ = program(phi1)
-    g_t, _ = follower.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
-    t = ddpsi * mech.DE * omega1**2 + g_t
+    g_t, _ = sensor_point.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
+    t = sensor_point.acceleration_at_E(mech.DE, 0.0, ddpsi * omega1**2)[0] + g_t
     return t - t.mean()
 
 
@@ -270,7 +271,7 @@ class CorrelationEdges:
         if self.fs:
             omega1 = TWO_PI * self.fs / period
             motion = float(np.max(np.abs(template_aE_t(self.mech, self.program, 720)))) * omega1**2
-            grav = np.ptp(follower.gravity_reading(self.mech.phiD + self.mech.psi0 +
+            grav = np.ptp(sensor_point.gravity_reading(self.mech.phiD + self.mech.psi0 +
                                                    self.program(TWO_PI * np.arange(720) / 720)[0], self.mech.g)[0])
             self.gravity = bool(grav > GRAVITY_IN_TEMPLATE * motion)
         self.template = self._template(self.n, period)

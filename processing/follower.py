@@ -1,11 +1,10 @@
 """From the accelerations at E to the follower's epsilon2 and omega2 (pure functions).
 
 Sign conventions (docs/architecture.md): aE_t positive along increasing psi (rise), aE_n positive towards D,
-epsilon2 = aE_t / DE (rad/s^2), omega2 positive in the rise.
+epsilon2 = aE_t / DE (rad/s^2), omega2 positive in the rise; the relation between the accelerations
+at E, the follower's motion and gravity's reading is labtool.models.mechanism.sensor_point.
 
-Gravity: an accelerometer reads the specific force a - g. With y up, g = (0, -g) and the follower
-angle phi2 (rad, CCW from x), the tangential axis (increasing phi2) is (-sin phi2, cos phi2) and the
-normal axis (towards D) is (-cos phi2, -sin phi2), so the sensor reads
+Gravity: an accelerometer reads the specific force a - g, so the sensor reads
     tangential: aE_t + g cos(phi2),      normal: aE_n - g sin(phi2).
 These terms change by about 2.5 and 0.25 m/s^2 over the 15 deg stroke (2-3 % of the aE_t peak at
 180 rpm); they are removed with phi2 from the kinematics at the measured cam angle.
@@ -23,11 +22,6 @@ import numpy as np
 
 DWELL_MIDDLE = 0.6    # fraction of each dwell, centred, whose mean is the reference
 DWELL_MIN_LEN = 8     # samples: shorter dwells are not used as a reference
-
-
-def gravity_reading(phi2: np.ndarray, g: float):
-    """(tangential, normal) specific-force components (m/s^2) that gravity adds to the sensor at E."""
-    return g * np.cos(phi2), -g * np.sin(phi2)
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -109,7 +103,3 @@ def integrate_motion(epsilon2: np.ndarray, moving: np.ndarray, fs: float, margin
     out[pos] = vals
     return out
 
-
-def omega2_from_normal(aE_n: np.ndarray, DE: float) -> np.ndarray:
-    """|omega2| (rad/s) = sqrt(aE_n / DE), aE_n (m/s^2) clipped at 0 (noise below zero in the dwells)."""
-    return np.sqrt(np.maximum(aE_n, 0.0) / DE)

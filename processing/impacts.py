@@ -39,6 +39,8 @@ import math
 
 import numpy as np
 
+from labtool.models.mechanism import sensor_point
+
 DEFAULT_K_SIGMA = 8.0          # detection threshold in robust standard deviations of x (as the spike detector)
 DEFAULT_SEQUENCE_GAP_S = 5e-3  # a quiet time longer than this starts a new jump
 FLOOR_FRACTION = 0.05          # smallest visible pulse, fraction of the cam law's peak |epsilon2|
@@ -303,7 +305,7 @@ def normal_consistency(t_impact: np.ndarray, d_omega2: np.ndarray, time: np.ndar
         if not (left.any() and right.any()):
             continue
         w = float(np.mean(omega2[left]))
-        pred = DE * ((w + d) ** 2 - w ** 2)
+        pred = float(np.diff(sensor_point.acceleration_at_E(DE, [w, w + d], 0.0)[1])[0])
         if abs(pred) < 0.05 * span or span == 0:
             continue
         out[k] = (float(np.mean(aE_n[right])) - float(np.mean(aE_n[left]))) / pred

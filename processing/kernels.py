@@ -324,7 +324,7 @@ def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table
             acc[i, 1] = np.nan
             eps[i] = 0.0
         else:
-            eps[i] = acc[i, 0] / DE
+            eps[i] = acc[i, 0] / DE      # sensor_point.epsilon2_from_tangential, inline: compiled loop
         omega[i] = 0.0
     _integrate_motion(eps, moving, bad, fs, margin, omega, starts, stops)
     for i in range(n):
@@ -333,7 +333,7 @@ def follower_chain_into(lp, phi1, rev, irregular, clipped, gravity, moving_table
             omega[i] = np.nan
             absn[i] = np.nan
         else:
-            absn[i] = math.sqrt(max(acc[i, 1], 0.0) / DE)
+            absn[i] = math.sqrt(max(acc[i, 1], 0.0) / DE)   # sensor_point.omega2_abs_from_normal
 
 
 @jit(nogil=True)
@@ -421,15 +421,14 @@ def core_outputs(acc, eps, omega, phi1, rev, absn, moving, clipped, c0, c1, rev_
 
 
 @jit(nogil=True)
-def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
+def resample_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, rows):
     """pipeline._add_cycles' resampling, compiled: each revolution [m0[k], m1[k]) (window sample
     positions) that is free of clipped and NaN samples, interpolated linearly at m0 + frac (m1 - m0)
-    (frac = grid / 2 pi), added to sums and sumsq (5, n_grid) in the order aE_t, aE_n, epsilon2,
-    omega2, |omega2| from aE_n (pipeline.CYCLE_NAMES). Returns (revolutions used, rejected)."""
+    (frac = grid / 2 pi), written to rows[used] (rows: (len(m0), 5, n_grid)) in the order aE_t,
+    aE_n, epsilon2, omega2, |omega2| from aE_n (pipeline.CYCLE_NAMES); cycles.CycleAccumulator
+    averages them. Returns (revolutions used, rejected)."""
     n = eps.shape[0]
     ng = frac.shape[0]
-    loc = np.zeros((5, ng))
-    locsq = np.zeros((5, ng))
     used, rejected = 0, 0
     for k in range(m0.shape[0]):
         if not (m0[k] >= 0 and math.floor(m1[k]) + 1 < n):
@@ -443,7 +442,6 @@ def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
         if not good:
             rejected += 1
             continue
-        used += 1
         span = m1[k] - m0[k]
         for q in range(ng):
             x = m0[k] + frac[q] * span
@@ -458,11 +456,8 @@ def add_cycles(acc, eps, omega, absn, clipped, m0, m1, frac, sums, sumsq):
                     y = omega[i0] * (1.0 - w) + omega[i0 + 1] * w
                 else:
                     y = absn[i0] * (1.0 - w) + absn[i0 + 1] * w
-                loc[v, q] += y
-                locsq[v, q] += y * y
-    if used:
-        sums += loc
-        sumsq += locsq
+                rows[used, v, q] = y
+        used += 1
     return used, rejected
 
 

@@ -11,7 +11,7 @@ HARMONICS harmonics of the cam frequency, where the motion law's acceleration li
 the groove's backlash and the follower's bending mode lie above: with them the tangential reading of
 the simulated stand's twin correlates only 0.6-0.7 with the ideal one, without them 0.99), and
 compared with what an ideal sensor at E reads at the measured speed, kept to the same harmonics
-(docs/architecture.md's signs; follower.py's gravity):
+(docs/architecture.md's signs; labtool.models.mechanism.sensor_point):
 
     tangential  T(phi1) = psi'' DE omega1^2 + g cos(phi2),
     normal      N(phi1) = psi'^2 DE omega1^2 - g sin(phi2)     (>= -g sin(phi2): omega2^2 DE >= 0).
@@ -37,7 +37,8 @@ import math
 import numpy as np
 
 from labtool.common.errors import InputError
-from labtool.processing import cam_angle, follower
+from labtool.models.mechanism import sensor_point
+from labtool.processing import cam_angle
 
 BINS = 360                 # cam-angle bins of the averaged readings
 HARMONICS = 20             # harmonics of the cam frequency compared: the motion law's band
@@ -131,8 +132,9 @@ def templates(mech, program, omega1: float, n: int):
     2 pi (k + 1/2) / n (the bins' centres), at the cam speed omega1 (rad/s)."""
     phi1 = 2.0 * math.pi * (np.arange(n) + 0.5) / n
     psi, dpsi, ddpsi, _ = program(phi1)
-    g_t, g_n = follower.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
-    return ddpsi * mech.DE * omega1**2 + g_t, dpsi**2 * mech.DE * omega1**2 + g_n
+    g_t, g_n = sensor_point.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
+    aE_t, aE_n = sensor_point.acceleration_at_E(mech.DE, dpsi * omega1, ddpsi * omega1**2)
+    return aE_t + g_t, aE_n + g_n
 
 
 def mirror_symmetric(program, n: int = 720) -> bool:

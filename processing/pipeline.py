@@ -36,7 +36,7 @@ from labtool.common.errors import InputError
 from labtool.common.files import atomic_write
 from labtool.common.invocation import command_line
 from labtool.common.names import shown
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, orientation, speed, spectra
 from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
@@ -46,7 +46,7 @@ from labtool.processing.readers.base import MAX_SAMPLE, check_finite, stated_num
 from labtool.processing.workspace import Workspace
 from labtool.processing.writer import CoreBlock, MeasuredWriter
 
-CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.add_cycles' order
+CYCLE_NAMES = ["aE_t", "aE_n", "epsilon2", "omega2", "omega2_abs_from_aE_n"]  # kernels.resample_cycles' order
 
 
 class ProcessingWarning(UserWarning):
@@ -368,8 +368,8 @@ def _process_window(w: dict, ext, wa, marks, period, chain: Chain, irregular) ->
     writing into the workspace's views ``w`` (phys and clipped filled; ext the filter's scratch).
 
     Defined by the pure functions it fuses: filters.zero_phase, cam_angle.phi1_from_marks,
-    follower.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
-    follower.omega2_from_normal (tests/test_proc_kernels.py checks the equality).
+    sensor_point.gravity_reading (tabulated), follower.dwell_baseline, follower.integrate_motion,
+    sensor_point.omega2_abs_from_normal (tests/test_proc_kernels.py checks the equality).
     """
     phys, lp, n = w["phys"], w["lp"], len(w["phys"])
     kernels.sosfiltfilt_into(chain.sos, chain.zi, phys, min(chain.padlen, n - 1), ext, lp)
@@ -521,7 +521,8 @@ def _scan(rec: Recording, block, first: int, vmin, vmax) -> None:
 
 
 def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
-    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.add_cycles).
+    """Resample every complete revolution starting in [a, b) on the phi1 grid (kernels.resample_cycles)
+    and add them to the cycle statistics.
 
     phi1 is linear in the sample index within a revolution, so linear interpolation in the sample
     index at m_k + (phi/2 pi)(m_{k+1} - m_k) is linear interpolation in phi1.
@@ -529,10 +530,11 @@ def _add_cycles(cyc, res, clipped, marks, a, b, wa, n) -> None:
     k = np.flatnonzero((marks[:-1] >= a) & (marks[:-1] < b))
     if len(k) == 0:
         return
-    used, rejected = kernels.add_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
-                                        clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
-                                        cyc.sums, cyc.sumsqs)
-    cyc.count += used
+    rows = np.empty((len(k), len(cyc.names), cyc.grid.size))
+    used, rejected = kernels.resample_cycles(res["acc"], res["epsilon2"], res["omega2"], res["omega2_abs_from_aE_n"],
+                                             clipped, marks[k] - wa, marks[k + 1] - wa, cyc.grid / (2.0 * math.pi),
+                                             rows)
+    cyc.add_rows(rows[:used])
     cyc.rejected += rejected
 
 
@@ -545,7 +547,7 @@ class KinematicTables:
     def __init__(self, mech, program):
         grid = 2.0 * math.pi * np.arange(self.N) / self.N
         psi = program(grid)[0]
-        gt, gn = follower.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
+        gt, gn = sensor_point.gravity_reading(mech.phiD + mech.psi0 + psi, mech.g)
         self.gravity = np.ascontiguousarray(np.column_stack([gt, gn]))
         self.moving = program.direction(grid) != 0
 

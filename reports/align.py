@@ -28,6 +28,8 @@ import xarray as xr
 from labtool.common.errors import InputError
 from labtool.common.history import History, Lowpass
 from labtool.common.names import shown
+from labtool.models.dynamics import periodicity
+from labtool.processing.cycles import cycle_statistics
 from labtool.processing.filters import lowpass_sos, zero_phase
 
 TWO_PI = 2.0 * math.pi
@@ -36,7 +38,7 @@ DEFAULT_GRID = 720          # 0.5 deg of cam angle
 DEFAULT_HARMONICS = 60      # 180 Hz at 180 rpm; about 10 harmonics of the 58 deg rise
 # a model's motion is periodic when its last two revolutions differ by less than this fraction of
 # the signal's rms, for omega2 and epsilon2 (after the common conditioning); docs/reports.md
-PERIODIC_TOL = 0.05
+PERIODIC_TOL = periodicity.STEADY_CYCLE_TOL
 SIM_RATE_HZ = 10_000.0      # uniform resampling of a simulation when the measurement records no rate
 
 
@@ -142,10 +144,12 @@ class MeasuredCycles:
     blocks: list = dataclasses.field(default_factory=list)   # the measured data read (xr.Dataset each)
 
     def mean(self, name: str) -> np.ndarray:
-        return self.signals[name].mean(axis=0)
+        """Cycle average of ``name`` over the revolutions (labtool.processing.cycles)."""
+        return cycle_statistics(self.signals[name]).mean
 
     def std(self, name: str) -> np.ndarray:
-        return self.signals[name].std(axis=0)
+        """Standard deviation of ``name`` over the revolutions (population, ddof 0)."""
+        return cycle_statistics(self.signals[name]).std
 
 
 MAX_REVOLUTIONS = 160      # the report reads at most this many whole revolutions of a recording
@@ -546,10 +550,7 @@ def steady_cycles(revs: dict, grid: np.ndarray, tol: float = PERIODIC_TOL) -> Si
     K = next(iter(revs.values())).shape[0]
     change = 0.0
     if K >= 2:
-        for v in revs.values():
-            rms = float(np.sqrt(np.mean(v[-1] ** 2)))
-            if rms > 0:
-                change = max(change, float(np.sqrt(np.mean((v[-1] - v[-2]) ** 2))) / rms)
+        change = max(periodicity.revolution_change(v[-1], v[-2]) for v in revs.values())
     periodic = K >= 2 and change < tol
     if periodic or K < 3:
         cyc = {n: v[-1].copy() for n, v in revs.items()}
@@ -560,8 +561,9 @@ def steady_cycles(revs: dict, grid: np.ndarray, tol: float = PERIODIC_TOL) -> Si
                 f"revolution {K} of {K}" + ("" if K < 2 else f"; NOT periodic ({100 * change:.2g} % rms change "
                                               "from the revolution before), too few revolutions for statistics"))
     else:
-        cyc = {n: v[1:].mean(axis=0) for n, v in revs.items()}
-        std = {n: v[1:].std(axis=0) for n, v in revs.items()}
+        stats = {n: cycle_statistics(v[1:]) for n, v in revs.items()}
+        cyc = {n: st.mean for n, st in stats.items()}
+        std = {n: st.std for n, st in stats.items()}
         n_used = K - 1
         note = (f"NOT periodic ({100 * change:.2g} % rms change between its last two revolutions): the model's "
                 f"cycle average over revolutions 2..{K} is compared, with its scatter")

@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from labtool.processing.cycles import cycle_statistics
+
 SIGNALS = ("omega2", "epsilon2")
 UNITS = {"omega2": "rad s-1", "epsilon2": "rad s-2", "phi1": "rad"}
 SUFFIX = {"rad s-1": "rad_s", "rad s-2": "rad_s2", "rad": "rad", "degree": "deg"}
@@ -71,9 +73,10 @@ def curves_dataset(grid, measured: dict | None = None, revolutions=None, models=
             if s not in measured:
                 continue
             m = np.asarray(measured[s], dtype=float)
-            ds[f"{s}_measured_mean"] = ("phi1", m.mean(axis=0), {"units": UNITS[s],
+            stats = cycle_statistics(m)
+            ds[f"{s}_measured_mean"] = ("phi1", stats.mean, {"units": UNITS[s],
                                                                 "long_name": f"measured {LONG[s]}, cycle average"})
-            ds[f"{s}_measured_std"] = ("phi1", m.std(axis=0), {"units": UNITS[s], "long_name":
+            ds[f"{s}_measured_std"] = ("phi1", stats.std, {"units": UNITS[s], "long_name":
                                                               f"measured {LONG[s]}, standard deviation over the revolutions"})
             ds[f"{s}_measured"] = (("revolution", "phi1"), m, {"units": UNITS[s],
                                                                 "long_name": f"measured {LONG[s]}, each whole revolution"})

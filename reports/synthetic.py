@@ -21,7 +21,7 @@ def synthetic_measured(rpm: float = 180.0, revolutions: float = 4.3, fs: float =
     signal's peak. The recording starts at cam angle ``start_deg`` so that its first and last
     revolutions are partial, as on the stand."""
     from labtool.models.mechanism.kinematics import analyze
-    from labtool.models.mechanism import Mechanism
+    from labtool.models.mechanism import Mechanism, sensor_point
     from labtool.models.mechanism.motion_laws import CamProgram
 
     mech = mechanism or Mechanism.default()
@@ -39,12 +39,11 @@ def synthetic_measured(rpm: float = 180.0, revolutions: float = 4.3, fs: float =
     e2 = gain * np.interp(src, grid, kin["epsilon2"].values)
     w2 = w2 + noise * np.abs(w2).max() * rng.standard_normal(n)
     e2 = e2 + noise * np.abs(e2).max() * rng.standard_normal(n)
-    DE = mech.DE
 
     def var(dims, data, units, long_name):
         return (dims, np.asarray(data), {"units": units, "long_name": long_name})
 
-    aE_t, aE_n = e2 * DE, w2**2 * DE
+    aE_t, aE_n = sensor_point.acceleration_at_E(mech.DE, w2, e2)
     freq = np.fft.rfftfreq(n, 1.0 / fs)
     amp = lambda y: 2.0 * np.abs(np.fft.rfft(y - y.mean())) / n   # noqa: E731 (single-sided amplitude)
     pg = np.linspace(0.0, 2.0 * math.pi, 361)[:-1]

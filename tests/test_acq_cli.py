@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from labtool.acquisition import signal_chain as sc
-from labtool.acquisition.recorder import read_recording
+from labtool.common import recording_format
 from labtool.cli import main
 from labtool.common.units import RPM
 
@@ -18,7 +18,7 @@ def test_must_show_sim_180_rpm_10_s_fast_writes_a_valid_v1_file(tmp_path, capsys
     out = tmp_path / "r.h5"
     assert main(["acquire", "--device", "sim", "--rpm", "180", "--duration", "10", "--fast", "-o", str(out)]) == 0
     assert "wrote" in capsys.readouterr().out
-    rec = read_recording(out)
+    rec = recording_format.load(out)
     a = rec["attrs"]
     assert a["format"] == "labtool.recording" and a["format_version"] == 1 and a["complete"]
     assert a["sample_rate_hz"] == 10000.0 and a["cam_speed_rpm"] == 180.0
@@ -34,7 +34,7 @@ def test_recovered_omega2_matches_the_truth(tmp_path):
     """Tacho -> rise start; integrate aE_t * Ka / DE over the rise: the peak omega2 is the truth's."""
     out = tmp_path / "r.h5"
     assert main(["acquire", "--rpm", "300", "--duration", "2", "--fast", "--seed", "5", "-o", str(out)]) == 0
-    rec = read_recording(out)
+    rec = recording_format.load(out)
     fs = rec["attrs"]["sample_rate_hz"]
     v = rec["signals"]
     scene = sc.scene_from_attrs(rec["attrs"])      # the twin behind the recording
@@ -58,8 +58,8 @@ def test_scene_file_and_overrides(tmp_path):
     scene.write_text('[stand]\ncam_speed_rpm = 500\nseed = 9\nduration_s = 0.5\nlaw = "sine"\nbacklash_mm = 0.128\n')
     out = tmp_path / "r.h5"
     assert main(["acquire", "--scene", str(scene), "--fast", "--rpm", "300", "-o", str(out)]) == 0
-    a = read_recording(out)["attrs"]
-    assert a["cam_speed_rpm"] == 300.0 and a["seed"] == 9 and read_recording(out)["signals"].shape[0] == 5000
+    a = recording_format.load(out)["attrs"]
+    assert a["cam_speed_rpm"] == 300.0 and a["seed"] == 9 and recording_format.load(out)["signals"].shape[0] == 5000
 
 
 @pytest.mark.slow
@@ -67,7 +67,7 @@ def test_clipping_warns(tmp_path, capsys):
     out = tmp_path / "c.h5"
     assert main(["acquire", "--fast", "--duration", "1", "--fault", "clip@0.5", "-o", str(out)]) == 0
     assert "clipping on aE_t" in capsys.readouterr().err
-    assert any(k == "clip" for _, k, _ in read_recording(out)["events"])
+    assert any(k == "clip" for _, k, _ in recording_format.load(out)["events"])
 
 
 @pytest.mark.slow
@@ -112,7 +112,7 @@ def test_force_overwrites(tmp_path):
     out = tmp_path / "r.h5"
     out.write_text("old")
     assert main(["acquire", "--fast", "--duration", "0.2", "--force", "-o", str(out)]) == 0
-    assert read_recording(out)["signals"].shape[0] == 2000
+    assert recording_format.load(out)["signals"].shape[0] == 2000
 
 
 @pytest.mark.slow
@@ -133,7 +133,7 @@ SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "sample_dat
 def test_sample_data_is_what_its_scene_makes(tmp_path, name):
     out = tmp_path / f"{name}.h5"
     assert main(["acquire", "--scene", str(SAMPLE / "scenes" / f"{name}.toml"), "--fast", "-o", str(out)]) == 0
-    kept, fresh = read_recording(SAMPLE / f"{name}.h5"), read_recording(out)
+    kept, fresh = recording_format.load(SAMPLE / f"{name}.h5"), recording_format.load(out)
     np.testing.assert_array_equal(kept["signals"], fresh["signals"])
     assert kept["attrs"]["complete"] and not any(k in ("clip", "gap", "overrun") for _, k, _ in kept["events"])
     assert (SAMPLE / f"{name}.h5").stat().st_size < 1_000_000
@@ -150,7 +150,7 @@ def test_sample_calibration_gives_the_chains_ka():
 def test_truth_from_a_recordings_attributes(tmp_path):
     out = tmp_path / "r.h5"
     assert main(["acquire", "--fast", "--rpm", "500", "--ripple", "0.01", "--duration", "0.3", "-o", str(out)]) == 0
-    rec = read_recording(out)
+    rec = recording_format.load(out)
     scene = sc.scene_from_attrs(rec["attrs"])
     assert scene.cam_speed_rpm == 500 and scene.ripple == 0.01 and scene.backlash == pytest.approx(0.128e-3)
     t = np.arange(rec["signals"].shape[0]) / rec["attrs"]["sample_rate_hz"]
@@ -164,7 +164,7 @@ def test_elastic_truth_run_records_the_models_motion(tmp_path):
     out = tmp_path / "el.h5"
     assert main(["acquire", "--truth", "elastic", "--rpm", "300", "--duration", "0.6", "--fast", "--ka", "864.3",
                  "-o", str(out)]) == 0
-    rec = read_recording(out)
+    rec = recording_format.load(out)
     assert rec["attrs"]["truth_model"].startswith("elastic") and rec["attrs"]["truth_revolutions"] == 0  # the default 8, periodic
     scene = sc.scene_from_attrs(rec["attrs"])
     assert scene.truth_model == "elastic" and scene.ripple == 0.0 and scene.contact_damping == 40.0
@@ -192,7 +192,7 @@ def test_scene_file_truth_table(tmp_path, capsys):
                      'mode_hz = 1500\nfriction_radius_mm = 0.02\npersistence_ms = 3\n')
     out = tmp_path / "r.h5"
     assert main(["acquire", "--scene", str(scene), "--fast", "--restitution", "0.4", "-o", str(out)]) == 0
-    a = read_recording(out)["attrs"]
+    a = recording_format.load(out)["attrs"]
     assert a["truth_contact_damping_s_per_m"] == 25.0 and a["truth_mode_hz"] == 1500.0 and a["resonance_hz"] == 1500.0
     assert a["truth_friction_radius_m"] == pytest.approx(2e-5) and a["truth_persistence_s"] == pytest.approx(3e-3)
     assert a["truth_restitution"] == 0.4

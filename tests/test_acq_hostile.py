@@ -9,7 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from labtool.acquisition.recorder import Recorder, read_recording
+from labtool.acquisition.recorder import Recorder
+from labtool.common import recording_format
 from labtool.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,7 +26,7 @@ def _reference(tmp, n):
     ref = tmp / "ref.h5"
     proc = _cli("acquire", "--fast", "--duration", f"{n / 10000 + 0.2:.1f}", "-o", ref)
     assert proc.returncode == 0, proc.stderr
-    return read_recording(ref)["signals"][:n]
+    return recording_format.load(ref)["signals"][:n]
 
 
 @pytest.mark.hostile("traceback")
@@ -54,7 +55,7 @@ def test_a_real_full_disk_keeps_every_row_it_claims(small_disk, tmp_path):
     lines = _errors(proc.stderr)
     assert len(lines) == 1 and lines[0].startswith("labtool: error: disk full"), proc.stderr[-2000:]
     assert lines[0].endswith("complete=false")
-    rec = read_recording(out)
+    rec = recording_format.load(out)
     n = rec["signals"].shape[0]
     assert 10000 < n < 600000
     a = rec["attrs"]
@@ -131,7 +132,7 @@ def test_a_second_writer_is_refused_even_with_force(tmp_path):
         if first.poll() is None:
             first.kill()
     assert rc == 130, err
-    rec = read_recording(f)
+    rec = recording_format.load(f)
     n = rec["signals"].shape[0]
     assert not bool(rec["attrs"]["complete"]) and int(rec["attrs"]["n_samples"]) == n >= 5000
     assert f"wrote {f}: {n} samples" in out  # the first run's summary describes the file
@@ -159,7 +160,7 @@ def test_a_live_swmr_reader_does_not_stop_the_close(tmp_path):
         for p in (writer, reader):
             if p is not None and p.poll() is None:
                 p.kill()
-    rec = read_recording(f)
+    rec = recording_format.load(f)
     assert bool(rec["attrs"]["complete"]) and rec["signals"].shape[0] == 30000
     assert rec["events"][-1][1] == "stop"
 
@@ -182,7 +183,7 @@ def test_two_acquires_started_together(tmp_path, force):
             assert ("being recorded" in lines[0]) or ("already exists" in lines[0])
         else:
             winner = out
-    rec = read_recording(f)
+    rec = recording_format.load(f)
     n = rec["signals"].shape[0]
     assert bool(rec["attrs"]["complete"]) and n == 20000 and f"{n} samples" in winner
 
@@ -190,16 +191,16 @@ def test_two_acquires_started_together(tmp_path, force):
 @pytest.mark.slow
 @pytest.mark.hostile("hang")
 @pytest.mark.parametrize("keep", [100, 512, 4096])
-def test_read_recording_of_a_truncated_file_is_one_error_not_a_hang(tmp_path, keep):
+def test_loading_a_truncated_file_is_one_error_not_a_hang(tmp_path, keep):
     full = tmp_path / "full.h5"
     assert main(["acquire", "--fast", "--duration", "0.3", "-o", str(full)]) == 0
     cut = tmp_path / "cut.h5"
     cut.write_bytes(full.read_bytes()[:keep])
-    code = ("import sys\nfrom labtool.acquisition.recorder import read_recording\nfrom labtool.common.errors import FileFormatError\n"
-            "try:\n    read_recording(sys.argv[1])\nexcept FileFormatError as e:\n    print('refused:', e)\n")
+    code = ("import sys\nfrom labtool.common import recording_format\nfrom labtool.common.errors import FileFormatError\n"
+            "try:\n    recording_format.load(sys.argv[1])\nexcept FileFormatError as e:\n    print('refused:', e)\n")
     try:  # in a child with a bound: before the safe opener, h5py looped for ever on such a file
         proc = subprocess.run([sys.executable, "-c", code, str(cut)], cwd=ROOT, capture_output=True, text=True,
                               timeout=90)
     except subprocess.TimeoutExpired:
-        pytest.fail(f"read_recording hung on a file cut to {keep} bytes")
+        pytest.fail(f"recording_format.load hung on a file cut to {keep} bytes")
     assert proc.returncode == 0 and proc.stdout.startswith("refused:"), (proc.stdout, proc.stderr[-500:])

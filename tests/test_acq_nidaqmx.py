@@ -14,7 +14,7 @@ from labtool.acquisition import nidaqmx_config as nc
 from labtool.acquisition import session
 from labtool.acquisition.device import DeviceDisconnected
 from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, check_readback, expand_channels
-from labtool.acquisition.recorder import read_recording
+from labtool.common import recording_format
 from labtool.common.errors import InputError
 from nidaqmx_fake import FakeBoard
 
@@ -108,7 +108,7 @@ def test_configuration_round_trip_set_task_read_back_stored(tmp_path):
         trigger_source="/Dev1/PFI0", trigger_edge=Edge.FALLING)
     assert str(board.chans["aE_t"].ai_coupling) == "Coupling.AC" and str(board.chans["tacho"].ai_coupling) == "Coupling.DC"
     # task -> read back -> stored in the recording
-    rec = read_recording(tmp_path / "n.h5")
+    rec = recording_format.load(tmp_path / "n.h5")
     a = rec["attrs"]
     rb = json.loads(a["ni_readback_json"])
     assert rb["channels"]["aE_t"]["ai_rng_high"] == 1.0  # the board's range covering +-0.9 V
@@ -153,7 +153,7 @@ def test_excitation_from_the_daq_when_asked():
 def test_real_rate_is_read_back_and_stored(tmp_path):
     board = FakeBoard(coerce=lambda r: 12.8e6 / 1279)  # 10007.8 Hz
     res = session.run(make(board), tmp_path / "n.h5", 10000, 0.05)
-    rec = read_recording(tmp_path / "n.h5")
+    rec = recording_format.load(tmp_path / "n.h5")
     assert rec["attrs"]["sample_rate_hz"] == pytest.approx(12.8e6 / 1279)
     assert rec["attrs"]["requested_rate_hz"] == 10000
     assert res.outcome == "done" and board.closed
@@ -195,7 +195,7 @@ def test_overrun_becomes_an_event_and_a_gap(tmp_path):
     board = FakeBoard(script={3: "overrun"})
     res = session.run(make(board), tmp_path / "o.h5", 10000, 0.1)
     assert res.overruns == 1 and res.gaps == 1 and res.samples_lost >= 300
-    rec = read_recording(tmp_path / "o.h5")
+    rec = recording_format.load(tmp_path / "o.h5")
     kinds = [(i, k) for i, k, _ in rec["events"] if k in ("overrun", "gap")]
     assert kinds == [(200, "overrun"), (200, "gap")]
     assert board.started == 2  # restarted after the overrun
@@ -288,7 +288,7 @@ def test_software_trigger_keeps_the_pretrigger_samples(tmp_path):
     dev = SimStand(sc.StandScene(truth_model="kinematic"), seed=3, duration_s=1.2, realtime=False, faults=[])
     trig = SoftwareTrigger(dev, channel=2, level_v=2.5, pretrigger=500)
     res = session.run(trig, tmp_path / "t.h5", 10000, 0.5)
-    rec = read_recording(tmp_path / "t.h5")
+    rec = recording_format.load(tmp_path / "t.h5")
     x = rec["signals"]
     assert res.n_samples == x.shape[0] == 5000
     starts = [(i, d) for i, k, d in rec["events"] if k == "start"]

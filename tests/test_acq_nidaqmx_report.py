@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import labtool.acquisition.nidaqmx_driver as drv
-from labtool.acquisition.recorder import read_recording
+from labtool.common import recording_format
 from labtool.cli import main
 from nidaqmx_fake import FakeBoard, stand_source
 
@@ -27,9 +27,9 @@ def test_operating_point_and_metadata_from_an_nidaqmx_run_reach_the_report(tmp_p
                  "--test-id", "T-042", "--operator", "M. Ionescu", "--sensor-model", "PCB 352A76",
                  "--sensor-serial", "LW001", "--conditioner-gain", "1", "--notes", "after greasing",
                  *sens, "-o", str(rec_path)]) == 0
-    a = read_recording(rec_path)["attrs"]
+    a = recording_format.load(rec_path)["attrs"]
     assert a["device"] == "nidaqmx" and a["Fu_N"] == 5.0 and a["Fu_N_source"] == "stated by the operator (--fu)"
-    ka = read_recording(rec_path)["ka_m_s2_per_v"]
+    ka = recording_format.load(rec_path)["ka_m_s2_per_v"]
     np.testing.assert_allclose(ka[:2], 9806.65 / 11.346, rtol=1e-9)  # nominal: sensitivity x gain (x1, as the stand)
     assert main(["process", str(rec_path), "-o", str(nc)]) == 0
     capsys.readouterr()

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labtool.acquisition.recorder import read_recording
+from labtool.common import recording_format
 from labtool.cli import main
 
 OLD_H5PY = "h5py==3.11.*"
@@ -71,7 +71,7 @@ def test_a_recording_reads_with_h5py_3_11_on_hdf5_1_14(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     old = json.loads(proc.stdout)
     assert old["hdf5"].startswith("1.14")
-    new = read_recording(rec_path)
+    new = recording_format.load(rec_path)
     # every root attribute, with its value
     assert set(old["attrs"]) == set(new["attrs"])
     for k, v in new["attrs"].items():

@@ -16,7 +16,7 @@ import pytest
 from labtool.acquisition import nidaqmx_config as nc
 from labtool.acquisition import session
 from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, list_devices
-from labtool.acquisition.recorder import read_recording
+from labtool.common import recording_format
 from labtool.common.errors import InputError
 
 HOWTO = ("needs an NI-DAQmx simulated device: create one (e.g. a simulated PCI-4462 named SimDev1) in NI MAX or "
@@ -49,7 +49,7 @@ def test_round_trip_on_the_simulated_device(sim_device, tmp_path):
     dev = NIDAQmxDevice(cfg)
     res = session.run(dev, tmp_path / "sim.h5", 10240, 1.0)
     assert res.outcome == "done" and res.complete
-    rec = read_recording(tmp_path / "sim.h5")
+    rec = recording_format.load(tmp_path / "sim.h5")
     rb = json.loads(rec["attrs"]["ni_readback_json"])
     assert rb["channels"]["aE_t"]["ai_rng_high"] >= 3.0 and rb["channels"]["aE_t"]["ai_coupling"] == "AC"
     assert rb["timing"]["samp_quant_samp_mode"] == "CONTINUOUS"

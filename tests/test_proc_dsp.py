@@ -9,7 +9,7 @@ import pytest
 from scipy import signal
 
 from labtool.common.errors import InputError
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 from labtool.processing import cam_angle, cycles, events, filters, follower, spectra
 from labtool.processing.calibration_file import read_calibration
@@ -112,7 +112,7 @@ def test_period_estimate_and_phi1_from_marks():
 
 def test_gravity_reading_matches_vector_projection():
     phi2 = np.linspace(0.5, 2.5, 7)
-    gt, gn = follower.gravity_reading(phi2, 9.81)
+    gt, gn = sensor_point.gravity_reading(phi2, 9.81)
     f = -np.array([0.0, -9.81])  # specific force of a body at rest: a - g
     t = np.stack([-np.sin(phi2), np.cos(phi2)])
     nvec = -np.stack([np.cos(phi2), np.sin(phi2)])
@@ -138,7 +138,7 @@ def test_dwell_baseline_and_integration_closed_form():
     bad = np.zeros(n, bool)
     bad[1200] = True
     assert np.isnan(follower.integrate_motion(eps, moving, fs, 50, bad=bad)[1200])
-    assert np.allclose(follower.omega2_from_normal(np.array([-1.0, 0.186 * 4]), 0.186), [0.0, 2.0])
+    assert np.allclose(sensor_point.omega2_abs_from_normal(np.array([-1.0, 0.186 * 4]), 0.186), [0.0, 2.0])
 
 
 def test_cycle_accumulator_mean_std():

@@ -11,6 +11,7 @@ from scipy import signal
 import scipy.fft as scipy_fft
 
 from labtool.processing import accumulators, cam_angle, cycles, events, filters, follower, kernels
+from labtool.models.mechanism import sensor_point
 
 
 @settings(max_examples=20, deadline=None)
@@ -97,7 +98,7 @@ def _numpy_chain(lp, phi1, rev, irregular, clipped, gravity, moving_table, DE, f
     eps = acc[:, 0] / DE
     omega = follower.integrate_motion(np.nan_to_num(eps), moving, fs, margin, bad=bad)
     omega[bad] = np.nan
-    absn = follower.omega2_from_normal(np.nan_to_num(acc[:, 1]), DE)
+    absn = sensor_point.omega2_abs_from_normal(np.nan_to_num(acc[:, 1]), DE)
     absn[bad] = np.nan
     return acc, eps, omega, absn, moving
 
@@ -238,7 +239,7 @@ def _numpy_cycles(acc, eps, omega, absn, clipped, m0, m1, grid):
 @settings(max_examples=25, deadline=None)
 @given(n=st.integers(50, 5000), period=st.floats(20, 900), start=st.floats(-300, 300), seed=st.integers(0, 999),
        n_nan=st.integers(0, 4))
-def test_add_cycles_equals_numpy(n, period, start, seed, n_nan):
+def test_resample_cycles_equals_numpy(n, period, start, seed, n_nan):
     rng = np.random.default_rng(seed)
     acc = rng.normal(size=(n, 2))
     eps, omega, absn = rng.normal(size=n), rng.normal(size=n), rng.normal(size=n)
@@ -249,9 +250,10 @@ def test_add_cycles_equals_numpy(n, period, start, seed, n_nan):
     m0, m1 = marks[:-1], marks[1:]
     grid = cycles.phi1_grid(72)
     ref_s, ref_q, ref_used, ref_rej = _numpy_cycles(acc, eps, omega, absn, clipped, m0, m1, grid)
-    sums, sumsq = np.zeros((5, 72)), np.zeros((5, 72))
-    used, rejected = kernels.add_cycles(acc, eps, omega, absn, clipped, m0, m1, grid / (2 * math.pi), sums, sumsq)
+    rows = np.full((len(m0), 5, 72), np.nan)
+    used, rejected = kernels.resample_cycles(acc, eps, omega, absn, clipped, m0, m1, grid / (2 * math.pi), rows)
     assert (used, rejected) == (ref_used, ref_rej)
+    sums, sumsq = rows[:used].sum(axis=0), (rows[:used] ** 2).sum(axis=0)
     np.testing.assert_allclose(sums, ref_s if ref_used else 0.0, rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(sumsq, ref_q if ref_used else 0.0, rtol=1e-13, atol=1e-13)
 

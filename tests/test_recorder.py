@@ -14,7 +14,9 @@ import pytest
 from labtool.acquisition import session
 from labtool.acquisition import signal_chain as sc
 from labtool.acquisition.device import Block, Device, Event
-from labtool.acquisition.recorder import EVENT_DTYPE, Recorder, read_recording
+from labtool.acquisition.recorder import Recorder
+from labtool.common import recording_format
+from labtool.common.recording_format import EVENT_DTYPE
 from labtool.acquisition.sim_stand import Fault, SimStand
 from labtool.cli import main
 
@@ -61,14 +63,14 @@ def test_format_v1_to_the_letter(tmp_path):
         # the metadata needed to compare with a known truth
         for key in ("law", "Fu_N", "backlash_mm", "seed", "chain_ka_m_s2_per_v", "truth_omega1_ripple", "resonance_hz"):
             assert key in a, key
-    np.testing.assert_array_equal(read_recording(p)["signals"], reference_data(1, 1.0))
+    np.testing.assert_array_equal(recording_format.load(p)["signals"], reference_data(1, 1.0))
 
 
 def test_gaps_and_overruns_are_events_at_the_joint(tmp_path):
     p = tmp_path / "g.h5"
     res = session.run(sim(seed=4, duration=3.0, faults=[Fault("overrun", 1.0, 0.2), Fault("drop", 2.05)]), p, 10000, 3.0)
     assert res.overruns == 1 and res.gaps == 2 and res.samples_lost == 3000
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert rec["signals"].shape[0] == 27000
     ev = [(i, k, d) for i, k, d in rec["events"] if k in ("gap", "overrun")]
     assert [(i, k) for i, k, _ in ev] == [(10000, "overrun"), (10000, "gap"), (18000, "gap")]
@@ -84,7 +86,7 @@ def test_gaps_and_overruns_are_events_at_the_joint(tmp_path):
 def test_event_index_is_the_row_even_after_a_gap(tmp_path):
     p = tmp_path / "cg.h5"
     session.run(sim(seed=4, duration=3.0, faults=[Fault("overrun", 1.0, 0.2), Fault("clip", 2.5)]), p, 10000, 3.0)
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     clip = [i for i, k, _ in rec["events"] if k == "clip"]
     assert clip == [25004 - 2000]  # device sample 25004, 2000 samples lost before it
     assert rec["signals"][clip[0], 0] >= 10.0 - 20.0 / 2**16 - 1e-6  # the row sits at the rail
@@ -124,7 +126,7 @@ def test_sigkill_leaves_every_flushed_sample_and_complete_false(tmp_path, capsys
         if proc.poll() is None:
             proc.kill()
     assert flushed[-1] > 0
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     n = rec["signals"].shape[0]
     assert n >= flushed[-1]
     assert bool(rec["attrs"]["complete"]) is False
@@ -192,7 +194,7 @@ def test_a_reader_opening_the_new_file_does_not_fail_the_recording(tmp_path, mon
     with Recorder(tmp_path / "r.h5", ["a"], 1000.0) as rec:
         assert released.is_set()               # created once the reader let go
         rec.write_block(Block(np.zeros((10, 1), np.float32), 0))
-    assert read_recording(tmp_path / "r.h5")["signals"].shape == (10, 1)
+    assert recording_format.load(tmp_path / "r.h5")["signals"].shape == (10, 1)
 
 
 def test_ctrl_c_stops_cleanly(tmp_path):
@@ -202,7 +204,7 @@ def test_ctrl_c_stops_cleanly(tmp_path):
     dev = _StopAfter(sim(duration=5.0), 7)
     res = session.run(dev, p, 10000, 5.0)
     assert res.outcome == "interrupted" and not res.complete and res.signum == signal.SIGINT and dev.stopped
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert rec["signals"].shape[0] == 7000 and not rec["attrs"]["complete"]
     assert rec["events"][-1][1] == "stop" and "Ctrl-C" in rec["events"][-1][2]
     # a reader says why it is short: the user stopped it, not a recorder that did not close
@@ -219,7 +221,7 @@ def test_ctrl_c_ends_a_recording_without_a_duration_complete(tmp_path):
     dev = _StopAfter(sim(duration=5.0), 7)
     res = session.run(dev, p, 10000, None)
     assert res.outcome == "interrupted" and res.complete and res.signum == signal.SIGINT
-    assert read_recording(p)["attrs"]["complete"]
+    assert recording_format.load(p)["attrs"]["complete"]
 
 
 @pytest.mark.slow
@@ -244,7 +246,7 @@ def test_ctrl_c_or_sigterm_to_a_realtime_cli_run_closes_the_file(tmp_path, sig, 
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 128 + sig, err
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert not rec["attrs"]["complete"] and 5000 <= rec["signals"].shape[0] < 600000
     assert said in rec["events"][-1][2]
     assert f"interrupted ({signal.Signals(sig).name}); {p} keeps its {rec['signals'].shape[0]} samples" in err
@@ -267,7 +269,7 @@ def test_disk_full_stops_cleanly_and_keeps_the_data(tmp_path, monkeypatch):
     p = tmp_path / "full.h5"
     res = session.run(sim(duration=3.0), p, 10000, 3.0)
     assert res.outcome == "disk_full" and not res.complete
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert rec["signals"].shape[0] == 12000
     assert rec["attrs"]["complete"] == False  # noqa: E712 (numpy bool)
     assert any(k == "fault" and "disk full" in d for _, k, d in rec["events"])
@@ -281,7 +283,7 @@ def test_disk_full_cli_one_line_exit_2(tmp_path, monkeypatch, capsys):
     assert main(["acquire", "--fast", "--duration", "2", "-o", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("labtool: error: disk full") and "5000 samples (0.500 s) kept" in err[-1]
-    assert read_recording(p)["signals"].shape[0] == 5000
+    assert recording_format.load(p)["signals"].shape[0] == 5000
 
 
 def test_disconnect_keeps_the_data_and_says_so(tmp_path, capsys):
@@ -289,7 +291,7 @@ def test_disconnect_keeps_the_data_and_says_so(tmp_path, capsys):
     assert main(["acquire", "--fast", "--duration", "2", "--fault", "disconnect@0.55", "-o", str(p)]) == 2
     err = capsys.readouterr().err
     assert "labtool: error: device disconnected" in err
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert rec["signals"].shape[0] == 5000 and rec["attrs"]["complete"]
     assert any(k == "fault" for _, k, _ in rec["events"])
 
@@ -312,7 +314,7 @@ def test_an_unexpected_error_mid_run_keeps_the_data_marks_it_incomplete_and_prop
     p = tmp_path / "e.h5"
     with pytest.raises(_ModelFailure):
         session.run(_StopAfter(sim(duration=5.0), 4, exc=_ModelFailure), p, 10000, 5.0)
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert rec["signals"].shape[0] == 4000 and not rec["attrs"]["complete"]
     assert any(k == "fault" and "_ModelFailure" in d for _, k, d in rec["events"])
 
@@ -339,7 +341,7 @@ def test_sigterm_to_a_recording_stops_it_and_the_command_goes_on(tmp_path):
         res = session.run(sim(duration=5.0), p, 10000, 5.0, on_block=_sigterm_after_blocks(5))
     assert res.outcome == "interrupted" and not res.complete and "SIGTERM" in res.message
     assert res.signum == signal.SIGTERM
-    assert not read_recording(p)["attrs"]["complete"]
+    assert not recording_format.load(p)["attrs"]["complete"]
 
 
 @pytest.mark.hostile("interrupted")
@@ -354,7 +356,7 @@ def test_sigterm_to_a_recording_another_command_runs_ends_that_command(tmp_path)
             with command_scope(), signals_interrupt():      # the acquire step it runs
                 session.run(sim(duration=5.0), p, 10000, 5.0, on_block=_sigterm_after_blocks(5))
     assert caught.value.signum == signal.SIGTERM
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert not rec["attrs"]["complete"] and "SIGTERM" in rec["events"][-1][2]     # closed, short of 5 s
 
 
@@ -386,5 +388,5 @@ def test_a_command_that_another_runs_passes_the_interrupt_on(tmp_path):
                 main(["acquire", "--duration", "20", "-o", str(p)])
             finally:
                 done.set()
-    rec = read_recording(p)
+    rec = recording_format.load(p)
     assert not rec["attrs"]["complete"] and 0 < rec["signals"].shape[0] < 200000     # closed, short of 20 s

@@ -53,6 +53,7 @@ from labtool.models.dynamics.kernels import rigid_nb as eq
 from labtool.models.dynamics.result import DatasetParts, SimulationResult, empty_indicators
 from labtool.models.dynamics.rigid_tables import cam_table, follower_table
 from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism import sensor_point
 from labtool.models.mechanism.cam_profile import cached_sense
 from labtool.models.mechanism.memo import cached
 from labtool.models.mechanism.motion_laws import CamProgram
@@ -382,7 +383,7 @@ def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> DatasetParts:
     def var(data, units, long_name, dims=("time",), **extra):
         return (dims, np.asarray(data), {"units": units, "long_name": long_name, **extra})
 
-    DE = scene.mechanism.DE
+    aE_t, aE_n = sensor_point.acceleration_at_E(scene.mechanism.DE, s["omega2"], s["epsilon2"])
     data = {
         "phi1": var(s["phi1"], "rad", "cam angle from the start of the rise"),
         "omega1": var(s["omega1"], "rad/s", "cam angular velocity"),
@@ -390,8 +391,8 @@ def _dataset(scene, info, omega1_0, times, s, r, record: dict) -> DatasetParts:
         "phi2": var(s["phi2"], "rad", "follower angle of DC from the x axis"),
         "omega2": var(s["omega2"], "rad/s", "follower angular velocity"),
         "epsilon2": var(s["epsilon2"], "rad/s^2", "follower angular acceleration (impacts excluded: impulsive)"),
-        "aE_t": var(s["epsilon2"] * DE, "m/s^2", "tangential acceleration of E (ideal sensor)"),
-        "aE_n": var(s["omega2"] ** 2 * DE, "m/s^2", "normal acceleration of E, towards D (ideal sensor)"),
+        "aE_t": var(aE_t, "m/s^2", "tangential acceleration of E (ideal sensor)"),
+        "aE_n": var(aE_n, "m/s^2", "normal acceleration of E, towards D (ideal sensor)"),
         "MR13D": var(s["MR13D"], "N m", "moment about D of the cam-on-follower reaction (0 in flight)"),
         "R13n": var(s["R13n"], "N", "normal cam-on-roller force, > 0 = inner flank pushing C away from A"),
         "gap": var(s["gap"], "m", "normal distance of the roller centre from the inner-flank contact position (0..j)"),

@@ -58,6 +58,7 @@ from labtool.common.operating_point import OperatingPoint
 from labtool.common.errors import InputError, SolverError
 from labtool.models.dynamics.contact import contact_stiffness, static_penetration
 from labtool.models.dynamics.scene import Scene
+from labtool.models.mechanism import sensor_point
 from labtool.models.mechanism.motor import cam_inertia, motor_moment_on_cam, motor_slope_on_cam
 
 TWO_PI = 2.0 * math.pi
@@ -453,7 +454,6 @@ def simulate(scene: Scene, physics: TwinPhysics | None = None, duration: float |
     run = TwinRun(scene, physics)
     t = np.arange(int(math.floor(duration / output_step)) + 1) * output_step
     s = run.sample(t, accelerations=True)
-    DE = scene.mechanism.DE
     meta = {
         "phi1": ("rad", "cam angle (unwrapped, 0 at the start of the first rise)"), "omega1": ("rad/s", "cam angular velocity"),
         "phi2": ("rad", "follower angle of DC from the x axis"), "omega2": ("rad/s", "follower angular velocity"),
@@ -465,7 +465,8 @@ def simulate(scene: Scene, physics: TwinPhysics | None = None, duration: float |
         "contact_phase": ("1", "0 interior flank, 1 flight in the gap, 2 exterior flank"),
     }
     data = {k: ("time", s[k], {"units": u, "long_name": ln}) for k, (u, ln) in meta.items()}
-    data["aE_n"] = ("time", s["omega2"] ** 2 * DE, {"units": "m/s^2", "long_name": "normal acceleration of E, towards D"})
+    aE_n = sensor_point.acceleration_at_E(scene.mechanism.DE, s["omega2"], 0.0)[1]
+    data["aE_n"] = ("time", aE_n, {"units": "m/s^2", "long_name": "normal acceleration of E, towards D"})
     ds = xr.Dataset(data, coords={"time": ("time", t, {"units": "s", "long_name": "time from the start of the first rise"})})
     ds = ds.merge(event_dataset(run.take_events(final=True)))
     ds.attrs.update(title="labtool stand twin (docs/twin.md)", **OperatingPoint.attrs(scene),

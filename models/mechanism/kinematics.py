@@ -24,7 +24,7 @@ from labtool.common.datasets import dataset
 from labtool.common.errors import InputError
 from labtool.common.units import rpm_to_rad_s
 from labtool.models.mechanism.linkage import linkage_state, reduced_follower
-from labtool.models.mechanism import Mechanism
+from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 from labtool.models.mechanism.motor import cam_inertia, transmission_ratio
 
@@ -84,14 +84,15 @@ def analyze(mech: Mechanism | None = None, program: CamProgram | None = None, rp
     def var(data, units, long_name, dims=("phi1",)):
         return (dims, np.asarray(data, dtype=float), {"units": units, "long_name": long_name})
 
+    aE_t, aE_n = sensor_point.acceleration_at_E(mech.DE, omega2, epsilon2)
     data = {
         "time": var(phi1 / omega1, "s", "time at constant cam speed"),
         "psi": var(psi, "rad", "follower stroke from the start of the rise"),
         "phi2": var(phi2, "rad", "follower angle of DC from the x axis"),
         "omega2": var(omega2, "rad/s", "follower angular velocity"),
         "epsilon2": var(epsilon2, "rad/s^2", "follower angular acceleration"),
-        "aE_t": var(epsilon2 * mech.DE, "m/s^2", "tangential acceleration of E (ideal sensor)"),
-        "aE_n": var(omega2**2 * mech.DE, "m/s^2", "normal acceleration of E, towards D (ideal sensor)"),
+        "aE_t": var(aE_t, "m/s^2", "tangential acceleration of E (ideal sensor)"),
+        "aE_n": var(aE_n, "m/s^2", "normal acceleration of E, towards D (ideal sensor)"),
         "phi4": var(st.phi4, "rad", "rod 4 angle from the x axis"),
         "omega4": var(st.omega4, "rad/s", "rod 4 angular velocity"),
         "epsilon4": var(st.epsilon4, "rad/s^2", "rod 4 angular acceleration"),

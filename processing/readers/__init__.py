@@ -69,11 +69,11 @@ def recording_kind(path) -> str | None:
         return "LVM recording"
     if kind != "hdf5":
         return None
+    from labtool.common import recording_format as fmt
     from labtool.common.hdf5 import open_file
-    from labtool.processing.readers.base import as_text
     f, _ = open_file(path)
     with f:
-        return "labtool recording" if as_text(f.attrs.get("format", "")) == "labtool.recording" else None
+        return "labtool recording" if fmt.as_text(f.attrs.get("format", "")) == fmt.FORMAT else None
 
 
 def open_recording(path, sample_rate_hz: float | None = None, group: str | None = None,

@@ -15,10 +15,9 @@ import numpy as np
 
 from labtool.common.errors import FileFormatError, InputError
 from labtool.common.names import shown
+# the format's event kinds and the text and rate checks every reader shares
+from labtool.common.recording_format import EVENT_KINDS, SPLITTING_KINDS, as_text, check_sample_rate  # noqa: F401
 
-EVENT_KINDS = ("overrun", "gap", "clip", "start", "stop", "fault")
-# events that mean the samples before and after the index are not contiguous in time
-SPLITTING_KINDS = ("overrun", "gap")
 
 
 @dataclasses.dataclass
@@ -203,19 +202,6 @@ class Recording:
 MAX_LOST_S = 86400.0   # s: the most a run's gaps may lose in all (a device lost longer is a new run)
 
 
-def check_sample_rate(value, source: str) -> float:
-    """A usable sample rate (Hz): one finite, positive, not absurd number; otherwise InputError."""
-    if np.size(value) != 1:
-        raise InputError(f"{source}: sample rate {np.asarray(value).tolist()!r} is not one number; give one rate in Hz")
-    try:
-        fs = float(np.asarray(value).reshape(-1)[0]) if np.ndim(value) else float(value)
-    except (TypeError, ValueError, IndexError):
-        raise InputError(f"{source}: sample rate {value!r} is not a number; give it in Hz") from None
-    if not (math.isfinite(fs) and 1.0 <= fs <= 10e6):
-        raise InputError(f"{source}: sample rate {fs!r} Hz is not usable (expected 1 Hz .. 10 MHz)")
-    return fs
-
-
 MAX_SAMPLE = 1e12   # V or m/s^2: past any ADC or accelerometer; x Ka (<= 1e6) and squared it stays finite
 
 
@@ -249,12 +235,3 @@ def stated_number(attrs, name: str, source, option: str | None = None) -> float 
     except (TypeError, ValueError):
         raise InputError(f"{shown(source)}: attribute {name} = {shown(as_text(raw))!r} is not a number; fix the file"
                          + (f" or give {option}" if option else "")) from None
-
-
-def as_text(value) -> str:
-    """Decode bytes/numpy strings leniently (attributes and event fields come in many encodings)."""
-    if isinstance(value, (bytes, np.bytes_)):
-        return bytes(value).decode("utf-8", errors="replace").rstrip("\x00")
-    if isinstance(value, np.ndarray) and value.shape == ():
-        return as_text(value.item())
-    return str(value)

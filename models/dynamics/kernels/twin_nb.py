@@ -179,7 +179,7 @@ def rhs(t, y, phase, cn, ch, cc, fn, fh, fc, p, out, aux, cam, fol):
     aux[5] = eps2
     aux[6] = A2
     aux[7] = w2 - dpsi * w1
-    aux[8] = DE * eps2 + ddu
+    aux[8] = DE * eps2 + ddu     # sensor_point.acceleration_at_E's aE_t plus the mode's u'': compiled loop
 
 
 @jit
