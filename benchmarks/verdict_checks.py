@@ -51,8 +51,7 @@ def record(d: Path, truth: str, rpm: float, seconds: float) -> tuple[Path, Path]
 
 def truth_record(rec: Path, duration: float) -> dict:
     """The recording's true events (labtool.models.dynamics.events arrays). The elastic model's record carries no
-    event_domega2 until labtool.models.dynamics.events lands on main: then its contacts' steps are taken
-    as the report takes them from a model (labtool.reports.events.model_events: omega2 less the law's
+    event_domega2: its contacts' steps are taken as the report takes them from a model (labtool.reports.events.model_events: omega2 less the law's
     over the impact), from the truth's own simulation, its steady turn repeated as the stand does."""
     import h5py
 

@@ -6,9 +6,8 @@
    with its default truth: ``labtool acquire --device sim --fast``;
 4. ``labtool process`` turns it into measured.nc (omega2, epsilon2, cam angle, spectra);
 5. ``labtool report``: the rigid and elastic models, omega1 constant and variable, against it,
-   with the groove's energy loss where the stand's recording states it (its ``truth_*``
-   restitution and contact damping: what a lab measures on its groove), the robustness check and
-   the measured impacts.
+   with labtool's default model options (the stand's restitution and contact damping,
+   labtool.common.operating_point), the robustness check and the measured impacts.
 
 A step that fails ends the demo with its error.
 """
