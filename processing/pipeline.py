@@ -399,6 +399,11 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
                          "conditioner, the ADC range)")
     if st.clip.flagged:
         warn(f"{st.clip.flagged} clipped samples flagged and kept out of the estimates")
+    if st.cycles.count == 0 and st.cycles.rejected:
+        warn(f"no revolution averaged: each of the {st.cycles.rejected} whole revolutions holds a clipped or irregular "
+             "sample, so the cycle statistics are empty and report and fit cannot use this file; if they are clipped, "
+             "record with a larger range in m/s^2 (the ADC's range x Ka: a less sensitive conditioner setting; on the "
+             "simulated stand acquire --ka 8643)")
     hist.add(H.TimeAxis(samples_lost=st.time.samples_lost, gaps_with_unknown_loss=st.time.unknown))
     hist.add(H.Clipping(flagged_samples=st.clip.flagged, recorder_clip_events=int(len(st.clip.events)),
                         rail_v=st.clip.rail_v, min_run_at_extreme=ClipCounter.MIN_RUN))

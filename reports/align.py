@@ -308,7 +308,14 @@ def measured_cycles(ds: xr.Dataset, names, cond: Conditioning) -> MeasuredCycles
     # the partial revolutions before the first and after the last whole one
     partial += int(theta[0] < TWO_PI * k_first - tol) + int(theta[-1] > TWO_PI * (k_last + 1) + tol)
     if not revs:
-        raise InputError("the measured file holds no whole cam revolution (need phi1 to cover 0..360 deg without gaps)")
+        turns = max(k_last - k_first + 1, 0)
+        dropped = int(ok.size - ok.sum())
+        why = (f": each of its {turns} revolutions holds a gap, {dropped} samples are not finite (clipped at the ADC's "
+               "rails, most likely at the impacts): record with a larger range in m/s^2 (the ADC's range x Ka: a "
+               "less sensitive conditioner setting; on the simulated stand acquire --ka 8643) and process it again"
+               if turns and dropped else "")
+        src = ds.encoding.get("source")
+        raise InputError(f"{shown(src) + ': it' if src else 'the measured file'} holds no whole cam revolution (need phi1 to cover 0..360 deg without gaps){why}")
     signals = {n: condition(np.array(v), cond) for n, v in out.items()}
     times = np.array(times)
     period = float(np.mean(times[:, -1] - times[:, 0])) * cond.n_grid / (cond.n_grid - 1)

@@ -257,3 +257,26 @@ def test_a_design_that_writes_over_100_mb_is_refused_when_piped(tmp_path):
                                 "-o", tmp_path / "r.csv"], timeout=300))
     assert line.startswith("labtool: error: this design of 400000 runs would") and "write about" in line
     assert "pass --yes" in line and sorted(p.name for p in tmp_path.iterdir()) == ["f.csv"]
+
+
+# --- silent wrong: a recording clipped at every impact ------------------------------------------
+@pytest.mark.hostile("silent_wrong")
+@pytest.mark.slow
+def test_a_recording_clipped_in_every_revolution_is_said_and_the_advice_works(tmp_path, capsys):
+    """The 480C02 at gain x10 (Ka 86.43) clips at every impact: process wrote "0 revolutions
+    averaged" with exit 0, and report and fit then said "the measured file holds no whole cam
+    revolution", naming neither the file nor why. The advice (a larger range in m/s^2) is
+    followed and the report runs."""
+    rec, nc = tmp_path / "k10.h5", tmp_path / "k10.nc"
+    acq = ["acquire", "--device", "sim", "--fast", "--duration", "2", "--seed", "3"]
+    assert cli([*acq, "--ka", "86.43", "-o", rec], capsys)[0] == 0
+    code, err = cli(["process", rec, "-o", nc], capsys)
+    assert code == 0 and "no revolution averaged: each of the" in err and "acquire --ka 8643" in err
+    line = one_error_line(*cli(["report", nc, "-o", tmp_path / "r.html", *REPORT_QUICK], capsys))
+    assert f"{nc}: it holds no whole cam revolution" in line and "not finite (clipped" in line
+    advice = line.split("on the simulated stand ")[1].split(")")[0].split()
+    assert advice[:2] == ["acquire", "--ka"]
+    assert cli([*acq, *advice[1:], "-o", tmp_path / "k1.h5"], capsys)[0] == 0
+    assert cli(["process", tmp_path / "k1.h5", "-o", tmp_path / "k1.nc"], capsys)[0] == 0
+    code, err = cli(["report", tmp_path / "k1.nc", "-o", tmp_path / "r.html", *REPORT_QUICK], capsys)
+    assert code == 0, err

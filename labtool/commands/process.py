@@ -59,10 +59,13 @@ def process(
                        decimal=_decimal(decimal), time_unit_s=_time_unit(time_unit), units=_unit_map(units),
                        invert=_inverted(invert), dataset=False)
     summary = measured
+    # an unknown value is left out of the file's attributes (no revolution to check omega2 on)
+    check = summary.get("omega2_normal_check_rel_rms")
+    check = f"{100 * check:.1f} % rms of peak" if check is not None else "not computed (no finite omega2 while the follower moves)"
     typer.echo(f"wrote {output}: cam {summary['cam_speed_rpm_measured']:.2f} rpm (phi1 by {summary['phi1_method']}), "
                f"{summary['n_revolutions_averaged']} revolutions averaged, low-pass {summary['lowpass_hz']:.0f} Hz, "
                f"{summary['n_spikes']} spikes, {summary['n_clipped_samples']} clipped samples, "
-               f"|omega2| vs sqrt(aE_n/DE): {100 * summary['omega2_normal_check_rel_rms']:.1f} % rms of peak")
+               f"|omega2| vs sqrt(aE_n/DE): {check}")
     typer.echo(_ka_line(summary))
     typer.echo(_channels_line(summary))
     speeds = _speed_line(summary)
