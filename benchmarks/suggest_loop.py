@@ -14,7 +14,7 @@ backlash,restitution --shared backlash``) and the backlash's 95 % interval compa
 (on the log scale, ln(hi / lo), as the fit searches it) and whether it holds the truth.
 
 Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and writes
-``benchmarks/results/suggest_loop.json``.
+``benchmarks/results/suggest_loop_<truth>.json``.
 
     nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
@@ -36,7 +36,7 @@ LABTOOL = str(ROOT / ".venv" / "bin" / "labtool")
 DURATION_S = 4.0
 FIRST = (180.0, 0.0)
 FIXED = ((300.0, 0.0), (500.0, 0.0))
-RESULTS = ROOT / "benchmarks" / "results" / "suggest_loop.json"
+RESULTS = ROOT / "benchmarks" / "results" / "suggest_loop_{truth}.json"
 FIT = ["--model", "rigid", "--free", "backlash,restitution", "--shared", "backlash", "--accuracy", "fast"]
 SUGGEST = ["--model", "rigid", "--free", "backlash,restitution", "--shared", "backlash", "--rpm-range", "120:600:40",
            "--accuracy", "fast"]
@@ -146,9 +146,10 @@ def main() -> None:
     TRUTH["model"] = args.truth
     if args.table:
         rows = table(args.dir)
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(json.dumps(rows, indent=1) + "\n")
-        print(f"wrote {RESULTS}")
+        out = Path(str(RESULTS).format(truth=args.truth))
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(rows, indent=1) + "\n")
+        print(f"wrote {out}")
         return
     for seed in range(args.seeds):
         try:
