@@ -324,7 +324,10 @@ def _summary(req, files, free, shared, fit, current, noise, cands, best, targets
         "point": point,
         "expected": {"log_det_gain": best.criterion, "interval_width_ratio": best.shrink,
                      "sentence": f"a recording at {best.rpm:g} rpm, Fu = {best.Fu:g} N is expected to narrow "
-                                 f"the 95 % interval of {shrink} of its width now"},
+                                 f"the 95 % interval of {shrink} of its width now, by linear theory of the "
+                                 "measurement's part (the model's discrepancy and the objective's roughness at that "
+                                 "speed are not in it; on the simulated stand the paper's 300 and 500 rpm did as well: "
+                                 "docs/identification.md)"},
         "noise_model": noise,
         "candidates": [{"cam_speed_rpm": c.rpm, "Fu_N": c.Fu,
                         "log_det_gain": c.criterion if c.error is None else None,
