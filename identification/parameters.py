@@ -111,13 +111,13 @@ class FreeParameter:
 
 
 CATALOGUE = {p.name: p for p in (
-    FreeParameter("backlash", ("rigid", "elastic"), (0.01, 0.6), True, 0.128, True,
+    FreeParameter("backlash", ("rigid", "elastic"), (0.01, 0.6), True, FIELD["backlash"].default_edge, True,
                   "groove backlash j (the gap the follower crosses)", field=FIELD["backlash"]),
     FreeParameter("restitution", ("rigid",), (0.0, 1.0), False, 0.5, False,
                   "Newton's restitution k of the rigid model's impacts", field=FIELD["restitution"]),
-    FreeParameter("contact_damping", ("elastic",), (0.0, 400.0), False, 40.0, False,
+    FreeParameter("contact_damping", ("elastic",), (0.0, 400.0), False, FIELD["contact_damping"].default_edge, False,
                   "Hunt-Crossley damping of the elastic contact", field=FIELD["contact_damping"]),
-    FreeParameter("contact_length", ("elastic",), (1.0, 30.0), True, 6.0, True,
+    FreeParameter("contact_length", ("elastic",), (1.0, 30.0), True, FIELD["contact_length"].default_edge, True,
                   "roller-groove contact length lw behind Kc = 8.05e4 lw^(8/9)", field=FIELD["contact_length"]),
     FreeParameter("ka_gain", ("rigid", "elastic"), (0.5, 2.0), True, 1.0, True,
                   "true Ka over the Ka the processing used (the measured signals are the truth divided by it)",

@@ -24,11 +24,12 @@ from rich.table import Table
 
 from labtool.output import console as new_console
 from labtool.common.files import write_netcdf
+from labtool.common.operating_point import FIELD
 
-# the paper's experiment (sec. 2.4 and 3.3)
-EXPERIMENT_RPM = 180.0
-EXPERIMENT_BACKLASH_MM = 0.128
-EXPERIMENT_FU_N = 0.0
+# the paper's experiment (sec. 2.4 and 3.3) at the operating point's defaults
+EXPERIMENT_RPM = FIELD["cam_speed"].default_edge
+EXPERIMENT_BACKLASH_MM = FIELD["backlash"].default_edge
+EXPERIMENT_FU_N = FIELD["Fu"].default_edge
 RECORD_SECONDS = 3.0           # 9 cam revolutions at 180 rpm
 DEMO_TEST_ID = "DEMO-180"      # what the report's title block and the curves' header show
 DEMO_OPERATOR = "labtool demo"
