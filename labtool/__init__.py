@@ -27,6 +27,8 @@ _EXPORTS = {
     "report": "labtool.api.reporting",
     "fit": "labtool.api.fitting",
     "suggest": "labtool.api.design",
+    "acquire": "labtool.api.acquisition",
+    "Acquisition": "labtool.api.acquisition",
     "OperatingPoint": "labtool.common.operating_point",
     "DEFAULT": "labtool.common.operating_point",
     "PAPER_EXPERIMENT": "labtool.common.operating_point",

@@ -97,3 +97,48 @@ def test_the_process_command_reads_its_summary_without_opening_the_output_as_a_d
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]"
     assert out.stdout.startswith(f"wrote {tmp_path / 'm.nc'}: cam ")
+
+
+def _recording(path):
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        attrs = {k: v for k, v in f.attrs.items() if k not in ("start_time_utc", "stop_time_utc", "command")}
+        return f["signals"][()], attrs
+
+
+@pytest.mark.slow
+def test_acquire_writes_the_file_the_command_writes(tmp_path):
+    from labtool.cli import main
+
+    assert main(["acquire", "--fast", "--duration", "0.5", "--rpm", "240", "--backlash-mm", "0.2", "--seed", "3",
+                 "--status-every", "0", "-o", str(tmp_path / "cli.h5")]) == 0
+    res = labtool.acquire(tmp_path / "api.h5", stand={"duration_s": 0.5, "cam_speed_rpm": 240, "backlash_mm": 0.2,
+                                                      "seed": 3}, realtime=False)
+    assert res.complete and res.stop_reason == "done" and res.n_samples == 5000 and res.rate_hz == 10000.0
+    assert res.n_channels == 3 and res.overruns == 0 and res.unstated == []
+    cli, api = _recording(tmp_path / "cli.h5"), _recording(tmp_path / "api.h5")
+    np.testing.assert_array_equal(cli[0], api[0])
+    assert {k: str(v) for k, v in cli[1].items()} == {k: str(v) for k, v in api[1].items()}
+    assert api[1]["cam_speed_rpm"] == 240.0 and api[1]["backlash_mm"] == 0.2
+
+
+def test_acquire_refuses_an_unknown_setting_and_a_short_duration_before_writing(tmp_path):
+    from labtool.common.errors import InputError
+
+    with pytest.raises(InputError, match="unknown stand setting.*rpm"):
+        labtool.acquire(tmp_path / "r.h5", stand={"rpm": 240})
+    with pytest.raises(InputError, match="less than one sample"):
+        labtool.acquire(tmp_path / "r.h5", stand={"duration_s": 1e-9}, realtime=False)
+    assert not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.slow
+def test_acquire_keeps_what_a_disconnect_left_and_says_so(tmp_path):
+    from labtool.common.errors import InputError
+
+    res = labtool.acquire(tmp_path / "r.h5", stand={"duration_s": 1.0}, realtime=False, faults=["disconnect@0.3"],
+                          check=False)
+    assert res.stop_reason == "disconnected" and 0 < res.n_samples < 10000
+    with pytest.raises(InputError, match="kept in"):
+        res.check()
