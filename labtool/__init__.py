@@ -28,6 +28,8 @@ _EXPORTS = {
     "fit": "labtool.api.fitting",
     "suggest": "labtool.api.design",
     "acquire": "labtool.api.acquisition",
+    "run_design": "labtool.api.doe",
+    "DesignRun": "labtool.api.doe",
     "Acquisition": "labtool.api.acquisition",
     "OperatingPoint": "labtool.common.operating_point",
     "DEFAULT": "labtool.common.operating_point",

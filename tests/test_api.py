@@ -142,3 +142,47 @@ def test_acquire_keeps_what_a_disconnect_left_and_says_so(tmp_path):
     assert res.stop_reason == "disconnected" and 0 < res.n_samples < 10000
     with pytest.raises(InputError, match="kept in"):
         res.check()
+
+
+FACTORS_2x2 = """
+[[factor]]
+name = "A"
+symbol = "Fu"
+unit = "N"
+levels = [0, 65]
+
+[[factor]]
+name = "B"
+symbol = "n1"
+unit = "rpm"
+levels = [180, 300]
+"""
+
+
+@pytest.mark.slow
+def test_run_design_writes_the_table_the_command_writes(tmp_path):
+    import pandas as pd
+
+    from labtool.cli import main
+
+    (tmp_path / "f.toml").write_text(FACTORS_2x2)
+    assert main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"), "--workers", "1",
+                 "-o", str(tmp_path / "cli.csv")]) == 0
+    res = labtool.run_design(tmp_path / "api.csv", model="kinematic", factors=tmp_path / "f.toml", workers=1)
+    assert res.n_runs == 4 and res.n_failed == 0 and res.netcdf == tmp_path / "api.nc"
+    assert [f.levels for f in res.factors] == [(0.0, 65.0), (180.0, 300.0)]
+    cli, api = pd.read_csv(tmp_path / "cli.csv"), pd.read_csv(tmp_path / "api.csv")
+    pd.testing.assert_frame_equal(cli, api)
+    # the kinematic MR13D grows with the load: an independent fact the rows must show
+    by = api.set_index(["A_Fu_level", "B_n1_level"])["MR13D_max_Nm"]
+    assert by[(2, 1)] > by[(1, 1)] and by[(2, 2)] > by[(1, 2)]
+
+
+def test_run_design_refuses_bad_workers_before_running(tmp_path):
+    from labtool.common.errors import InputError
+
+    with pytest.raises(InputError, match="workers must be >= 1"):
+        labtool.run_design(tmp_path / "r.csv", model="kinematic", workers=0)
+    with pytest.raises(InputError, match="another file than the CSV"):
+        labtool.run_design(tmp_path / "r.csv", model="kinematic", netcdf=tmp_path / "r.csv")
+    assert not any(tmp_path.iterdir())
