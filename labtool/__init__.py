@@ -29,6 +29,8 @@ _EXPORTS = {
     "suggest": "labtool.api.design",
     "acquire": "labtool.api.acquisition",
     "run_design": "labtool.api.doe",
+    "kinematics": "labtool.api.kinematics",
+    "Kinematics": "labtool.api.kinematics",
     "DesignRun": "labtool.api.doe",
     "Acquisition": "labtool.api.acquisition",
     "OperatingPoint": "labtool.common.operating_point",

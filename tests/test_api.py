@@ -186,3 +186,23 @@ def test_run_design_refuses_bad_workers_before_running(tmp_path):
     with pytest.raises(InputError, match="another file than the CSV"):
         labtool.run_design(tmp_path / "r.csv", model="kinematic", netcdf=tmp_path / "r.csv")
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_kinematics_writes_the_file_the_command_writes_and_scales_with_speed(tmp_path):
+    import xarray as xr
+
+    from labtool.cli import main
+
+    assert main(["kinematics", "--rpm", "180", "--points", "361", "-o", str(tmp_path / "cli.nc")]) == 0
+    k = labtool.kinematics(cam_speed=180 * RPM, points=361, output=tmp_path / "api.nc")
+    with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli, \
+            xr.open_dataset(tmp_path / "api.nc", engine="h5netcdf") as api:
+        xr.testing.assert_identical(cli.drop_attrs(), api.drop_attrs())
+        assert {k: v for k, v in cli.attrs.items() if k != "history"} == \
+               {k: v for k, v in api.attrs.items() if k != "history"}
+    assert k.cam_speed_rpm == 180.0 and k.groove_points is None
+    # cam as input: omega2 = psi'(phi1) omega1 and epsilon2 = psi''(phi1) omega1^2 at constant speed
+    twice = labtool.kinematics(cam_speed=360 * RPM, points=361)
+    assert twice.summary["omega2_max_rad_s"] == pytest.approx(2 * k.summary["omega2_max_rad_s"], rel=1e-12)
+    assert twice.summary["epsilon2_max_rad_s2"] == pytest.approx(4 * k.summary["epsilon2_max_rad_s2"], rel=1e-12)
