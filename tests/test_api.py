@@ -206,3 +206,31 @@ def test_kinematics_writes_the_file_the_command_writes_and_scales_with_speed(tmp
     twice = labtool.kinematics(cam_speed=360 * RPM, points=361)
     assert twice.summary["omega2_max_rad_s"] == pytest.approx(2 * k.summary["omega2_max_rad_s"], rel=1e-12)
     assert twice.summary["epsilon2_max_rad_s2"] == pytest.approx(4 * k.summary["epsilon2_max_rad_s2"], rel=1e-12)
+
+
+@pytest.mark.slow
+def test_simulate_writes_the_file_the_command_writes(tmp_path):
+    import xarray as xr
+
+    from labtool.cli import main
+
+    assert main(["simulate", "--model", "rigid", "--rpm", "300", "--accuracy", "fast", "-o", str(tmp_path / "cli.nc")]) == 0
+    sim = labtool.simulate(model="rigid", cam_speed=300 * RPM, accuracy="fast", output=tmp_path / "api.nc")
+    with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli, \
+            xr.open_dataset(tmp_path / "api.nc", engine="h5netcdf") as api:
+        xr.testing.assert_equal(cli.drop_attrs(), api.drop_attrs())
+        assert cli.attrs["cam_speed_rpm"] == api.attrs["cam_speed_rpm"] == 300.0
+        assert cli.attrs["cam_speed_rpm_source"] == "option --rpm" and api.attrs["cam_speed_rpm_source"] == "argument cam_speed"
+    from labtool.common.operating_point import default_source
+    assert sim.sourced.sources["Fu"] == default_source("Fu") and sim.scene.cam_speed == 300 * RPM
+
+
+def test_fit_and_suggest_check_their_output_files_before_any_work(tmp_path):
+    from labtool.common.errors import InputError
+
+    (tmp_path / "fit.png").write_text("taken")
+    with pytest.raises(InputError, match="fit.png"):      # the figure beside the JSON exists
+        labtool.fit(tmp_path / "missing.nc", model="rigid", free="backlash", output=tmp_path / "fit.json")
+    with pytest.raises(InputError, match="different files"):
+        labtool.suggest(tmp_path / "missing.nc", output=tmp_path / "s.png", figure=tmp_path / "s.png")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.png"]
