@@ -28,39 +28,30 @@ from labtool.common.names import shown
 
 
 def _sim_device(plan, point, duration_s: float):
+    """The simulated stand at the point (labtool.acquisition.devices, as 'labtool acquire' builds it)."""
     from labtool.acquisition import signal_chain as sc
-    from labtool.acquisition.sim_stand import SimStand
+    from labtool.acquisition.devices import sim_device
 
     dev = plan.doc.device
-    kw = {} if dev.truth is None else {"truth_model": dev.truth}
-    if dev.truth in sc.MODEL_TRUTHS:
-        kw["ripple"] = 0.0    # a model truth's cam runs at constant speed, as 'labtool acquire' does
-    scene = sc.StandScene(mode="run", **{n: getattr(point.point, n) for n in STATED}, **kw)
-    if dev.truth in sc.MODEL_TRUTHS and sc.model_truth_span(scene) < duration_s:
-        raise InputError(f"the {dev.truth} truth does not reach a periodic steady state, so it cannot cover "
-                         f"{duration_s:g} s of point {point.name}; record fewer revolutions or use the twin truth")
-    k = float(dev.ka_m_s2_per_v or sc.DEFAULT_KA)
-    params = sc.ChainParams(ka_m_s2_per_v=(k, k), resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
-    device = SimStand(scene, params, seed=point.seed, duration_s=duration_s, realtime=dev.pacing == "realtime")
-    attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k, "pacing": dev.pacing}
-    return device, [k, k, math.nan], attrs
+    setup = sim_device({n: getattr(point.point, n) for n in STATED}, truth_model=dev.truth or "twin",
+                       ka_m_s2_per_v=float(dev.ka_m_s2_per_v or sc.DEFAULT_KA), seed=point.seed, duration_s=duration_s,
+                       realtime=dev.pacing == "realtime",
+                       advice=f"point {point.name}: record fewer revolutions or use the twin truth")
+    return setup.device, setup.ka_m_s2_per_v, setup.attrs
 
 
 def _nidaqmx_device(plan, point, duration_s: float):
     """The NI device of the plan: its device file (channels by role, ranges, coupling, IEPE,
     sensitivities, trigger; labtool.acquisition.nidaqmx_config) and/or its physical channels."""
-    from labtool.acquisition import nidaqmx_config as nc
-    from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
+    from labtool.acquisition.devices import nidaqmx_device
 
     dev = plan.doc.device
-    doc = nc.load_device_file(plan.device_file) if plan.device_file is not None else None
-    cfg = nc.build(expand_channels(dev.channels) if dev.channels else None, doc,
-                   source=f"device file {shown(plan.device_file)}" if plan.device_file else f"campaign plan {plan.path.name}",
-                   iepe_excitation_a=0.004 if dev.iepe_excitation else None)
-    device = NIDAQmxDevice(cfg)
+    device, cfg, nominal = nidaqmx_device(dev.channels or None, plan.device_file, (), dev.iepe_excitation,
+                                          f"device file {shown(plan.device_file)}" if plan.device_file
+                                          else f"campaign plan {plan.path.name}")
     # Ka: the plan's calibration files, applied by processing; the nominal one (sensitivity x gain)
     # is stored as the recording's own, as 'labtool acquire' does
-    ka = [float(k) if c.kind == "accel" else math.nan for c, k in zip(cfg.channels, device.ka_nominal)]
+    ka = [float(k) if c.kind == "accel" else math.nan for c, k in zip(cfg.channels, nominal)]
     return device, ka, {"ka_source": "nominal from the device configuration; the campaign's calibration files "
                                      "are applied by processing", **dict(cfg.metadata)}
 

@@ -97,3 +97,140 @@ def test_the_process_command_reads_its_summary_without_opening_the_output_as_a_d
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]"
     assert out.stdout.startswith(f"wrote {tmp_path / 'm.nc'}: cam ")
+
+
+def _recording(path):
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        attrs = {k: v for k, v in f.attrs.items() if k not in ("start_time_utc", "stop_time_utc", "command")}
+        return f["signals"][()], attrs
+
+
+@pytest.mark.slow
+def test_acquire_writes_the_file_the_command_writes(tmp_path):
+    from labtool.cli import main
+
+    assert main(["acquire", "--fast", "--duration", "0.5", "--rpm", "240", "--backlash-mm", "0.2", "--seed", "3",
+                 "--status-every", "0", "-o", str(tmp_path / "cli.h5")]) == 0
+    res = labtool.acquire(tmp_path / "api.h5", stand={"duration_s": 0.5, "cam_speed_rpm": 240, "backlash_mm": 0.2,
+                                                      "seed": 3}, realtime=False)
+    assert res.complete and res.stop_reason == "done" and res.n_samples == 5000 and res.rate_hz == 10000.0
+    assert res.n_channels == 3 and res.overruns == 0 and res.unstated == []
+    cli, api = _recording(tmp_path / "cli.h5"), _recording(tmp_path / "api.h5")
+    np.testing.assert_array_equal(cli[0], api[0])
+    assert {k: str(v) for k, v in cli[1].items()} == {k: str(v) for k, v in api[1].items()}
+    assert api[1]["cam_speed_rpm"] == 240.0 and api[1]["backlash_mm"] == 0.2
+
+
+def test_acquire_refuses_an_unknown_setting_and_a_short_duration_before_writing(tmp_path):
+    from labtool.common.errors import InputError
+
+    with pytest.raises(InputError, match="unknown stand setting.*rpm"):
+        labtool.acquire(tmp_path / "r.h5", stand={"rpm": 240})
+    with pytest.raises(InputError, match="less than one sample"):
+        labtool.acquire(tmp_path / "r.h5", stand={"duration_s": 1e-9}, realtime=False)
+    assert not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.slow
+def test_acquire_keeps_what_a_disconnect_left_and_says_so(tmp_path):
+    from labtool.common.errors import InputError
+
+    res = labtool.acquire(tmp_path / "r.h5", stand={"duration_s": 1.0}, realtime=False, faults=["disconnect@0.3"],
+                          check=False)
+    assert res.stop_reason == "disconnected" and 0 < res.n_samples < 10000
+    with pytest.raises(InputError, match="kept in"):
+        res.check()
+
+
+FACTORS_2x2 = """
+[[factor]]
+name = "A"
+symbol = "Fu"
+unit = "N"
+levels = [0, 65]
+
+[[factor]]
+name = "B"
+symbol = "n1"
+unit = "rpm"
+levels = [180, 300]
+"""
+
+
+@pytest.mark.slow
+def test_run_design_writes_the_table_the_command_writes(tmp_path):
+    import pandas as pd
+
+    from labtool.cli import main
+
+    (tmp_path / "f.toml").write_text(FACTORS_2x2)
+    assert main(["doe", "run", "--model", "kinematic", "--factors", str(tmp_path / "f.toml"), "--workers", "1",
+                 "-o", str(tmp_path / "cli.csv")]) == 0
+    res = labtool.run_design(tmp_path / "api.csv", model="kinematic", factors=tmp_path / "f.toml", workers=1)
+    assert res.n_runs == 4 and res.n_failed == 0 and res.netcdf == tmp_path / "api.nc"
+    assert [f.levels for f in res.factors] == [(0.0, 65.0), (180.0, 300.0)]
+    cli, api = pd.read_csv(tmp_path / "cli.csv"), pd.read_csv(tmp_path / "api.csv")
+    pd.testing.assert_frame_equal(cli, api)
+    # the kinematic MR13D grows with the load: an independent fact the rows must show
+    by = api.set_index(["A_Fu_level", "B_n1_level"])["MR13D_max_Nm"]
+    assert by[(2, 1)] > by[(1, 1)] and by[(2, 2)] > by[(1, 2)]
+
+
+def test_run_design_refuses_bad_workers_before_running(tmp_path):
+    from labtool.common.errors import InputError
+
+    with pytest.raises(InputError, match="workers must be >= 1"):
+        labtool.run_design(tmp_path / "r.csv", model="kinematic", workers=0)
+    with pytest.raises(InputError, match="another file than the CSV"):
+        labtool.run_design(tmp_path / "r.csv", model="kinematic", netcdf=tmp_path / "r.csv")
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_kinematics_writes_the_file_the_command_writes_and_scales_with_speed(tmp_path):
+    import xarray as xr
+
+    from labtool.cli import main
+
+    assert main(["kinematics", "--rpm", "180", "--points", "361", "-o", str(tmp_path / "cli.nc")]) == 0
+    k = labtool.kinematics(cam_speed=180 * RPM, points=361, output=tmp_path / "api.nc")
+    with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli, \
+            xr.open_dataset(tmp_path / "api.nc", engine="h5netcdf") as api:
+        xr.testing.assert_identical(cli.drop_attrs(), api.drop_attrs())
+        assert {k: v for k, v in cli.attrs.items() if k != "history"} == \
+               {k: v for k, v in api.attrs.items() if k != "history"}
+    assert k.cam_speed_rpm == 180.0 and k.groove_points is None
+    # cam as input: omega2 = psi'(phi1) omega1 and epsilon2 = psi''(phi1) omega1^2 at constant speed
+    twice = labtool.kinematics(cam_speed=360 * RPM, points=361)
+    assert twice.summary["omega2_max_rad_s"] == pytest.approx(2 * k.summary["omega2_max_rad_s"], rel=1e-12)
+    assert twice.summary["epsilon2_max_rad_s2"] == pytest.approx(4 * k.summary["epsilon2_max_rad_s2"], rel=1e-12)
+
+
+@pytest.mark.slow
+def test_simulate_writes_the_file_the_command_writes(tmp_path):
+    import xarray as xr
+
+    from labtool.cli import main
+
+    assert main(["simulate", "--model", "rigid", "--rpm", "300", "--accuracy", "fast", "-o", str(tmp_path / "cli.nc")]) == 0
+    sim = labtool.simulate(model="rigid", cam_speed=300 * RPM, accuracy="fast", output=tmp_path / "api.nc")
+    with xr.open_dataset(tmp_path / "cli.nc", engine="h5netcdf") as cli, \
+            xr.open_dataset(tmp_path / "api.nc", engine="h5netcdf") as api:
+        xr.testing.assert_equal(cli.drop_attrs(), api.drop_attrs())
+        assert cli.attrs["cam_speed_rpm"] == api.attrs["cam_speed_rpm"] == 300.0
+        assert cli.attrs["cam_speed_rpm_source"] == "option --rpm" and api.attrs["cam_speed_rpm_source"] == "argument cam_speed"
+    from labtool.common.operating_point import default_source
+    assert sim.sourced.sources["Fu"] == default_source("Fu") and sim.scene.cam_speed == 300 * RPM
+
+
+def test_fit_and_suggest_check_their_output_files_before_any_work(tmp_path):
+    from labtool.common.errors import InputError
+
+    (tmp_path / "fit.png").write_text("taken")
+    with pytest.raises(InputError, match="fit.png"):      # the figure beside the JSON exists
+        labtool.fit(tmp_path / "missing.nc", model="rigid", free="backlash", output=tmp_path / "fit.json")
+    with pytest.raises(InputError, match="different files"):
+        labtool.suggest(tmp_path / "missing.nc", output=tmp_path / "s.png", figure=tmp_path / "s.png")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.png"]

@@ -326,7 +326,7 @@ def test_a_mechanism_file_saved_as_utf16(tmp_path, capsys):
 
 @pytest.mark.hostile("real_file")
 def test_threshold_and_scene_files_with_bom_and_crlf(tmp_path):
-    from labtool.commands.acquire import load_scene
+    from labtool.api.acquisition import load_scene
     from labtool.reports.thresholds import load_thresholds
 
     th = tmp_path / "th.toml"

@@ -43,7 +43,7 @@ def test_every_command_shows_the_owners_defaults(command):
 def test_the_stand_the_plan_and_acquire_default_to_the_owners_point():
     from labtool.acquisition.signal_chain import StandScene
     from labtool.campaign.plan import BASE_POINT, POINT_KEYS
-    from labtool.commands.acquire import DEFAULTS, POINT_OPTIONS
+    from labtool.api.acquisition import DEFAULTS, POINT_OPTIONS
     from labtool.models.dynamics.scene import Scene
 
     stand, scene = StandScene(), Scene()

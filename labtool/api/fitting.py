@@ -7,7 +7,7 @@ from pathlib import Path
 
 def fit(measured, *, model: str, free: str, shared: str | None = None, omega1: str = "const", accuracy: str = "standard", revolutions: int = 3,
         bounds: dict | None = None, start="scan", scan: bool = True, max_runs: int = 200, ka_gain: float = 1.0,
-        delay_ms: float = 0.0, progress=None, **changes):
+        delay_ms: float = 0.0, output=None, figure=None, force: bool = False, progress=None, **changes):
     """Identify a model's parameters from a processed measurement.
 
     Parameters
@@ -44,6 +44,13 @@ def fit(measured, *, model: str, free: str, shared: str | None = None, omega1: s
         The measuring chain's gain on the calibrated Ka [-], when it is not free.
     delay_ms : float
         The measuring chain's delay [ms], when it is not free.
+    output : path, optional
+        The result to write (JSON, the ``summary``).
+    figure : path, optional
+        The figure of the fit and its profiles (PNG; default: beside ``output``, ``.png``). The
+        JSON and the figure are written as one set: both, or neither.
+    force : bool
+        Overwrite existing output files.
     progress : callable, optional
         ``progress(text)`` before each long step.
     **changes
@@ -75,20 +82,60 @@ def fit(measured, *, model: str, free: str, shared: str | None = None, omega1: s
             raise InputError(f"{name} must be a finite number, got {value}")
     if not ka_gain > 0:
         raise InputError(f"ka_gain must be > 0, got {ka_gain:g}")
-
+    figure = result_files(output, figure, force)
     if isinstance(bounds, str):
         bounds = parse_assignments(bounds, "bounds", ranges=True)
     common = dict(omega1=omega1, accuracy=accuracy, revolutions=int(revolutions), bounds=dict(bounds or {}),
                   start=start, overrides={k: v for k, v in changes.items() if v is not None},
                   chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=int(max_runs), scan=scan)
-    if isinstance(measured, (list, tuple)):
-        if len(measured) > 1:
-            from labtool.identification.joint import JointRequest, identify_joint
-            return identify_joint(JointRequest([Path(m) for m in measured], model, free, shared, **common),
-                                  progress=progress)
-        if not measured:
-            raise InputError("fit: no measured file given")
-        measured = measured[0]
-    if shared is not None:
-        raise InputError("shared needs several measured files (a joint fit)")
-    return identify(FitRequest(Path(measured), model, free, **common), progress=progress)
+    files = list(measured) if isinstance(measured, (list, tuple)) else [measured]
+    if not files:
+        raise InputError("fit: no measured file given")
+    if len(files) > 1:
+        from labtool.identification.joint import JointRequest, identify_joint
+        outcome = identify_joint(JointRequest([Path(m) for m in files], model, free, shared, **common),
+                                 progress=progress)
+    else:
+        if shared is not None:
+            raise InputError("shared needs several measured files (a joint fit)")
+        outcome = identify(FitRequest(Path(files[0]), model, free, **common), progress=progress)
+    if output is not None or figure is not None:
+        write_result(outcome, output, figure, joint=len(files) > 1, progress=progress)
+    return outcome
+
+
+def result_files(output, figure, force: bool):
+    """The figure's path (default: beside the JSON ``output``, ``.png``), both checked before any
+    work: different files, and none there unless ``force``."""
+    from labtool.common.errors import InputError
+    from labtool.common.files import check_output_path
+
+    output = Path(output) if output is not None else None
+    figure = Path(figure) if figure is not None else (output.with_suffix(".png") if output is not None else None)
+    outputs = [p for p in (output, figure) if p is not None]
+    if len({p.resolve() for p in outputs}) != len(outputs):
+        raise InputError("the JSON and the figure must be different files")
+    for p in outputs:
+        check_output_path(p, force)
+    return figure
+
+
+def write_result(outcome, output, figure, joint: bool = False, progress=None) -> None:
+    """The fit's summary as JSON (``output``) and its figure (PNG, ``figure``), renamed together:
+    a rerun after an interruption finds no JSON without its figure."""
+    import json
+
+    from labtool.common.files import OutputSet
+
+    text = json.dumps(outcome.summary, indent=1, allow_nan=False)
+    fig = None
+    if figure is not None:
+        if progress is not None:
+            progress("drawing the figure")
+        from labtool.identification.figures import fit_figure, joint_figure
+        fig = joint_figure(outcome) if joint else fit_figure(outcome)
+    with OutputSet() as outputs:
+        if output is not None:
+            outputs.write_text(Path(output), text + "\n")
+        if fig is not None:
+            outputs.write(Path(figure), lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

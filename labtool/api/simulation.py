@@ -3,14 +3,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from labtool.common import cf
+from labtool.common import budget, cf
+from labtool.common.budget import DEFAULT_MAX_SECONDS
 from labtool.common.operating_point import DEFAULT, OperatingPoint
 from labtool.processing.cycles import phi1_grid, resample_revolution
 
+PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 # the variables put on the cam-angle grid, when the model has them
 CYCLE_VARIABLES = ("phi2", "omega2", "epsilon2", "omega1", "MR13D", "aE_t", "aE_n", "x_el")
 
@@ -44,6 +47,8 @@ class Simulation:
         ``rise_only`` and the mechanism.
     wall_s : float
         Wall time of the model run [s].
+    sourced : labtool.common.operating_point.Sourced
+        The operating point with where each value came from (given, the mechanism file, a default).
     """
 
     dataset: xr.Dataset
@@ -54,10 +59,13 @@ class Simulation:
     warnings: list
     scene: object
     wall_s: float
+    sourced: object = None
 
 
 def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolutions: float = 1.0,
-             rise_only: bool = True, mechanism=None, grid_points: int = 720, **changes) -> Simulation:
+             rise_only: bool = True, mechanism=None, grid_points: int = 720, output=None, force: bool = False,
+             max_seconds: float = DEFAULT_MAX_SECONDS, confirm=None, history: str = "", option_source=None,
+             **changes) -> Simulation:
     """Simulate the mechanism at an operating point.
 
     Parameters
@@ -71,10 +79,25 @@ def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolu
         Cam revolutions to simulate [-], the first starting at the start of the rise.
     rise_only : bool
         Simulate the rise only, as the paper's tables do (``revolutions`` then counts rises).
-    mechanism : labtool.models.mechanism.Mechanism, optional
-        The mechanism (default: the paper's STB-216; ``Mechanism.from_toml(path)`` for another).
+    mechanism : path or labtool.models.mechanism.Mechanism, optional
+        The mechanism, or its TOML file (default: the paper's STB-216); its ``[program]`` law
+        stands where ``law`` is not given.
     grid_points : int
         Points per revolution of the cam-angle grid of ``Simulation.cycles`` [-].
+    output : path, optional
+        The NetCDF to write: the time series (``Simulation.dataset``), the operating point with
+        each value's source among its attributes.
+    force : bool
+        Overwrite an existing output file.
+    max_seconds : float
+        Refuse a run of many ``revolutions`` estimated longer [s] (``confirm`` may allow it).
+    confirm : callable, optional
+        ``confirm(question) -> bool`` asked before such a run.
+    history : str
+        The dataset's ``history`` (the command line that made it).
+    option_source : callable, optional
+        ``option_source(field) -> str``: how a given value's source is named (default
+        ``"argument <name>"``).
     **changes
         Operating-point fields replacing ``point``'s, in SI (``cam_speed`` [rad/s], ``Fu`` [N],
         ``backlash`` [m], ``restitution`` [-], ...; see ``labtool.OperatingPoint``).
@@ -91,18 +114,54 @@ def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolu
     >>> sim = labtool.simulate(model="rigid", cam_speed=300 * RPM, revolutions=3, rise_only=False)
     >>> sim.cycles["omega2"].sel(revolution=2)          # doctest: +SKIP
     """
+    from labtool.common.errors import InputError
+    from labtool.common.files import check_output_path, write_netcdf
+    from labtool.common.operating_point import FIELD, resolve
     from labtool.models.dynamics.scene import Scene
     from labtool.models.dynamics.simulate import simulate as run
     from labtool.models.mechanism import Mechanism
 
-    base = point if point is not None else DEFAULT
-    extent = {"revolutions": float(revolutions), "rise_only": bool(rise_only),
-              "mechanism": mechanism if mechanism is not None else Mechanism.default()}
-    scene = Scene.at(base, **changes, **extent)
+    unknown = sorted(set(changes) - set(FIELD))
+    if unknown:
+        raise TypeError(f"simulate() got unexpected keyword arguments {unknown}: the operating point's fields are "
+                        f"{', '.join(FIELD)} (SI)")
+    if output is not None:
+        check_output_path(Path(output), force)
+    if not (math.isfinite(revolutions) and revolutions > 0):
+        raise InputError(f"--revolutions must be a finite number > 0, got {revolutions}")
+    if mechanism is None or isinstance(mechanism, Mechanism):
+        mech, where = mechanism if mechanism is not None else Mechanism.default(), "the mechanism"
+    else:
+        mech, where = Mechanism.from_toml(Path(mechanism)), f"mechanism file {mechanism}"
+    # a mechanism's [program] law stands where no law is given
+    program_law = ({"law": mech.program["law"], "law_source": "its [program] table"}
+                   if mechanism is not None and mech.program.get("law") else None)
+    sourced = resolve(changes, program_law, where=where, base=point if point is not None else DEFAULT,
+                      option_source=option_source or (lambda f: f"argument {f.name}"))
+    scene = Scene.at(sourced.point, revolutions=float(revolutions), rise_only=bool(rise_only), mechanism=mech)
+    budget.check_limit(max_seconds)
+    if revolutions > PROBE_ABOVE_REVOLUTIONS:
+        _check_budget(scene, model, revolutions, max_seconds, output is not None, confirm)
     res = run(scene, model)
-    ds = cf.apply(res.dataset, title=f"labtool simulation, {res.model} model", source=f"labtool {res.model} model")
+    ds = res.dataset
+    ds.attrs.update(sourced.source_attrs())
+    # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
+    cf.apply(ds, title=f"labtool simulation, {res.model} model", source=f"labtool {res.model} model", history=history)
+    if output is not None:
+        write_netcdf(ds, Path(output))
     return Simulation(ds, cam_angle_cycles(ds, grid_points), res.indicators, res.model, res.reason,
-                      list(res.warnings), scene, res.wall_s)
+                      list(res.warnings), scene, res.wall_s, sourced)
+
+
+def _check_budget(scene, model: str, revolutions: float, max_seconds: float, writes: bool, confirm) -> None:
+    """Refuse (or ask through ``confirm``) a run estimated over ``max_seconds`` or the memory there
+    is, from the same scene at 2 and 4 revolutions (peak memory ~2x the Dataset, +1x for the NetCDF)."""
+    from labtool.models.dynamics.simulate import simulate as run
+
+    est = budget.probe_linear(lambda n: run(scene.replace(revolutions=float(n)), model).dataset,
+                              (2, 4), revolutions, "revolution",
+                              nbytes=lambda ds: ds.nbytes * (3.0 if writes else 2.0))
+    budget.check(est, f"--revolutions {revolutions:g}", max_seconds, "use fewer --revolutions", confirm)
 
 
 def cam_angle_cycles(ds: xr.Dataset, grid_points: int = 720) -> xr.Dataset:

@@ -1,4 +1,5 @@
-"""``labtool acquire``: record the stand (simulated or NI-DAQmx) into a v1 recording (HDF5)."""
+"""``labtool acquire``: record the stand (simulated or NI-DAQmx) into a v1 recording (HDF5),
+through ``labtool.acquire`` (labtool/api/acquisition.py)."""
 from __future__ import annotations
 
 import math
@@ -7,67 +8,14 @@ from typing import List, Optional
 
 import typer
 
-from labtool.acquisition.metadata import OPTION, missing_operating_point, operating_point_attrs, run_metadata_attrs
+from labtool.acquisition.metadata import OPTION
 from labtool.common.errors import InputError
-from labtool.common.files import check_output_path
 from labtool.common.invocation import command_line
-from labtool.common.names import shown
-from labtool.common.operating_point import FIELD, schema_field
-from labtool.common.schema import Integer, Number, String, Table, load_toml
 from labtool.options import op_option
-from labtool.processing.calibration_file import KA_MAX, KA_MIN
-
-# keys a scene file's [stand] table may hold -> option name
-SCENE_KEYS = {
-    "mode": "mode", "law": "law", "cam_speed_rpm": "rpm", "Fu_N": "fu", "backlash_mm": "backlash_mm",
-    "jt_factor": "jt_factor", "ripple": "ripple", "cal_accel_m_s2": "cal_accel", "cal_freq_hz": "cal_freq",
-    "cal_channel": "cal_channel", "seed": "seed", "duration_s": "duration", "rate_hz": "rate",
-    "ka_m_s2_per_v": "ka", "truth_model": "truth",
-}
-# option -> operating-point field (labtool.common.operating_point: its default, unit and bounds)
-POINT_OPTIONS = {"law": "law", "rpm": "cam_speed", "fu": "Fu", "backlash_mm": "backlash", "jt_factor": "jt_factor"}
-DEFAULTS = {**{opt: FIELD[name].default_edge for opt, name in POINT_OPTIONS.items()},
-            "mode": "run", "ripple": 0.005, "cal_accel": 9.81, "cal_freq": 79.6, "cal_channel": "aE_t", "seed": 0,
-            "duration": 10.0, "rate": 10000.0, "ka": 864.3, "truth": "twin"}
 
 
 def register(app: typer.Typer) -> None:
     app.command("acquire")(acquire)
-
-
-# the [stand] table of a scene file (labtool.common.schema): types, plausible bounds, unknown keys named
-STAND_SCHEMA = Table({
-    "mode": String(choices=("run", "calibration"), required=False),
-    **{FIELD[name].attr: schema_field(name) for name in POINT_OPTIONS.values()},
-    "ripple": Number(ge=0, lt=1, required=False),
-    "cal_accel_m_s2": Number(gt=0, le=1e6, unit="m/s^2", required=False),
-    "cal_freq_hz": Number(gt=0, le=1e6, unit="Hz", required=False),
-    "cal_channel": String(max_len=64, required=False),
-    "seed": Integer(ge=0, required=False),
-    "duration_s": Number(gt=0, allow_inf=True, unit="s", required=False),
-    "rate_hz": Number(gt=0, le=1e8, unit="Hz", required=False),
-    "ka_m_s2_per_v": Number(gt=KA_MIN, lt=KA_MAX, unit="m/s^2/V", required=False),   # as a calibration file
-    "truth_model": String(max_len=64, required=False),      # checked by StandScene (TRUTH_MODELS)
-})
-assert set(STAND_SCHEMA.fields) == set(SCENE_KEYS)
-# [truth] is checked key by key by labtool.acquisition.signal_chain.truth_settings
-SCENE_SCHEMA = Table({"stand": STAND_SCHEMA, "truth": Table({}, extra=True, required=False)})
-
-
-def load_scene(path: Path) -> dict:
-    """Option values from a scene file's [stand] table (keys in SCENE_KEYS), and under "_truth"
-    the StandScene arguments of its optional [truth] table (labtool.acquisition.signal_chain.TRUTH_TABLE_KEYS);
-    InputError if bad (labtool.common.schema: types, bounds, unknown keys named)."""
-    doc = SCENE_SCHEMA.check(load_toml(path, "scene file"), where=f"scene file {path}")
-    out = {SCENE_KEYS[k]: v for k, v in doc["stand"].items()}
-    table = doc.get("truth")
-    if table is not None:
-        from labtool.acquisition.signal_chain import truth_settings
-        settings = truth_settings(table, f"scene file {path}")
-        if "truth_model" in settings:
-            out["truth"] = settings.pop("truth_model")
-        out["_truth"] = settings
-    return out
 
 
 def acquire(
@@ -118,261 +66,44 @@ def acquire(
                              "asking (off a terminal such a recording is refused without it)"),
 ) -> None:
     """Record aE_t, aE_n (volts) and the tacho from the stand into recording format v1 (docs/architecture.md)."""
-    from labtool.acquisition.device import parse_device
+    import labtool
+    from labtool.output import console, terminal_confirm
 
-    given = {k: v for k, v in dict(rpm=rpm, duration=duration, rate=rate, seed=seed, law=law, fu=fu,
-                                     backlash_mm=backlash_mm, jt_factor=jt_factor, ripple=ripple, ka=ka, mode=mode,
-                                     cal_freq=cal_freq, cal_accel=cal_accel, cal_channel=cal_channel,
-                                     truth=truth).items()
-             if v is not None}
-    opts = dict(DEFAULTS)
-    opts["_truth"] = {}
-    if scene is not None:
-        opts.update(load_scene(scene))
-    opts.update(given)
-    for name, value in (("restitution", restitution), ("contact_damping", contact_damping)):
-        if value is not None:
-            opts["_truth"] = {**opts["_truth"], name: float(value)}
-    if "ripple" in given or (scene is not None and "ripple" in load_scene(scene)):
-        opts["_ripple_given"] = True
-    if device is None:
-        device = "nidaqmx" if device_file is not None else "sim"
-    kind, arg = ("nidaqmx", "") if device.strip() == "nidaqmx" and device_file is not None else parse_device(device)
-    if kind == "nidaqmx" and "ka" not in given and (scene is None or "ka" not in load_scene(scene)):
-        opts["ka"] = None
-    dur = float(opts["duration"])
-    if not (dur > 0):
-        raise InputError(f"--duration must be > 0 s (or inf), got {dur:g}")
-    if math.isinf(dur) and not (realtime or kind == "nidaqmx"):
-        raise InputError("--duration inf needs --realtime (a --fast run would never end)")
-    if not (math.isfinite(float(opts["rate"])) and float(opts["rate"]) > 0):
-        raise InputError(f"--rate must be a positive number of Hz, got {opts['rate']}")
-    _check_sample_count(dur, float(opts["rate"]))
-    _check_sampled(dur, float(opts["rate"]), kind == "sim" and str(opts["mode"]) == "calibration",
-                   float(opts["cal_freq"]))
-    if opts["ka"] is not None:   # --ka 1e308 was stored, and processing used it
-        if not (math.isfinite(float(opts["ka"])) and KA_MIN < float(opts["ka"]) < KA_MAX):
-            raise InputError(f"--ka must lie between {KA_MIN:g} and {KA_MAX:g} m/s^2/V (as in a calibration file), "
-                             f"got {float(opts['ka']):g}")
-    if output.is_dir():
-        raise InputError(f"{output} is a folder; give a file name for the recording")
-    replacing = _check_output(output, force)
     if not (math.isfinite(status_every) and status_every >= 0):
         raise InputError(f"--status-every must be >= 0 s, got {status_every:g}")
-    meta_given = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
-                      conditioner_gain=conditioner_gain, notes=notes)
+    stand = dict(cam_speed_rpm=rpm, duration_s=duration, rate_hz=rate, seed=seed, law=law, Fu_N=fu,
+                 backlash_mm=backlash_mm, jt_factor=jt_factor, ripple=ripple, ka_m_s2_per_v=ka, mode=mode,
+                 cal_freq_hz=cal_freq, cal_accel_m_s2=cal_accel, cal_channel=cal_channel, truth_model=truth)
+    metadata = dict(test_id=test_id, operator=operator, sensor_model=sensor_model, sensor_serial=sensor_serial,
+                    conditioner_gain=conditioner_gain, notes=notes)
+    shown_by = {}
 
-    dev, ka_ch, attrs = _device(kind, arg, opts, given, realtime, fault or [], dur, device_file, ni or [],
-                                iepe_excitation, meta_given, motor_setting)
-    attrs["command"] = command_line("labtool acquire")
-    _check_size(dur, float(opts["rate"]), len(dev.channel_names), realtime or kind == "nidaqmx", yes)
-    if replacing:
-        typer.echo(f"labtool: warning: recording over {shown(output)}, {replacing}", err=True)
-    _run(dev, output, float(opts["rate"]), None if math.isinf(dur) else dur, attrs, ka_ch, force or bool(replacing),
-         status_every)
+    def monitor(dev, ka_ch, dur):
+        shown_by["display"] = _Display(console(stderr=True), dev, dur, ka_ch, status_every)
+        return shown_by["display"]
 
-
-def _check_output(output: Path, force: bool) -> str | None:
-    """Refuse an output another process is recording (--force does not help there), or an existing
-    file without --force unless a rerun may record over it: an unfinished recording (an interrupted
-    or killed run of this command; labtool.acquisition.recorder.unfinished). Returns what is
-    recorded over without --force (None: nothing)."""
-    from labtool.acquisition.recorder import unfinished
-    from labtool.acquisition.writer_lock import RecordingBusy, busy_message, is_being_written
-
-    if is_being_written(output):
-        raise RecordingBusy(busy_message(output))
-    replacing = None if force else unfinished(output)
-    check_output_path(output, force or replacing is not None)
-    return replacing
-
-
-def _device(kind, arg, opts, given, realtime, faults, dur, device_file, ni, iepe_excitation, meta_given,
-            motor_setting):
-    """The device, its per-channel Ka and the recording's attributes (operating point, metadata)."""
-    if kind == "sim":
-        if device_file is not None or ni:
-            raise InputError("--device-file and --ni configure NI-DAQmx devices; use them with --device nidaqmx")
-        dev, ka_ch, attrs = _sim_device(opts, realtime, faults, dur)
-        attrs.update(run_metadata_attrs(meta_given))
-        if motor_setting is not None:
-            attrs.update(operating_point_attrs({"motor_setting": motor_setting}, "stated by the operator (--motor-setting)"))
-        return dev, ka_ch, attrs
-    if faults:
-        raise InputError("--fault works with --device sim only")
-    if not realtime:
-        raise InputError("--fast works with --device sim only: a DAQ board runs at its own pace")
-    return _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting)
+    res = labtool.acquire(output, device=device, stand=stand, scene=scene, realtime=realtime,
+                          truth_options=dict(restitution=restitution, contact_damping=contact_damping),
+                          faults=fault or [], device_file=device_file, ni=ni or [], iepe_excitation=iepe_excitation,
+                          metadata=metadata, motor_setting=motor_setting, force=force, yes=yes,
+                          confirm=terminal_confirm(), monitor=monitor, warn=_warn,
+                          command=command_line("labtool acquire"), check=False)
+    rt = (res.n_samples / res.rate_hz) / res.wall_s if res.wall_s > 0 else float("inf")
+    typer.echo(f"wrote {output}: {res.n_samples} samples x {res.n_channels} channels at {res.rate_hz:g} Hz "
+               f"({res.n_samples / res.rate_hz:.3f} s, {rt:.1f}x real time), {res.overruns} overruns, {res.gaps} gaps, "
+               f"complete={str(res.complete).lower()}")
+    if res.unstated:
+        _warn(f"operating point not stated: {', '.join(res.unstated)} ({', '.join(OPTION[m] for m in res.unstated)}); "
+              "a report will assume the paper's experiment for them and say so")
+    if shown_by["display"].headroom_warning:
+        _warn(shown_by["display"].headroom_warning)
+    if res.clipped:
+        _warn(f"clipping on {', '.join(res.clipped)} (ADC range exceeded); see the 'clip' events")
+    res.check()
 
 
-def _nidaqmx_device(arg, device_file, ni, iepe_excitation, opts, given, meta_given, motor_setting):
-    """The NI device (configuration checked, nothing touched yet), per-channel Ka and the attributes:
-    the operating point as the operator stated it (each value with its source), the run metadata
-    (device file's [metadata], then the options), and where each channel's Ka comes from."""
-    from labtool.acquisition import nidaqmx_config as nc
-    from labtool.acquisition.nidaqmx_driver import NIDAQmxDevice, expand_channels
-    from labtool.acquisition.trigger import SoftwareTrigger
-
-    doc = nc.load_device_file(device_file) if device_file is not None else None
-    cfg = nc.build(expand_channels(arg) if arg else None, doc, overrides=ni,
-                   source=f"device file {device_file}" if device_file is not None else "command line",
-                   iepe_excitation_a=0.004 if iepe_excitation else None)
-    meta = {k: v for k, v in cfg.metadata.items()}
-    meta.update({k: v for k, v in meta_given.items() if v is not None})
-    attrs = run_metadata_attrs(meta)
-    stated = {"law": "law", "cam_speed_rpm": "rpm", "Fu_N": "fu", "backlash_mm": "backlash_mm", "jt_factor": "jt_factor"}
-    op = {name: opts[key] for name, key in stated.items() if key in given}
-    if motor_setting is not None:
-        op["motor_setting"] = motor_setting
-    attrs.update(operating_point_attrs(op, {n: f"stated by the operator ({OPTION[n]})" for n in op}))
-    dev = NIDAQmxDevice(cfg)
-    ka_ch, sources = [], []
-    for ch, nominal in zip(cfg.channels, dev.ka_nominal):
-        if ch.kind != "accel":
-            ka_ch.append(float("nan"))
-            sources.append("none (not an accelerometer)")
-        elif opts["ka"] is not None:
-            ka_ch.append(float(opts["ka"]))
-            sources.append("--ka option")
-        elif math.isfinite(nominal):
-            ka_ch.append(nominal)
-            sources.append(f"nominal: {ch.sensitivity_mv_per_g:g} mV/g x gain {ch.conditioner_gain:g} (calibrate to measure it)")
-        else:
-            ka_ch.append(float("nan"))
-            sources.append("none (calibrate, or give --ka or the sensitivity)")
-    attrs["ka_source"] = "; ".join(f"{n}: {s}" for n, s in zip(cfg.names, sources))
-    if cfg.trigger.software:
-        dev = SoftwareTrigger(dev, cfg.names.index(nc.trigger_channel(cfg).name), cfg.trigger.level_v,
-                              cfg.trigger.edge, cfg.trigger.pretrigger_samples)
-    return dev, ka_ch, attrs
-
-
-def _sim_device(opts, realtime, faults, dur):
-    from labtool.acquisition import signal_chain as sc
-    from labtool.acquisition.sim_stand import SimStand, parse_fault
-
-    model = str(opts["truth"])
-    if model in sc.MODEL_TRUTHS and opts.get("_ripple_given") is None:
-        opts["ripple"] = 0.0  # the model's cam runs at constant speed
-    point = {name: FIELD[name].check_edge(opts[opt]) for opt, name in POINT_OPTIONS.items()}
-    scene = sc.StandScene(truth_model=model, mode=str(opts["mode"]), **point, ripple=float(opts["ripple"]),
-                          cal_accel=float(opts["cal_accel"]), cal_freq=float(opts["cal_freq"]),
-                          cal_channel=str(opts["cal_channel"]), **opts["_truth"])
-    if model in sc.MODEL_TRUTHS and scene.mode == "run":
-        scene = _model_truth_for(scene, dur)
-    k = float(opts["ka"])
-    params = sc.ChainParams(ka_m_s2_per_v=(k, k), resonance_hz=scene.twin.mode_hz, resonance_zeta=scene.twin.mode_zeta)
-    dev = SimStand(scene, params, seed=int(opts["seed"]), duration_s=None if math.isinf(dur) else dur,
-                   realtime=realtime, faults=[parse_fault(f) for f in faults])
-    attrs = {"ka_source": "simulated chain (true value)", "ka_m_s2_per_v": k,
-             "pacing": "realtime" if realtime else "fast"}
-    if scene.mode == "run":
-        attrs["cam_speed_rpm"] = float(scene.cam_speed_rpm)
-    return dev, [k, k, float("nan")], attrs
-
-
-def _model_truth_for(scene, dur):
-    """The rigid/elastic truth scene that covers ``dur`` s: its periodic steady state, or (not
-    periodic) a run over the whole duration up to MAX_MODEL_REVOLUTIONS turns; InputError else."""
-    import dataclasses
-
-    from labtool.acquisition import signal_chain as sc
-
-    if sc.model_truth_span(scene) >= dur:
-        return scene
-    needed = int(math.ceil((dur + 0.2) * scene.cam_speed_rpm / 60.0)) + 1 if math.isfinite(dur) else math.inf
-    if scene.truth_revolutions == 0 and needed <= sc.MAX_MODEL_REVOLUTIONS:
-        longer = dataclasses.replace(scene, truth_revolutions=needed)
-        if sc.model_truth_span(longer) >= dur:
-            return longer
-    raise InputError(f"the {scene.truth_model} truth does not reach a periodic steady state in {scene.model_revolutions} "
-                     f"cam turns (restitution {scene.restitution:g}, contact damping {scene.contact_damping:g} s/m), "
-                     f"so it cannot be repeated over {dur:g} s: give energy loss (--restitution < 1, --contact-damping > 0) "
-                     f"or a --duration of at most {sc.MAX_MODEL_REVOLUTIONS} turns")
-
-
-MAX_SAMPLES = 1e15    # per channel: 3000 years at 10 kHz, and an exact integer in a float
-
-
-def _check_sample_count(duration_s: float, rate_hz: float) -> None:
-    """InputError when a finite --duration (s) at --rate (Hz) asks for more than MAX_SAMPLES
-    samples: --duration 1e308 overflowed the device's sample count (OverflowError, exit 70)."""
-    if math.isfinite(duration_s) and duration_s * rate_hz > MAX_SAMPLES:
-        raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is more samples than the {MAX_SAMPLES:g} "
-                         f"a recording can hold; give at most {MAX_SAMPLES / rate_hz:g} s, "
-                         "or --duration inf --realtime to record until Ctrl-C")
-
-
-def _check_size(duration_s: float, rate_hz: float, n_channels: int, paced: bool, yes: bool) -> None:
-    """Ask before a recording of more than 10 min of the stand (paced: real time) or 100 MB
-    (float32 samples), on a terminal; refuse it elsewhere unless --yes (labtool.common.budget.check_work):
-    a --duration of 2000 meant as ms is 240 MB at 10 kHz."""
-    if not math.isfinite(duration_s):            # until Ctrl-C: the user stops it
-        return
-    from labtool.common import budget
-    from labtool.output import terminal_confirm
-
-    samples = duration_s * rate_hz
-    budget.check_work(f"--duration {duration_s:g} s at {rate_hz:g} Hz", duration_s if paced else 0.0,
-                      samples * n_channels * 4, f"{samples:.4g} samples x {n_channels} channels x 4 bytes"
-                      + (", in real time" if paced else ""), terminal_confirm(), yes,
-                      "give a shorter --duration (in seconds)")
-
-
-def _check_sampled(duration_s: float, rate_hz: float, shaker: bool, cal_freq_hz: float) -> None:
-    """InputError when the recording could not hold what it asks: --duration under one sample
-    (1e-9 s wrote a recording of 0 samples marked complete, exit 0), or the calibration shaker's
-    sine at or past half --rate (6000 Hz at 10 kHz recorded its 4000 Hz alias, exit 0)."""
-    if math.isfinite(duration_s) and duration_s * rate_hz < 1.0:
-        raise InputError(f"--duration {duration_s:g} s at {rate_hz:g} Hz is less than one sample; "
-                         f"give at least {1.0 / rate_hz:g} s")
-    if shaker and not cal_freq_hz < 0.5 * rate_hz:
-        raise InputError(f"--cal-freq {cal_freq_hz:g} Hz is not below half the sample rate ({0.5 * rate_hz:g} Hz): "
-                         "the recording would hold its alias; lower --cal-freq or raise --rate")
-
-
-def _run(dev, output: Path, rate: float, duration, attrs, ka_ch, force: bool, status_every: float = 5.0):
-    from labtool.output import console
-
-    from labtool.acquisition import session
-
-    con = console(stderr=True)
-    display = _Display(con, dev, duration, ka_ch, status_every)
-    try:  # session.run turns Ctrl-C and SIGTERM into a clean stop between blocks
-        result = session.run(dev, output, rate, duration, attrs=attrs, ka_m_s2_per_v=ka_ch, progress=display.progress,
-                             on_block=display.on_block, replace=force)
-        display.progress(None, result.wall_s, final=True)
-    finally:
-        display.stop()
-    rt = (result.n_samples / result.rate_hz) / result.wall_s if result.wall_s > 0 else float("inf")
-    typer.echo(f"wrote {output}: {result.n_samples} samples x {len(dev.channel_names)} channels at "
-               f"{result.rate_hz:g} Hz ({result.n_samples / result.rate_hz:.3f} s, {rt:.1f}x real time), "
-               f"{result.overruns} overruns, {result.gaps} gaps, complete={str(result.complete).lower()}")
-    # the simulated stand states its whole operating point; a real stand only what the operator said
-    missing = [] if dev.metadata.get("device") == "sim" else missing_operating_point(attrs)
-    if missing:
-        typer.echo(f"labtool: warning: operating point not stated: {', '.join(missing)} "
-                   f"({', '.join(OPTION[m] for m in missing)}); a report will assume the paper's experiment for "
-                   "them and say so", err=True)
-    if display.headroom_warning:
-        typer.echo(f"labtool: warning: {display.headroom_warning}", err=True)
-    if result.clipped:
-        typer.echo(f"labtool: warning: clipping on {', '.join(result.clipped)} (ADC range exceeded); "
-                   "see the 'clip' events", err=True)
-    if result.outcome in ("disconnected", "disk_full", "write_error"):
-        raise InputError(f"{result.message}; {result.n_samples} samples ({result.n_samples / result.rate_hz:.3f} s) "
-                         f"kept in {output}, complete={str(result.complete).lower()}")
-    if result.signum is not None:        # Ctrl-C, SIGTERM, SIGHUP: exit 128 + signal (labtool.cli)
-        from labtool.common.errors import interruption
-
-        secs = result.n_samples / result.rate_hz
-        if result.complete:
-            note = f"{shown(output)} is closed and complete ({result.n_samples} samples, {secs:.3f} s)"
-        else:
-            of = f" of {duration:g}" if duration is not None else ""
-            note = (f"{shown(output)} keeps its {result.n_samples} samples ({secs:.3f}{of} s), closed and marked "
-                    "incomplete; the same command records it again")
-        raise interruption(result.signum, note)
+def _warn(text: str) -> None:
+    typer.echo(f"labtool: warning: {text}", err=True)
 
 
 class _Display:

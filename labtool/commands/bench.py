@@ -56,11 +56,6 @@ def accuracy(
     one_core: bool = typer.Option(True, "--one-core/--all-cores", help="pin the process to one core while measuring"),
 ) -> None:
     """Work-precision data of every model x solver x tolerance (CSV, PNG) and the presets' errors."""
-    from rich.markup import escape
-    from rich.table import Table
-
-    from labtool.output import console
-
     names = [m.strip() for m in models.split(",") if m.strip()]
     bad = [m for m in names if m not in ("rigid", "elastic")]
     if bad or not names:
@@ -72,6 +67,16 @@ def accuracy(
     argv = ["--runs", ",".join(map(str, run_list)), "--ladder-runs", ",".join(map(str, ladder_list)),
             "--models", ",".join(names), "--out", str(output)] + ([] if one_core else ["--all-cores"])
     summary = wp.main(argv, quiet=True)
+    _print_summary(summary, names, output)
+
+
+def _print_summary(summary: dict, names: list, output: Path) -> None:
+    """Each preset's worst errors as a table, then the speed-up over scipy DOP853 per model."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from labtool.output import console
+
     table = Table(title=f"Work-precision ({output}/work_precision.csv, .png)")
     for col in ("model", "preset", "err omega2", "err MR13D", "err t_event [s]", "d events", "err indicators",
                 "loop [s]"):

@@ -6,6 +6,7 @@ the ANOVA (Fisher's F) and the reduced effect models in the paper's matrix form 
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
@@ -17,6 +18,8 @@ from labtool.common.budget import LONG_RUN_S
 from labtool.common.files import atomic_write, check_output_path
 from labtool.common.invocation import command_line
 from labtool.common.names import shown
+from labtool.reports.effects import heading as _heading
+from labtool.reports.effects import level as _level
 
 doe_app = typer.Typer(
     help="Simulated experiments: full factorial runs (Tables 2-3) and their ANOVA (eqs 20-28).",
@@ -68,24 +71,57 @@ def run(
     per-run cost / workers) at more than 10 min, or using more than 100 MB of disk, asks for
     confirmation, or needs --yes when not on a terminal.
     """
+    import labtool
     from labtool.common.errors import SolverError
-    from labtool.execution.backends import backend_for, check_scheduler_address
-    from labtool.execution.design import parts_folder, run_design
-    from labtool.common.operating_point import PAPER_EXPERIMENT
-    from labtool.models.dynamics.scene import Scene
-    from labtool.models.study.doe import Design, read_factors, responses_for, table1_factors
+    from labtool.execution.progress import BarProgress, LineProgress
+    from labtool.output import terminal_confirm, terminal_console
 
-    responses_for(model)
-    if scheduler is not None:
-        check_scheduler_address(scheduler)
+    _check_options(output, netcdf, workers, chunk_runs)
+    err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
+    label = f"doe run ({model})"
+    if err is not None:
+        def say(text):
+            err.print(text, highlight=False, markup=False, soft_wrap=True)
+        bar = BarProgress(label, err, None)
+    else:
+        def say(text):
+            typer.echo(text, err=True)
+        bar = contextlib.nullcontext(LineProgress(label, say))
+    with bar as progress:
+        res = labtool.run_design(output, model=model, law=law, omega1=omega1, factors=factors, accuracy=accuracy,
+                                 elastic_gap=elastic_gap, scheduler=scheduler, scheduler_always=scheduler_always,
+                                 workers=workers, chunk_runs=chunk_runs, fresh=fresh, yes=yes,
+                                 confirm=terminal_confirm(), netcdf=netcdf, force=force, progress=progress, say=say,
+                                 history=command_line())
+    if res.n_runs <= 64:  # the table itself, as in the paper; large designs only get the summary line
+        import pandas as pd
+        gap_note = f", gap {elastic_gap}" if model == "elastic" else ""
+        _print_results(pd.read_csv(output), f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}",
+                       res.factors)
+    per_run = "" if res.cost_s is None else f", {res.cost_s * 1e3:.3g} ms per run"
+    resumed = f"; {res.resumed} runs resumed from {res.parts}" if res.resumed else ""
+    typer.echo(f"wrote {output} and {res.netcdf}: {res.n_runs} runs of the {model} model "
+               f"({res.where}, {res.wall_s:.2f} s{per_run}{resumed})")
+    if model == "elastic" and elastic_gap == "physical":
+        typer.echo("note: the follower crosses the backlash here; the paper's Table 3 counts (1 jump, 0 impacts) "
+                   "come from --elastic-gap closed (docs/models.md)")
+    if res.n_failed:
+        first = min(res.failures)
+        raise SolverError(f"{res.n_failed} of {res.n_runs} runs failed and are left empty in {output} "
+                          f"(run {first}: {res.failures[first]})")
+
+
+def _check_options(output: Path, netcdf: Optional[Path], workers: Optional[int], chunk_runs: Optional[int]) -> None:
+    """The options' own checks, named as the command line names them (labtool.run_design checks
+    them again for a caller from Python)."""
+    from labtool.execution.design import parts_folder
+
     nc_path = netcdf if netcdf is not None else output.with_suffix(".nc")
     if nc_path == output:
         raise typer.BadParameter("the NetCDF path must differ from the CSV path", param_hint="--netcdf")
     if os.path.abspath(nc_path) == os.path.abspath(parts_folder(output)):
         raise typer.BadParameter(f"{shown(nc_path)} is the folder of the CSV's finished chunks; name another "
                                  "NetCDF file", param_hint="--netcdf")
-    for p in (output, nc_path):
-        check_output_path(p, force)
     if workers is not None and workers < 1:
         raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
     cores = os.cpu_count() or 1
@@ -94,68 +130,6 @@ def run(
                                  f"only share them), got {workers}", param_hint="--workers")
     if chunk_runs is not None and chunk_runs < 1:
         raise typer.BadParameter(f"must be >= 1, got {chunk_runs}", param_hint="--chunk-runs")
-    fset = read_factors(factors) if factors is not None else table1_factors()
-    base = Scene.at(PAPER_EXPERIMENT, law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
-    design = Design(tuple(fset), base, model)
-    design.validate()
-    n_runs = len(design)
-    history = command_line()
-
-    from labtool.output import terminal_console
-    from labtool.execution.progress import BarProgress, LineProgress
-    err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
-
-    def on_estimate(cost_s, n_left, n_workers):
-        # called once the first runs measured the cost, before any is kept: the time of the runs
-        # left and the disk of the whole design, asked for on a terminal, else refused without --yes
-        from labtool.common import budget
-        from labtool.execution.chunked import estimate_text
-        from labtool.execution.design import disk_bytes
-        from labtool.output import terminal_confirm
-
-        budget.check_work(f"this design of {n_runs} runs", cost_s * n_left / max(n_workers, 1), disk_bytes(design),
-                          f"{estimate_text(cost_s, n_left, n_workers)}; about {disk_bytes(design) / n_runs:.0f} bytes "
-                          "a run on disk", terminal_confirm(), yes, "use fewer levels (finished chunks are kept, "
-                          "a rerun resumes)")
-
-    folder = parts_folder(output)
-    if folder.exists() and not fresh:
-        text = f"resuming from the finished chunks in {folder} (--fresh discards them)"
-        if err is not None:
-            err.print(text, highlight=False, markup=False, soft_wrap=True)
-        else:
-            typer.echo(text, err=True)
-    backend = backend_for(workers, scheduler, scheduler_always=scheduler_always)
-    label = f"doe run ({model})"
-    try:
-        if err is not None:
-            with BarProgress(label, err, n_runs) as bar:
-                result = run_design(design, output, nc_path, backend, chunk_items=chunk_runs, fresh=fresh,
-                                    on_estimate=on_estimate, progress=bar, history=history)
-        else:
-            line = LineProgress(label, lambda text: typer.echo(text, err=True))
-            result = run_design(design, output, nc_path, backend, chunk_items=chunk_runs, fresh=fresh,
-                                on_estimate=on_estimate, progress=line, history=history)
-    finally:
-        if backend is not None:
-            backend.close()
-
-    if n_runs <= 64:  # the table itself, as in the paper; large designs only get the summary line
-        import pandas as pd
-        gap_note = f", gap {elastic_gap}" if model == "elastic" else ""
-        _print_results(pd.read_csv(output), f"{model} model, {law} law, omega1 {omega1}, accuracy {accuracy}{gap_note}",
-                       fset)
-    per_run = "" if result.cost_s is None else f", {result.cost_s * 1e3:.3g} ms per run"
-    resumed = f"; {result.resumed} runs resumed from {folder}" if result.resumed else ""
-    typer.echo(f"wrote {output} and {nc_path}: {n_runs} runs of the {model} model "
-               f"({result.where}, {result.wall_s:.2f} s{per_run}{resumed})")
-    if model == "elastic" and elastic_gap == "physical":
-        typer.echo("note: the follower crosses the backlash here; the paper's Table 3 counts (1 jump, 0 impacts) "
-                   "come from --elastic-gap closed (docs/models.md)")
-    if result.n_failed:
-        first = min(result.failures)
-        raise SolverError(f"{result.n_failed} of {n_runs} runs failed and are left empty in {output} "
-                          f"(run {first}: {result.failures[first]})")
 
 
 def in_units(table, factors):
@@ -213,6 +187,7 @@ def analyze(
     physical = physical_factors(data, factors)
     out = anova.analyze(data, alpha=alpha, max_order=max_order, responses=response)
     if plot is not None:
+        from labtool.reports.effects import plot_effects
         atomic_write(plot, lambda tmp: plot_effects(data, out, tmp, physical))
     if json_out:
         typer.echo(json.dumps(anova.to_json(out)))
@@ -237,14 +212,6 @@ def physical_factors(data, path: Optional[Path]) -> list:
         raise InputError(f"{path}: none of its factors ({', '.join(f'{f.name} = {f.symbol}' for f in given)}) is a "
                          f"factor of the table ({', '.join(f'{d.name} = {d.symbol}' for d in data.factors)})")
     return out
-
-
-def _heading(d, f) -> str:
-    return f.heading if f is not None else f"{d.symbol} [level]"
-
-
-def _level(d, f, k: int) -> str:
-    return f.level_text(k) if f is not None else f"{d.symbol} level {k}"
 
 
 def _print_text(data, out, digits: int, physical=None) -> None:
@@ -284,70 +251,3 @@ def _print_text(data, out, digits: int, physical=None) -> None:
         r2 = "" if res.r2_reduced is None else f" (R^2 = {res.r2_reduced:.4f})"
         con.print(f"Reduced model, significant terms only{r2}:", highlight=False, soft_wrap=True)
         con.print(matrix_form(res, digits), highlight=False, markup=False, soft_wrap=True)
-
-
-def plot_effects(data, out, path: Path, physical=None) -> None:
-    """One row per response: main effects (mean at each level of each factor, Minitab style) and
-    one interaction panel per pair of factors (cell means); significant terms are drawn solid.
-    Levels are shown as values in their units where ``physical`` (physical_factors) has them."""
-    import itertools
-
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from labtool.models.study.anova import RESPONSE_UNITS, cell_means
-    from labtool.reports.figures import OKABE_ITO as PALETTE
-
-    OKABE_ITO = [PALETTE[k] for k in ("blue", "vermillion", "green", "purple", "orange", "sky")]
-
-    factors = data.factors
-    physical = physical or [None] * len(factors)
-    pairs = list(itertools.combinations(range(len(factors)), 2))
-    ncol = 1 + len(pairs)
-    nrow = len(out)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.0 + 2.4 * ncol, 2.6 * nrow), squeeze=False)
-    for row, (resp, res) in enumerate(out.items()):
-        m = cell_means(data, resp)
-        ax = axes[row][0]
-        x0, ticks, labels = 0, [], []
-        for i, f in enumerate(factors):
-            other = tuple(a for a in range(m.ndim) if a != i)
-            means = m.mean(axis=other) if other else m
-            xs = np.arange(x0, x0 + len(f.levels))
-            sig = res.terms[f.name].significant
-            ax.plot(xs, means, "o-" if sig else "o--", color=OKABE_ITO[i % len(OKABE_ITO)], lw=1.0,
-                    label=f"{f.name}: {_heading(f, physical[i])}")
-            ticks += list(xs)
-            labels += [_level(f, physical[i], k + 1).replace(" = ", " ") for k in range(len(f.levels))]
-            x0 += len(f.levels) + 1
-        ax.axhline(res.mean, color="0.5", lw=0.8)
-        ax.set_xticks(ticks, labels, fontsize=6, rotation=90)
-        ax.set_ylabel(f"{resp} [{RESPONSE_UNITS.get(resp, '')}]", fontsize=8)
-        ax.set_title("main effects (solid: significant)", fontsize=8)
-        ax.legend(fontsize=6, loc="best")
-        for j, (a, b) in enumerate(pairs, 1):
-            ax = axes[row][j]
-            other = tuple(k for k in range(m.ndim) if k not in (a, b))
-            cm = m.mean(axis=other) if other else m
-            name = factors[a].name + factors[b].name
-            term = res.terms.get(name)
-            style = "-" if term is not None and term.significant else "--"
-            for lb in range(cm.shape[1]):
-                ax.plot(np.arange(1, cm.shape[0] + 1), cm[:, lb], "o" + style, color=OKABE_ITO[lb % len(OKABE_ITO)],
-                        lw=1.0, label=_level(factors[b], physical[b], lb + 1))
-            pa = physical[a]
-            ax.set_xticks(np.arange(1, cm.shape[0] + 1),
-                          [f"{v:g}" for v in pa.levels] if pa is not None else [str(k) for k in range(1, cm.shape[0] + 1)])
-            ax.set_xlabel(f"{factors[a].name}: {_heading(factors[a], pa)}", fontsize=7)
-            ax.set_title(f"{name}" + (" (pooled)" if term is not None and term.pooled else
-                                      " *" if term is not None and term.significant else ""), fontsize=8)
-            ax.tick_params(labelsize=6)
-            ax.legend(fontsize=6)
-    # the file name is text, not mathtext ('$x^$' in a name raised a ParseException) nor markup
-    fig.suptitle(f"{shown(data.source)}: main effects and two-factor interactions (cell means)", fontsize=9,
-                 parse_math=False)
-    fig.tight_layout()
-    fig.savefig(path, format="png", dpi=90)
-    plt.close(fig)

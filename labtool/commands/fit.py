@@ -22,8 +22,6 @@ import typer
 
 from labtool.options import given, op_option
 
-from labtool.common.files import OutputSet, check_output_path
-
 
 def register(app: typer.Typer) -> None:
     app.command("fit")(fit)
@@ -72,54 +70,30 @@ def fit(
 ) -> None:
     """Identify backlash, restitution, contact damping/length, Ka gain or delay from a measurement:
     least squares of the model's cycle statistics against the measured ones, with 95 % intervals."""
-    from labtool.common.errors import InputError
-    from labtool.identification.fit import FitRequest, identify
+    import labtool
+    from labtool.api.fitting import result_files
+    from labtool.common.files import check_interrupted
     from labtool.identification.parameters import parse_assignments
     from labtool.output import ProgressLines, console
 
-    for name, value in (("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value}")
-    if not (ka_gain > 0):
-        raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
-    figure = _outputs(output, figure, force)
-    start_value = start if start in ("scan", "scene") else parse_assignments(start, "--start")
+    _check_options(ka_gain, delay_ms, len(measured), shared)
+    figure = result_files(output, figure, force)
     overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
                       restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
                       kc_factor=kc_factor, elastic_gap=elastic_gap)
-    common = dict(omega1=omega1, accuracy=accuracy, revolutions=revolutions,
-                  bounds=parse_assignments(bounds, "--bounds", ranges=True), start=start_value, overrides=overrides,
-                  chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=max_runs, scan=scan)
-    if len(measured) == 1 and shared is not None:
-        raise InputError("--shared needs several measured files (a joint fit); give two or more, or drop --shared")
-    from labtool.common.files import check_interrupted
-
     err = console(stderr=True)
     with (err.status("fit") if err.is_terminal else ProgressLines(sys.stderr, "fit")) as status:
         def progress(msg: str) -> None:
             check_interrupted()        # a Ctrl-C that Python dropped (in a weakref callback) stops the search here
             status.update(msg)
-        if len(measured) == 1:
-            outcome = identify(FitRequest(measured[0], model, free, **common), progress=progress)
-        else:
-            from labtool.identification.joint import JointRequest, identify_joint
-            outcome = identify_joint(JointRequest(list(measured), model, free, shared, **common), progress=progress)
-        text = json.dumps(outcome.summary, indent=1, allow_nan=False)
-        fig = None
-        if figure is not None:
-            status.update("drawing the figure")
-            from labtool.identification.figures import fit_figure, joint_figure
-            fig = fit_figure(outcome) if len(measured) == 1 else joint_figure(outcome)
-        # both outputs are ready before either is written, and are renamed together (both or
-        # neither: a rerun after an interruption finds no JSON without its figure)
-        with OutputSet() as outputs:
-            if output is not None:
-                outputs.write_text(output, text + "\n")
-            if fig is not None:
-                outputs.write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        outcome = labtool.fit(list(measured), model=model, free=free, shared=shared, omega1=omega1, accuracy=accuracy,
+                              revolutions=revolutions, bounds=parse_assignments(bounds, "--bounds", ranges=True),
+                              start=start if start in ("scan", "scene") else parse_assignments(start, "--start"),
+                              scan=scan, max_runs=max_runs, ka_gain=ka_gain, delay_ms=delay_ms, output=output,
+                              figure=figure, force=force, progress=progress, **overrides)
     joint = len(measured) > 1
     if as_json:
-        typer.echo(text)
+        typer.echo(json.dumps(outcome.summary, indent=1, allow_nan=False))
     else:
         for line in (joint_lines(outcome.summary) if joint else summary_lines(outcome.summary)):
             typer.echo(line)
@@ -130,18 +104,18 @@ def fit(
         raise typer.Exit(1)
 
 
-def _outputs(output: Path | None, figure: Path | None, force: bool) -> Path | None:
-    """Check the output files before any work; the figure defaults to beside the JSON."""
+def _check_options(ka_gain: float, delay_ms: float, n_files: int, shared: Optional[str]) -> None:
+    """The chain options and --shared, named as the command line names them (labtool.fit checks
+    them again for a caller from Python)."""
     from labtool.common.errors import InputError
 
-    if figure is None and output is not None:
-        figure = output.with_suffix(".png")
-    outputs = [p for p in (output, figure) if p is not None]
-    if len({p.resolve() for p in outputs}) != len(outputs):
-        raise InputError("the JSON and the figure must be different files")
-    for p in outputs:
-        check_output_path(p, force)
-    return figure
+    for name, value in (("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
+        if value is not None and not math.isfinite(value):
+            raise InputError(f"{name} must be a finite number, got {value}")
+    if not (ka_gain > 0):
+        raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
+    if n_files == 1 and shared is not None:
+        raise InputError("--shared needs several measured files (a joint fit); give two or more, or drop --shared")
 
 
 def _num(v, fmt=".4g") -> str:

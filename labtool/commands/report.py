@@ -12,37 +12,11 @@ from typing import List, Optional
 import typer
 
 from labtool.common import budget
-from labtool.common.files import check_outputs
 from labtool.options import given, op_option
-
-PROBE_ABOVE_REVOLUTIONS = 20     # the default 6 takes well under a minute: no estimate needed
 
 
 def register(app: typer.Typer) -> None:
     app.command("report")(report)
-
-
-def _check_budget(models, modes, accuracy, revolutions, robustness, max_seconds) -> None:
-    """Estimate the simulations of a long report from each dynamic model at 2 and 4 revolutions
-    (the paper's operating point; the file's may differ, so this is an order of magnitude) times
-    the runs it makes (models x omega1 modes, x2 with the robustness check at the other preset)."""
-    from labtool.models.dynamics.scene import Scene
-    from labtool.models.dynamics.simulate import simulate
-
-    seconds, peak, bases = 0.0, 0.0, []
-    for model in [m for m in models if m in ("rigid", "elastic")]:
-        scene = Scene(accuracy=accuracy, rise_only=False)
-        est = budget.probe_linear(lambda n: simulate(scene.replace(revolutions=float(n)), model).dataset,
-                                  (2, 4), revolutions, "revolution", nbytes=lambda ds: 2.0 * ds.nbytes)
-        runs = len(modes) * (2 if robustness else 1)
-        seconds += runs * est.seconds
-        peak = max(peak, est.bytes * len(modes))
-        bases.append(f"{model}: {est.basis}, {runs} runs")
-    if seconds > 0:
-        from labtool.output import terminal_confirm
-
-        budget.check(budget.Estimate(seconds, peak, "; ".join(bases)), f"--revolutions {revolutions}", max_seconds,
-                     "use fewer --revolutions", terminal_confirm())
 
 
 def _split(value: str) -> list[str]:
@@ -86,49 +60,32 @@ def report(
 ) -> None:
     """Compare a measurement with the rigid and elastic models (omega1 constant and variable):
     Sprague & Geers, ISO/TS 18571, NRMSE, peak and timing errors, per revolution and overall."""
-    from labtool.output import ProgressLines, console
+    import labtool
+    from labtool.output import ProgressLines, console, terminal_confirm
+    from labtool.reports.outputs import curves_beside
+    from labtool.reports.pipeline import headline, verdict_lines
 
-    from labtool.reports.align import Conditioning
-    from labtool.reports.pipeline import build_report, headline, verdict_lines
-    from labtool.reports.thresholds import load_thresholds
-
-    from labtool.reports.outputs import curves_beside, write_report
-
-    curve_paths = curves_beside(output) if curves else {}
-    check_outputs({"-o": output, "--pdf": pdf, "--json": json_path,
-                   **{f"curves ({f})": p for f, p in curve_paths.items()}}, force)
-    budget.check_limit(max_seconds)
-    if revolutions > PROBE_ABOVE_REVOLUTIONS:
-        _check_budget(_split(models), _split(omega1), accuracy, revolutions, robustness, max_seconds)
-    th = load_thresholds(thresholds) if thresholds else None
-    fitted = None
-    if fit:
-        from labtool.identification.fit import load_fit
-        fitted = [load_fit(p) for p in fit]
-    cond = Conditioning(n_grid=grid, n_harmonics=harmonics)
     overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
                       restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
                       kc_factor=kc_factor, elastic_gap=elastic_gap)
     err = console(stderr=True)
-    quiet = json_path is not None and str(json_path) == "-"
     with (err.status("report") if err.is_terminal else ProgressLines(sys.stderr, "report")) as status:
-        rep = build_report(measured, _split(models), _split(omega1), th, overrides, accuracy, revolutions, cond,
-                           progress=lambda msg: status.update(msg), robustness=robustness, fitted=fitted,
-                           discriminate=discriminate)
-        # the HTML, PDF, JSON and curves are one set: all written, or none (a full disk, Ctrl-C)
-        text = write_report(rep, output, pdf, json_path, progress=lambda msg: status.update(msg), curves=curve_paths)
-        if json_path is not None and str(json_path) == "-":
-            typer.echo(text)
-    if not quiet:
+        rep = labtool.report(measured, output, models=_split(models), omega1=_split(omega1), thresholds=thresholds,
+                             pdf=pdf, json=json_path, accuracy=accuracy, revolutions=revolutions, robustness=robustness,
+                             harmonics=harmonics, grid_points=grid, fits=fit or (), curves=curves,
+                             discriminate=discriminate, force=force, max_seconds=max_seconds,
+                             confirm=terminal_confirm(), progress=lambda msg: status.update(msg), **overrides)
+    if json_path is not None and str(json_path) == "-":
+        from labtool.reports.summary import to_json
+        typer.echo(to_json(rep))
+    else:
         for row in headline(rep):
             typer.echo(f"{row['label']:28s} omega2 ISO {row['omega2_iso_rating']:.3f} ({row['omega2_iso_grade']}), "
                        f"epsilon2 ISO {row['epsilon2_iso_rating']:.3f} ({row['epsilon2_iso_grade']})")
-        for line in verdict_lines(rep):
+        for line in verdict_lines(rep) + [f"note: {n}" for n in rep.notes]:
             typer.echo(line)
-        for n in rep.notes:
-            typer.echo(f"note: {n}")
         typer.echo(f"wrote {output}" + (f", {pdf}" if pdf else "") + (f", {json_path}" if json_path else "")
-                   + "".join(f", {p}" for p in curve_paths.values()))
+                   + "".join(f", {p}" for p in (curves_beside(output) if curves else {}).values()))
     failed = [r for r in rep.threshold_rows if not r["passed"]]
     if failed:
         typer.echo(f"labtool: {len(failed)} of {len(rep.threshold_rows)} threshold checks failed "

@@ -17,11 +17,8 @@ from typing import Optional
 import typer
 
 from labtool.common import budget
-from labtool.common.files import check_output_path, write_netcdf
 from labtool.common.invocation import command_line
 from labtool.options import given, op_option
-
-PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 
 
 def register(app: typer.Typer) -> None:
@@ -63,63 +60,28 @@ def simulate(
                                       "estimated run time of many --revolutions is longer [s]"),
 ) -> None:
     """Simulate the mechanism at one operating point and report the jump indicators."""
-    from labtool.common.errors import InputError
-    from labtool.common.operating_point import resolve
-    from labtool.models.dynamics.scene import Scene
+    import labtool
     from labtool.models.dynamics.simulate import INDICATORS
-    from labtool.models.dynamics.simulate import simulate as run
-    from labtool.models.mechanism import Mechanism
+    from labtool.output import terminal_confirm
 
-    if output is not None:
-        check_output_path(output, force)
-    if not (math.isfinite(revolutions) and revolutions > 0):
-        raise InputError(f"--revolutions must be a finite number > 0, got {revolutions}")
     values = given(law=law, cam_speed=rpm, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor, omega1_mode=omega1,
                    accuracy=accuracy, restitution=restitution, contact_length=contact_length_mm, kc_factor=kc_factor,
                    contact_damping=contact_damping, elastic_gap=elastic_gap)
-    mech = Mechanism.from_toml(mechanism) if mechanism else Mechanism.default()
-    # a mechanism file's [program] law stands where --law is not given
-    program_law = ({"law": mech.program["law"], "law_source": "its [program] table"}
-                   if mechanism is not None and mech.program.get("law") else None)
-    sourced = resolve(values, program_law, where=f"mechanism file {mechanism}")
-    scene = Scene.at(sourced.point, revolutions=revolutions, rise_only=rise_only, mechanism=mech)
-    budget.check_limit(max_seconds)
-    if revolutions > PROBE_ABOVE_REVOLUTIONS:
-        _check_budget(scene, model, revolutions, max_seconds, output is not None)
-    result = run(scene, model)
-    for warning in result.warnings:
+    sim = labtool.simulate(model=model, revolutions=revolutions, rise_only=rise_only, mechanism=mechanism,
+                           output=output, force=force, max_seconds=max_seconds, confirm=terminal_confirm(),
+                           history=command_line("labtool.simulate"), option_source=lambda f: f"option {f.option}",
+                           **values)
+    for warning in sim.warnings:
         typer.echo(f"labtool: warning: {warning}", err=True)
-
     if as_json:
-        out = {k: _json_value(result.indicators.get(k)) for k in INDICATORS}
-        out.update(model=result.model, accuracy=scene.accuracy, wall_s=round(result.wall_s, 4))
+        out = {k: _json_value(sim.indicators.get(k)) for k in INDICATORS}
+        out.update(model=sim.model, accuracy=sim.scene.accuracy, wall_s=round(sim.wall_s, 4))
         typer.echo(json.dumps(out))
-        typer.echo(f"labtool simulate: {result.model} model ({result.reason})", err=True)
+        typer.echo(f"labtool simulate: {sim.model} model ({sim.reason})", err=True)
     else:
-        _print(result, scene, sourced)
+        _print(sim, sim.scene, sim.sourced)
     if output is not None:
-        from labtool.common import cf
-
-        ds = result.dataset
-        ds.attrs.update(sourced.source_attrs())
-        # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
-        cf.apply(ds, title=f"labtool simulation, {result.model} model", source=f"labtool {result.model} model",
-                 history=command_line("labtool.simulate"))
-        write_netcdf(ds, output)
         typer.echo(f"wrote {output}", err=as_json)
-
-
-def _check_budget(scene, model: str, revolutions: float, max_seconds: float, writes: bool) -> None:
-    """Refuse (or ask, on a terminal) a run estimated over ``max_seconds`` or the memory there is,
-    from the same scene at 2 and 4 revolutions (peak memory ~2x the Dataset, +1x for the NetCDF)."""
-    from labtool.models.dynamics.simulate import simulate as run
-
-    est = budget.probe_linear(lambda n: run(scene.replace(revolutions=float(n)), model).dataset,
-                              (2, 4), revolutions, "revolution",
-                              nbytes=lambda ds: ds.nbytes * (3.0 if writes else 2.0))
-    from labtool.output import terminal_confirm
-
-    budget.check(est, f"--revolutions {revolutions:g}", max_seconds, "use fewer --revolutions", terminal_confirm())
 
 
 _LABELS = {

@@ -17,7 +17,6 @@ from typing import Optional
 
 import typer
 
-from labtool.common.files import atomic_write, check_output_path
 
 
 def register(app: typer.Typer) -> None:
@@ -48,49 +47,46 @@ def suggest(
 ) -> None:
     """Suggest the next operating point (cam speed, load) to record: where a recording would narrow
     the identified parameters' 95 % intervals most."""
-    from labtool.commands.fit import _outputs
-    from labtool.common.errors import InputError
-    from labtool.identification.design import SuggestRequest
-    from labtool.identification.design import suggest as run
+    import labtool
+    from labtool.api.fitting import result_files
     from labtool.output import ProgressLines, console
 
-    figure = _outputs(output, figure, force)
-    parts = rpm_range.split(":")
-    try:
-        lo, hi, step = (float(v) for v in parts) if len(parts) == 3 else (float(parts[0]), float(parts[1]), 20.0)
-    except ValueError:
-        raise InputError(f"--rpm-range must be lo:hi:step in rpm (e.g. 120:600:20), got '{rpm_range}'") from None
-    load_values = None
-    if loads is not None:
-        try:
-            load_values = tuple(float(v) for v in loads.split(",") if v.strip())
-        except ValueError:
-            raise InputError(f"--loads must be numbers in N, comma-separated (e.g. 0,65), got '{loads}'") from None
-        if not load_values:
-            raise InputError("--loads names no load; give e.g. --loads 0,65")
-    req = SuggestRequest(list(measured), model, free, goal, shared, (lo, hi, step), load_values, accuracy,
-                         fit={"max_runs": max_runs}, models=tuple(m.strip() for m in models.split(",") if m.strip()))
+    figure = result_files(output, figure, force)
+    lo_hi_step, load_values = _candidates(rpm_range, loads)
     err = console(stderr=True)
     with (err.status("suggest") if err.is_terminal else ProgressLines(sys.stderr, "suggest")) as status:
-        outcome = run(req, progress=lambda msg: status.update(msg))
-        text = json.dumps(outcome.summary, indent=1, allow_nan=False)
-        fig = None
-        if figure is not None:
-            status.update("drawing the figure")
-            from labtool.identification.figures import suggest_figure
-            fig = suggest_figure(outcome)
-        if output is not None:
-            atomic_write(output, lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"))
-        if fig is not None:
-            atomic_write(figure, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        outcome = labtool.suggest(list(measured), goal=goal, model=model, free=free, shared=shared,
+                                  models=tuple(m.strip() for m in models.split(",") if m.strip()),
+                                  rpm_range=lo_hi_step, loads=load_values, accuracy=accuracy, max_runs=max_runs,
+                                  output=output, figure=figure, force=force, progress=lambda msg: status.update(msg))
     if as_json:
-        typer.echo(text)
+        typer.echo(json.dumps(outcome.summary, indent=1, allow_nan=False))
         return
     for line in summary_lines(outcome.summary):
         typer.echo(line)
     wrote = [str(p) for p in (output, figure) if p is not None]
     if wrote:
         typer.echo("wrote " + ", ".join(wrote))
+
+
+def _candidates(rpm_range: str, loads: Optional[str]):
+    """--rpm-range lo:hi[:step] [rpm] and --loads [N] as numbers; InputError naming the option."""
+    from labtool.common.errors import InputError
+
+    parts = rpm_range.split(":")
+    try:
+        lo, hi, step = (float(v) for v in parts) if len(parts) == 3 else (float(parts[0]), float(parts[1]), 20.0)
+    except ValueError:
+        raise InputError(f"--rpm-range must be lo:hi:step in rpm (e.g. 120:600:20), got '{rpm_range}'") from None
+    if loads is None:
+        return (lo, hi, step), None
+    try:
+        load_values = tuple(float(v) for v in loads.split(",") if v.strip())
+    except ValueError:
+        raise InputError(f"--loads must be numbers in N, comma-separated (e.g. 0,65), got '{loads}'") from None
+    if not load_values:
+        raise InputError("--loads names no load; give e.g. --loads 0,65")
+    return (lo, hi, step), load_values
 
 
 def summary_lines(s: dict) -> list[str]:
