@@ -13,9 +13,7 @@ cache that ``make demo`` and ``make test`` then read.
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import io
 import tempfile
 import time
 from pathlib import Path
@@ -40,20 +38,6 @@ class Done:
     seconds: float
 
 
-def _cli(args: list[str]) -> None:
-    """A labtool command in this process, its output discarded; a failure is an error here too."""
-    from labtool.cli import main
-    from labtool.common.errors import LabtoolError
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main(args)
-    if rc != 0:
-        lines = err.getvalue().strip().splitlines()
-        raise LabtoolError(f"warmup: 'labtool {' '.join(args)}' failed (exit {rc})"
-                           + (f": {lines[-1]}" if lines else ""))
-
-
 def _models(model: str):
     def run(folder: Path) -> None:
         from labtool.models.dynamics.scene import Scene
@@ -66,12 +50,18 @@ def _models(model: str):
 
 
 def _acquire(folder: Path) -> None:
-    _cli(["acquire", "--device", "sim", "--rpm", "180", "--duration", "1", "--fast", "--seed", "1",
-          "-o", str(folder / "warmup.h5")])
+    """What ``labtool acquire --device sim --fast`` runs, through the API the command calls."""
+    from labtool.api.acquisition import acquire
+
+    acquire(folder / "warmup.h5", device="sim", stand={"cam_speed_rpm": 180.0, "duration_s": 1.0, "seed": 1},
+            realtime=False, warn=lambda msg: None)
 
 
 def _process(folder: Path) -> None:
-    _cli(["process", str(folder / "warmup.h5"), "-o", str(folder / "warmup.nc")])
+    """What ``labtool process`` runs, through the API the command calls."""
+    from labtool.api.processing import process
+
+    process(folder / "warmup.h5", folder / "warmup.nc", warn=lambda msg: None)
 
 
 def _report(folder: Path) -> None:

@@ -51,8 +51,11 @@ def process(recording, output=None, *, calibration=(), channels: dict | None = N
         it as a Dataset: no index built over its time axis (~300 MB for a 1-hour recording, more
         than the processing itself) and no xarray loaded.
     **reader_options
-        What the file's reader takes: ``sample_rate_hz``, ``group`` (TDMS), ``delimiter``,
-        ``decimal``, ``time_unit_s`` (text tables).
+        What the file's reader takes: ``sample_rate_hz`` [Hz], ``group`` (TDMS), ``delimiter``,
+        ``decimal``, ``time_unit_s`` [s per unit of the time column] (text tables), ``units``
+        (channel: unit text, ``V``, ``mV``, ``m/s^2`` or ``g``, replacing the file's; TDMS, LVM,
+        CSV), and ``invert`` (``("aE_n",)``: the channels whose sensor reads the other way round,
+        turned before processing).
 
     Returns
     -------
