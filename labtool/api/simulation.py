@@ -4,14 +4,17 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import xarray as xr
 
 from labtool.common import budget, cf
 from labtool.common.budget import DEFAULT_MAX_SECONDS
 from labtool.common.operating_point import DEFAULT, OperatingPoint
 from labtool.processing.cycles import phi1_grid, resample_revolution
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 PROBE_ABOVE_REVOLUTIONS = 10       # smaller requests take seconds: no estimate needed
 # the variables put on the cam-angle grid, when the model has them
@@ -51,8 +54,6 @@ class Simulation:
         The operating point with where each value came from (given, the mechanism file, a default).
     """
 
-    dataset: xr.Dataset
-    cycles: xr.Dataset
     indicators: dict
     model: str
     reason: str
@@ -60,6 +61,23 @@ class Simulation:
     scene: object
     wall_s: float
     sourced: object = None
+    # the Datasets are built at their first read: a caller that wants the indicators alone (the
+    # command's --json) imports no xarray
+    _build: object = dataclasses.field(default=None, repr=False)
+    _grid_points: int = dataclasses.field(default=720, repr=False)
+    _built: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    @property
+    def dataset(self) -> xr.Dataset:
+        if "dataset" not in self._built:
+            self._built["dataset"] = self._build()
+        return self._built["dataset"]
+
+    @property
+    def cycles(self) -> xr.Dataset:
+        if "cycles" not in self._built:
+            self._built["cycles"] = cam_angle_cycles(self.dataset, self._grid_points)
+        return self._built["cycles"]
 
 
 def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolutions: float = 1.0,
@@ -143,14 +161,20 @@ def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolu
     if revolutions > PROBE_ABOVE_REVOLUTIONS:
         _check_budget(scene, model, revolutions, max_seconds, output is not None, confirm)
     res = run(scene, model)
-    ds = res.dataset
-    ds.attrs.update(sourced.source_attrs())
-    # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
-    cf.apply(ds, title=f"labtool simulation, {res.model} model", source=f"labtool {res.model} model", history=history)
+
+    def build():
+        ds = res.dataset
+        ds.attrs.update(sourced.source_attrs())
+        # CF-1.10 (labtool.common.cf): UDUNITS units, Conventions/title/source; the command line in history
+        cf.apply(ds, title=f"labtool simulation, {res.model} model", source=f"labtool {res.model} model",
+                 history=history)
+        return ds
+
+    sim = Simulation(res.indicators, res.model, res.reason, list(res.warnings), scene, res.wall_s, sourced,
+                     _build=build, _grid_points=grid_points)
     if output is not None:
-        write_netcdf(ds, Path(output))
-    return Simulation(ds, cam_angle_cycles(ds, grid_points), res.indicators, res.model, res.reason,
-                      list(res.warnings), scene, res.wall_s, sourced)
+        write_netcdf(sim.dataset, Path(output))
+    return sim
 
 
 def _check_budget(scene, model: str, revolutions: float, max_seconds: float, writes: bool, confirm) -> None:
@@ -171,6 +195,8 @@ def cam_angle_cycles(ds: xr.Dataset, grid_points: int = 720) -> xr.Dataset:
     dynamic models) or as its coordinate (the kinematic level). Revolution k covers phi1 in
     [2 pi k, 2 pi (k + 1)); grid points the run does not reach are NaN.
     """
+    import xarray as xr
+
     phi = np.asarray(ds["phi1"].values, float)
     dims = ds["phi1"].dims
     names = [n for n in CYCLE_VARIABLES if n in ds and ds[n].dims == dims]
