@@ -332,20 +332,10 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     """Fit ``req.free`` of ``req.model`` to all of ``req.measured`` at once; see the module's steps."""
     t0 = time.perf_counter()
     say = progress or (lambda msg: None)
-    files = [Path(m) for m in req.measured]
-    if len(files) < 2:
-        raise InputError("a joint fit needs two or more measured files")
-    if len({f.resolve() for f in files}) != len(files):
-        raise InputError("a measured file is given twice; give each measurement once")
-    if "cam_speed" in req.overrides:
-        raise InputError("--rpm: a joint fit takes each file's measured cam speed; fit a file alone to give its speed")
+    files = _checked_files(req)
     free = parse_free(req.free, req.model, req.overrides.get("elastic_gap") or "physical")
     shared = parse_shared(req.shared, free)
     space = make_space(free, req.bounds)
-    # every file readable before the first is fitted: a typo in the last must not cost minutes
-    from labtool.reports.pipeline import load_measured
-    for f in files:
-        load_measured(f).close()
     singles: list[FitOutcome] = []
     for i, f in enumerate(files):
         tell = (lambda msg, i=i, f=f: say(f"file {i + 1}/{len(files)} ({f.name}): {msg}"))
@@ -356,74 +346,8 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     own_keys = [k for k, s in zip(keys, shared) if not s]
     summaries = [o.summary for o in singles]
     notes = []
-
-    # the start: the files' estimates combined
-    u_files = [space.to_unit([o.summary["parameters"][k]["value"] for k in keys]) for o in singles]
-    shared_u = []
-    for k in shared_keys:
-        x, sd, _ = file_estimates(summaries, k)
-        use = np.isfinite(sd) & (sd > 0)
-        shared_u.append(float(np.sum(x[use] / sd[use] ** 2) / np.sum(1 / sd[use] ** 2)) if use.any()
-                        else float(np.nanmean(x)))
-    shared_u = np.clip(np.array(shared_u), 0.0, 1.0)
-    own_u = []
-    for o, uf in zip(singles, u_files):
-        lin = o.linear
-        own = uf[~shared].copy()
-        # the file's own parameters follow the shared ones along their correlation (its Gauss-Newton ridge)
-        g = lin.gn_inv
-        if np.all(np.isfinite(g)):
-            gss = g[np.ix_(shared, shared)]
-            gos = g[np.ix_(~shared, shared)]
-            try:
-                own = own + gos @ np.linalg.solve(gss, shared_u - uf[shared])
-            except np.linalg.LinAlgError:
-                pass
-        own_u.append(np.clip(own, 0.0, 1.0))
-    budget = sum(ev.model_runs for ev in evs) + req.max_runs
-    prob = JointProblem(evs, shared, SEARCH_PRESET, budget, say, "joint search")
-    u0 = prob.join(shared_u, own_u)
-    say("the joint search")
-    try:
-        prob.at(u0)
-        search.minimize(prob, u0, max_nfev=JOINT_NFEV)
-    except search.Budget:
-        pass
-    if prob.best.ev is None:
-        raise SolverError(f"the {req.model} model fails at the files' combined estimates: {prob.at(u0).error}")
-    if prob.exhausted:
-        notes.append(f"the joint search stopped at its budget of {req.max_runs} model runs (--max-runs)")
-    u = prob.best.u
-    if req.accuracy != SEARCH_PRESET:
-        polish = JointProblem(evs, shared, req.accuracy, prob.model_runs + POLISH_NFEV * (u.size + 1), say, "polish")
-        try:
-            polish.at(u)
-            search.minimize(polish, u, max_nfev=POLISH_NFEV)
-        except search.Budget:
-            pass
-        if polish.best.ev is not None:
-            u = polish.best.u
-
-    say(f"joint intervals ({req.accuracy})")
-    final = JointProblem(evs, shared, req.accuracy, None, say, "joint intervals")
-    after = final.at(u)
-    if not after.ok:
-        raise SolverError(f"the {req.model} model fails at the joint optimum: {after.error}")
-    J = final.jacobian(u, central=True)
-    u_j, r_j = u, after.residuals
-    u, after = search.gauss_newton_step(final, u, after, J)
-    lin = uncertainty.linear(J, after.residuals, u, final.blocks())
-    other = JointProblem(evs, shared, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u)
-    revs = _revolution_residuals(final, u, after)
-    lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals, revs,
-                                                                other.residuals if other.ok else None)
-    lin.rough_u, lin.rough = uncertainty.roughness(final, lin, J, u_j, r_j, search.FD_STEP)
-    lin.disc_u, lin.disc_rise, lin.disc_info = uncertainty.discrepancy(J, after.residuals, lin)
-    limit = after.objective + lin.acceptance()
-    rows = [v for v in final.visited.values() if final.at(v).ok and final.at(v).objective <= limit]
-    if rows:
-        lin.set_hull(np.array(rows))
-    profiles = [uncertainty.profile(final, lin, J, i) if i < prob.ns else None for i in range(u.size)]
+    u, prob = _joint_search(req, evs, shared, _joint_start(space, singles, shared, shared_keys, keys), say, notes)
+    final, after, lin, profiles = _joint_uncertainty(req, evs, shared, u, prob.ns, say)
 
     # the joint space's parameters, named by file
     jparams = [p for p, s in zip(free, shared) if s] + [p for _ in files for p, s in zip(free, shared) if not s]
@@ -434,32 +358,8 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     chi2 = after.objective / after.residuals.size
     shared_idx = list(range(prob.ns))
     entries = [_parameter_entry(jspace, i, lin, profiles[i], jnames, chi2, shared_idx if i < prob.ns else None)
-               for i in range(u.size)]
-
-    # the consistency test of every shared parameter: the files' own fits against the joint value
-    tests = {}
-    for i, k in enumerate(shared_keys):
-        x, sd, _ = file_estimates(summaries, k)
-        test = consistency(x, sd, float(lin.u[i]))
-        e = entries[i]
-        e["ci95_joint"] = list(e["ci95"])
-        if test["consistent"] is False:
-            c = float(lin.u[i])
-            a = -math.inf if e["ci95"][0] is None else _to_unit_one(jspace, i, e["ci95"][0])
-            b = math.inf if e["ci95"][1] is None else _to_unit_one(jspace, i, e["ci95"][1])
-            e["ci95"] = [jspace.value(i, c - (c - a) * test["birge_ratio"]),
-                         jspace.value(i, c + (b - c) * test["birge_ratio"])]
-            e["notes"] = e["notes"] + [verdict_text(k, test)]
-            if _to_unit_one(jspace, i, e["ci95"][1]) - _to_unit_one(jspace, i, e["ci95"][0]) > uncertainty.MOST_OF_BOUNDS:
-                e["identifiable"] = False
-                e["verdict"] = "not identifiable"
-                e["notes"].append("widened, its 95 % interval spans more than half the bounds")
-        tests[k] = {**test, "verdict": verdict_text(k, test),
-                    "files": [{"file": str(f), "cam_speed_rpm": s["measured"]["cam_speed_rpm_measured"],
-                               "value": s["parameters"][k]["value"], "ci95": s["parameters"][k]["ci95"],
-                               "identifiable": s["parameters"][k]["identifiable"]} for f, s in zip(files, summaries)]}
-        if test["consistent"] is False:
-            notes.append(verdict_text(k, test))
+               for i in range(lin.u.size)]
+    tests = _consistency_tests(shared_keys, summaries, files, lin, jspace, entries, notes)
 
     fitted = [evs[f].values(space.from_unit(v)) for f, v in enumerate(final.split(lin.u))]
     from labtool.reports.summary import plain_json
@@ -487,6 +387,136 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
         "wall_s": time.perf_counter() - t0,
     })
     return JointOutcome(summary, singles, lin)
+
+
+def _checked_files(req: JointRequest) -> list[Path]:
+    """The request's files, each given once and each readable, before the first is fitted (a typo
+    in the last must not cost minutes)."""
+    files = [Path(m) for m in req.measured]
+    if len(files) < 2:
+        raise InputError("a joint fit needs two or more measured files")
+    if len({f.resolve() for f in files}) != len(files):
+        raise InputError("a measured file is given twice; give each measurement once")
+    if "cam_speed" in req.overrides:
+        raise InputError("--rpm: a joint fit takes each file's measured cam speed; fit a file alone to give its speed")
+    from labtool.reports.pipeline import load_measured
+    for f in files:
+        load_measured(f).close()
+    return files
+
+
+def _joint_start(space, singles, shared, shared_keys, keys) -> tuple:
+    """The joint search's start (unit box): each shared parameter the files' estimates weighted by
+    their inverse variance; each file's own parameters moved along their correlation with the
+    shared ones (its Gauss-Newton ridge). Returns (shared_u, [own_u per file])."""
+    summaries = [o.summary for o in singles]
+    u_files = [space.to_unit([o.summary["parameters"][k]["value"] for k in keys]) for o in singles]
+    shared_u = []
+    for k in shared_keys:
+        x, sd, _ = file_estimates(summaries, k)
+        use = np.isfinite(sd) & (sd > 0)
+        shared_u.append(float(np.sum(x[use] / sd[use] ** 2) / np.sum(1 / sd[use] ** 2)) if use.any()
+                        else float(np.nanmean(x)))
+    shared_u = np.clip(np.array(shared_u), 0.0, 1.0)
+    own_u = []
+    for o, uf in zip(singles, u_files):
+        own = uf[~shared].copy()
+        g = o.linear.gn_inv
+        if np.all(np.isfinite(g)):
+            gss = g[np.ix_(shared, shared)]
+            gos = g[np.ix_(~shared, shared)]
+            try:
+                own = own + gos @ np.linalg.solve(gss, shared_u - uf[shared])
+            except np.linalg.LinAlgError:
+                pass
+        own_u.append(np.clip(own, 0.0, 1.0))
+    return shared_u, own_u
+
+
+def _joint_search(req: JointRequest, evs, shared, start, say, notes: list) -> tuple:
+    """The joint search from ``start`` at the search preset, polished at the request's; returns the
+    optimum (unit box) and the search's problem. Appends a note when the budget stopped it."""
+    budget = sum(ev.model_runs for ev in evs) + req.max_runs
+    prob = JointProblem(evs, shared, SEARCH_PRESET, budget, say, "joint search")
+    u0 = prob.join(*start)
+    say("the joint search")
+    try:
+        prob.at(u0)
+        search.minimize(prob, u0, max_nfev=JOINT_NFEV)
+    except search.Budget:
+        pass
+    if prob.best.ev is None:
+        raise SolverError(f"the {req.model} model fails at the files' combined estimates: {prob.at(u0).error}")
+    if prob.exhausted:
+        notes.append(f"the joint search stopped at its budget of {req.max_runs} model runs (--max-runs)")
+    u = prob.best.u
+    if req.accuracy != SEARCH_PRESET:
+        polish = JointProblem(evs, shared, req.accuracy, prob.model_runs + POLISH_NFEV * (u.size + 1), say, "polish")
+        try:
+            polish.at(u)
+            search.minimize(polish, u, max_nfev=POLISH_NFEV)
+        except search.Budget:
+            pass
+        if polish.best.ev is not None:
+            u = polish.best.u
+    return u, prob
+
+
+def _joint_uncertainty(req: JointRequest, evs, shared, u, n_shared: int, say) -> tuple:
+    """The intervals at the joint optimum ``u``, as a single fit's (uncertainty): the measurement's
+    part, the numerical parts, the roughness, the model's discrepancy, the profiles of the shared
+    parameters. Returns (the problem, its evaluation at the optimum, the linear theory, profiles)."""
+    say(f"joint intervals ({req.accuracy})")
+    final = JointProblem(evs, shared, req.accuracy, None, say, "joint intervals")
+    after = final.at(u)
+    if not after.ok:
+        raise SolverError(f"the {req.model} model fails at the joint optimum: {after.error}")
+    J = final.jacobian(u, central=True)
+    u_j, r_j = u, after.residuals
+    u, after = search.gauss_newton_step(final, u, after, J)
+    lin = uncertainty.linear(J, after.residuals, u, final.blocks())
+    other = JointProblem(evs, shared, OTHER_PRESET[req.accuracy], None, say, "preset check").at(u)
+    revs = _revolution_residuals(final, u, after)
+    lin.rev_u, lin.preset_u, lin.conv_u = uncertainty.numerical(J, after.residuals, revs,
+                                                                other.residuals if other.ok else None)
+    lin.rough_u, lin.rough = uncertainty.roughness(final, lin, J, u_j, r_j, search.FD_STEP)
+    lin.disc_u, lin.disc_rise, lin.disc_info = uncertainty.discrepancy(J, after.residuals, lin)
+    limit = after.objective + lin.acceptance()
+    rows = [v for v in final.visited.values() if final.at(v).ok and final.at(v).objective <= limit]
+    if rows:
+        lin.set_hull(np.array(rows))
+    profiles = [uncertainty.profile(final, lin, J, i) if i < n_shared else None for i in range(u.size)]
+    return final, after, lin, profiles
+
+
+def _consistency_tests(shared_keys, summaries, files, lin, jspace, entries, notes: list) -> dict:
+    """The consistency test of every shared parameter: the files' own fits against the joint value.
+    Where they disagree, the joint interval is widened by the Birge ratio (``ci95_joint`` keeps it
+    as fitted) and the verdict said in the entry's and the fit's notes."""
+    tests = {}
+    for i, k in enumerate(shared_keys):
+        x, sd, _ = file_estimates(summaries, k)
+        test = consistency(x, sd, float(lin.u[i]))
+        e = entries[i]
+        e["ci95_joint"] = list(e["ci95"])
+        if test["consistent"] is False:
+            c = float(lin.u[i])
+            a = -math.inf if e["ci95"][0] is None else _to_unit_one(jspace, i, e["ci95"][0])
+            b = math.inf if e["ci95"][1] is None else _to_unit_one(jspace, i, e["ci95"][1])
+            e["ci95"] = [jspace.value(i, c - (c - a) * test["birge_ratio"]),
+                         jspace.value(i, c + (b - c) * test["birge_ratio"])]
+            e["notes"] = e["notes"] + [verdict_text(k, test)]
+            if _to_unit_one(jspace, i, e["ci95"][1]) - _to_unit_one(jspace, i, e["ci95"][0]) > uncertainty.MOST_OF_BOUNDS:
+                e["identifiable"] = False
+                e["verdict"] = "not identifiable"
+                e["notes"].append("widened, its 95 % interval spans more than half the bounds")
+        tests[k] = {**test, "verdict": verdict_text(k, test),
+                    "files": [{"file": str(f), "cam_speed_rpm": s["measured"]["cam_speed_rpm_measured"],
+                               "value": s["parameters"][k]["value"], "ci95": s["parameters"][k]["ci95"],
+                               "identifiable": s["parameters"][k]["identifiable"]} for f, s in zip(files, summaries)]}
+        if test["consistent"] is False:
+            notes.append(verdict_text(k, test))
+    return tests
 
 
 def _to_unit_one(space, i: int, value: float) -> float:
