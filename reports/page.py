@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 
@@ -69,6 +70,18 @@ class Page:
     figures: list               # Figure, numbered
     appendix: list              # Table: operating point with sources, simulations, metrics, file attributes
     history: Table | None       # the processing history, step by step
+
+
+_PROSE_SYMBOLS = ((re.compile(r"\bomega2\b"), "ω2"), (re.compile(r"\bepsilon2\b"), "ε2"),
+                  (re.compile(r"\bomega1\b"), "ω1"), (re.compile(r"\bw1 = "), "ω1 = "))
+
+
+def typeset(text: str) -> str:
+    """A console sentence as the page prints it: omega2, epsilon2, omega1 and "w1 =" as ω2, ε2, ω1
+    (the console and the JSON keep the ASCII names a script greps for)."""
+    for pattern, symbol in _PROSE_SYMBOLS:
+        text = pattern.sub(symbol, text)
+    return text
 
 
 def _fmt(v, spec=".3f") -> str:
@@ -286,12 +299,12 @@ def build_page(report: Report, rendered) -> Page:
     body = [headline_table(report), robustness_table(report), thresholds_table(report), events_table(report)]
     appendix = [title_block_sources(report), simulations_table(report), metrics_table(report, "omega2"),
                 metrics_table(report, "epsilon2"), provenance_table(report)]
-    sub = (f"labtool report of {report.measured_path}: the measured ω2 and ε2 against "
-           f"{', '.join(dict.fromkeys(r.requested for r in report.sims))}"
-           + (f"; closest {best['label']}" if best else ""))
+    sub = typeset(f"labtool report of {report.measured_path}: the measured ω2 and ε2 against "
+                  f"{', '.join(dict.fromkeys(r.requested for r in report.sims))}"
+                  + (f"; closest {best['label']}" if best else ""))
     return Page("Model vs measurement", sub, report.measured_path, title_block(report),
-                (report.verdict or {}).get("sentence") or "No model was compared.", verdict_kind(report), th, passed,
-                list(report.notes), [t for t in body if t is not None], figure_captions(rendered),
+                typeset((report.verdict or {}).get("sentence") or "No model was compared."), verdict_kind(report), th,
+                passed, [typeset(n) for n in report.notes], [t for t in body if t is not None], figure_captions(rendered),
                 [t for t in appendix if t is not None], history_table(report))
 
 
