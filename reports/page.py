@@ -144,7 +144,7 @@ def _grade(value, grade) -> tuple:
 def headline_table(report: Report) -> Table:
     rows = []
     for h in headline(report):
-        rows.append([h["label"], h["motion"], _grade(h["omega2_iso_rating"], h["omega2_iso_grade"]),
+        rows.append([typeset(h["label"]), h["motion"], _grade(h["omega2_iso_rating"], h["omega2_iso_grade"]),
                      _fmt(h["omega2_sg_comprehensive"]), _fmt(h["omega2_nrmse"]),
                      _grade(h["epsilon2_iso_rating"], h["epsilon2_iso_grade"]), _fmt(h["epsilon2_sg_comprehensive"]),
                      _fmt(h["epsilon2_nrmse"]), f"{_fmt(100 * h['epsilon2_band_overlap'], '.0f')} %"])
@@ -167,7 +167,7 @@ def events_table(report: Report) -> Table:
                      _fmt(m.get("jumps_per_rev"), ".2f"), _fmt(m.get("first_impact_deg"), ".1f"),
                      angles(m.get("impact_angles_deg"))])
     for e in report.events:
-        rows.append([e["label"], _fmt(e["detectable_impacts_per_rev"], ".2f"), _fmt(e["impacts_per_rev"], ".2f"),
+        rows.append([typeset(e["label"]), _fmt(e["detectable_impacts_per_rev"], ".2f"), _fmt(e["impacts_per_rev"], ".2f"),
                      _fmt(e["jumps_per_rev"], ".2f"), _fmt(e["first_impact_deg"], ".1f"), angles(e["impact_angles_deg"])])
     thr = "" if m is None or m.get("threshold_rad_s") is None else (
         f" Visible: a velocity step |Δω2| ≥ {m['threshold_rad_s']:.3g} rad/s, this recording's detectability; the "
@@ -184,14 +184,14 @@ def robustness_table(report: Report) -> Table | None:
     rows = []
     for r in report.robustness:
         got = {m["label"]: m for m in r.get("models", [])}
-        cells = [r["accuracy"], _fmt(r["revolutions"], "g"), r["closest"] or f"failed: {r.get('error', '')}"]
+        cells = [r["accuracy"], _fmt(r["revolutions"], "g"), typeset(r["closest"] or f"failed: {r.get('error', '')}")]
         for lab in labels:
             m = got.get(lab)
             cells.append("—" if m is None else
                          (f"{_fmt(m['omega2_iso_rating'], '.3f')} / {_fmt(m['epsilon2_iso_rating'], '.3f')}",
                           f"grade-{m['epsilon2_iso_grade']}"))
         rows.append(cells)
-    return Table("robustness", ["preset", "revolutions", "closest"] + [f"{lab}: ω2 / ε2 R" for lab in labels], rows,
+    return Table("robustness", ["preset", "revolutions", "closest"] + [f"{typeset(lab)}: ω2 / ε2 R" for lab in labels], rows,
                  "LRL" + "R" * len(labels), "The verdict at both solver presets and at half the simulated length (the "
                  "first half of the same simulation): each model's ISO ratings.", widths=(1, 1, 2) + (1.6,) * len(labels))
 
@@ -199,7 +199,7 @@ def robustness_table(report: Report) -> Table | None:
 def metrics_table(report: Report, signal: str) -> Table:
     comps = [c for c in report.comparisons if c["signal"] == signal]
     rows = [[m] + [_fmt(c["overall"].get(m), ".3g") for c in comps] for m in METRIC_COLUMNS]
-    return Table("metrics" if signal == "omega2" else f"metrics-{signal}", [SIG[signal]] + [c["label"] for c in comps], rows, "L" + "R" * len(comps),
+    return Table("metrics" if signal == "omega2" else f"metrics-{signal}", [SIG[signal]] + [typeset(c["label"]) for c in comps], rows, "L" + "R" * len(comps),
                  f"All overall metrics of {SIG[signal]} (docs/reports.md defines each).", widths=(2,) + (1.4,) * len(comps))
 
 
@@ -216,7 +216,7 @@ def thresholds_table(report: Report) -> Table | None:
 
 
 def simulations_table(report: Report) -> Table:
-    rows = [[r.label, r.model, r.accuracy, _fmt(r.revolutions, "g"), _fmt(r.wall_s, ".2f"), r.note] for r in report.sims]
+    rows = [[typeset(r.label), r.model, r.accuracy, _fmt(r.revolutions, "g"), _fmt(r.wall_s, ".2f"), r.note] for r in report.sims]
     return Table("simulations", ["model, ω1", "level", "preset", "revolutions", "wall time [s]", "note"], rows,
                  "LLLRRL", "The simulations.", widths=(1.8, 1, 1, 1, 1, 4))
 

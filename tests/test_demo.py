@@ -47,4 +47,4 @@ def test_demo_runs_the_whole_pipeline_and_prints_where_the_report_is(tmp_path, c
                     "detectable_impacts_per_rev"):
             assert key in row
     html = (out / "report.html").read_text()
-    assert "elastic, w1 = var." in html and "rigid, w1 = ct." in html and 'id="robustness"' in html
+    assert "elastic, ω1 = var." in html and "rigid, ω1 = ct." in html and 'id="robustness"' in html

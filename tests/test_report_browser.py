@@ -44,7 +44,7 @@ def test_dom_has_the_tables_and_figures(report_html, tmp_path):
     dom = res.stdout
     assert res.returncode == 0 and "</html>" in dom, res.stderr[-2000:]
     assert dom.count("<img") >= 5 and 'src="data:image/png;base64,' in dom
-    assert '<table id="headline">' in dom and "kinematic, w1 = ct." in dom and "kinematic, w1 = var." in dom
+    assert '<table id="headline">' in dom and "kinematic, ω1 = ct." in dom and "kinematic, ω1 = var." in dom
     assert '<table id="metrics">' in dom and '<table id="events">' in dom
     # the title block comes first: before the verdict, every table and figure; provenance last
     block = dom.index('<table id="title-block"')
