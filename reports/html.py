@@ -46,6 +46,8 @@ def environment() -> jinja2.Environment:
         trim_blocks=True, lstrip_blocks=True,
     )
     env.globals["fmt"] = _fmt
+    from labtool.reports.page import typeset
+    env.filters["typeset"] = typeset        # ω2, ε2, ω1 in the page's prose (labtool.reports.page.typeset)
     return env
 
 
