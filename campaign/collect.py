@@ -215,9 +215,24 @@ def _mean(a, b):
     return float(np.mean(vals)) if len(vals) == 2 else None
 
 
+def undecided_with(r: PointRecord) -> list[str]:
+    """The models of another family that the point's measurement cannot tell from its closest
+    (the report's verdict, labtool.reports.verdict): [] where the verdict separates the families."""
+    v = r.summary.get("verdict") or {}
+    best, fam = v.get("closest"), closest_family(r)
+    family = {h.get("label"): h.get("requested_model") for h in r.summary.get("headline", [])}
+    out = []
+    for group in v.get("cannot_tell_apart") or []:
+        if best in group:
+            out += [lab for lab in group if lab != best and family.get(lab) not in (None, fam)]
+    return list(dict.fromkeys(out))
+
+
 def closest_changes(records: list[PointRecord]) -> list[dict]:
     """Where the closest model (the model family: rigid, elastic, ...) changes between neighbouring
-    speeds of one operating-point group: [{group, from_rpm, to_rpm, from, to}]."""
+    speeds of one operating-point group: [{group, from_rpm, to_rpm, from, to}]. A point whose
+    measurement cannot tell its closest from a model of another family (``undecided_with``) is no
+    side of a change."""
     out = []
     by_group: dict[tuple, list[PointRecord]] = {}
     for r in sort_records(records):
@@ -225,7 +240,7 @@ def closest_changes(records: list[PointRecord]) -> list[dict]:
     for group, recs in by_group.items():
         prev = None
         for r in recs:
-            fam = closest_family(r)
+            fam = closest_family(r) if not undecided_with(r) else None
             if prev is not None and fam is not None and closest_family(prev) not in (None, fam):
                 out.append({"group": r.group_label(), "from_rpm": prev.rpm, "to_rpm": r.rpm,
                             "from": closest_family(prev), "to": fam,

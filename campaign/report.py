@@ -148,6 +148,7 @@ def summary(rep: CampaignReport, files: dict | None = None) -> dict:
                            "cam_speed_rpm_nominal", "cam_speed_rpm_measured", "ka_m_s2_per_v", "ka_source",
                            "whole_revolutions", "partial_revolutions_left_out")},
                        "closest": s.get("closest"), "closest_model": collect.closest_family(r),
+                       "cannot_tell_from": collect.undecided_with(r),
                        "verdict": (s.get("verdict") or {}).get("sentence"),
                        "passed": s.get("passed"), "thresholds": s.get("thresholds"), "notes": s.get("notes", [])})
     table = rep.table.astype(object).where(rep.table.notna(), None).to_dict(orient="records")

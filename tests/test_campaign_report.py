@@ -202,3 +202,16 @@ def test_the_points_fits_combine_only_within_one_model_and_set_of_parameters():
     assert j["consistency"]["consistent"] and 0.1 < j["value"] < 0.102
     assert list(out["groups"][0]["parameters"]) == ["backlash_mm"]          # the stand's property only
     assert campaign_identification([("a", a)]) is None
+
+
+def test_a_point_whose_measurement_cannot_tell_the_families_apart_is_no_side_of_a_change():
+    """At 500 rpm the demo's campaign rated rigid 0.002 above elastic, under what the measurement
+    resolves: the page said "the closest model changes from elastic to rigid". A point whose verdict
+    groups its closest with a model of another family is no side of a change, and says so."""
+    recs = [_record("a", 180, {"rigid": 0.7, "elastic": 0.9}), _record("c", 500, {"rigid": 0.9, "elastic": 0.89})]
+    recs[1].summary["verdict"] = {"closest": "rigid, w1 = ct.", "cannot_tell_apart": [["rigid, w1 = ct.", "elastic, w1 = ct."]]}
+    assert collect.undecided_with(recs[1]) == ["elastic, w1 = ct."] and collect.undecided_with(recs[0]) == []
+    assert collect.closest_changes(recs) == []
+    # told apart (rigid ct. and var. alike only): the change stands
+    recs[1].summary["verdict"]["cannot_tell_apart"] = [["rigid, w1 = ct.", "rigid, w1 = var."]]
+    assert collect.undecided_with(recs[1]) == [] and [c["to"] for c in collect.closest_changes(recs)] == ["rigid"]

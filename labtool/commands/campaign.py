@@ -190,9 +190,11 @@ def _report(inputs, html: Path, json_path: Path, csv_path: Path, force: bool, co
     rep = collect_inputs(inputs, compare, overrides, page_base=html.parent, say=say)
     rep.identification = _identification(inputs, rep.records)
     write_outputs(rep, html, json_path, csv_path)
+    from labtool.campaign.collect import undecided_with
     for r in rep.records:
-        best = r.summary.get("closest")
-        typer.echo(f"{r.name:24s} {r.rpm:6g} rpm  closest: {best}")
+        best, alike = r.summary.get("closest"), undecided_with(r)
+        typer.echo(f"{r.name:24s} {r.rpm:6g} rpm  closest: {best}"
+                   + (f" (cannot be told from {', '.join(alike)} here)" if alike else ""))
     for c in rep.changes:
         typer.echo(f"the closest model changes from {c['from']} ({c['from_rpm']:g} rpm) to {c['to']} "
                    f"({c['to_rpm']:g} rpm), {c['group']}")
