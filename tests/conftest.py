@@ -57,3 +57,25 @@ def small_disk(tmp_path):
     for where in mounts:
         with contextlib.suppress(Exception):
             subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+@pytest.fixture(scope="session")
+def original(tmp_path_factory):
+    """The simulated stand's recording at 300 rpm, 2 s (tests/stand_data.py), processed once for the
+    readers' tests that write it again in other formats: (its volts (n, 3), the omega2 labtool
+    makes of the HDF5 original)."""
+    import h5py
+    import numpy as np
+    import xarray as xr
+
+    from labtool.cli import main
+    from stand_data import stand_recording
+
+    d = tmp_path_factory.mktemp("orig")
+    p = d / "orig.h5"
+    stand_recording(p, duration_s=2.0, rpm=300.0)
+    assert main(["process", str(p), "-o", str(d / "orig.nc")]) == 0
+    with h5py.File(p) as f:
+        volts = f["signals"][()].astype(np.float64)
+    with xr.open_dataset(d / "orig.nc", engine="h5netcdf", decode_times=False) as ds:
+        return volts, ds["omega2"].values

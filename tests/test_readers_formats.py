@@ -21,20 +21,6 @@ FS = 10000.0
 KA = 86.43
 
 
-@pytest.fixture(scope="module")
-def original(tmp_path_factory):
-    """(volts (n, 3), omega2 of the HDF5 original) at 300 rpm, 2 s."""
-    import h5py
-    d = tmp_path_factory.mktemp("orig")
-    p = d / "orig.h5"
-    stand_recording(p, duration_s=2.0, rpm=300.0)
-    assert main(["process", str(p), "-o", str(d / "orig.nc")]) == 0
-    with h5py.File(p) as f:
-        volts = f["signals"][()].astype(np.float64)
-    om = xr.open_dataset(d / "orig.nc", engine="h5netcdf", decode_times=False)["omega2"].values
-    return volts, om
-
-
 def _same_omega2(nc, ref):
     om = xr.open_dataset(nc, engine="h5netcdf", decode_times=False)["omega2"].values
     assert np.array_equal(np.isnan(om), np.isnan(ref))

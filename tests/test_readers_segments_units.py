@@ -15,22 +15,8 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
 from hostile import one_error_line
 from labtool.cli import main
-from stand_data import stand_recording
 
 FS = 10000.0
-
-
-@pytest.fixture(scope="module")
-def original(tmp_path_factory):
-    """(volts (n, 3), omega2 of the HDF5 original)."""
-    import h5py
-    d = tmp_path_factory.mktemp("orig")
-    p = d / "orig.h5"
-    stand_recording(p, duration_s=2.0, rpm=300.0)
-    assert main(["process", str(p), "-o", str(d / "orig.nc")]) == 0
-    with h5py.File(p) as f:
-        volts = f["signals"][()].astype(np.float64)
-    return volts, xr.open_dataset(d / "orig.nc", engine="h5netcdf", decode_times=False)["omega2"].values
 
 
 def _cli(args, capsys):
