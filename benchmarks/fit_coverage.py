@@ -41,6 +41,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from benchmarks.fit_recovery import _forget_stated_backlash  # noqa: E402
 LABTOOL = str(ROOT / ".venv" / "bin" / "labtool")
 PYTHON = str(ROOT / ".venv" / "bin" / "python")
 DURATION_S = 4.0
@@ -86,18 +87,6 @@ def _twin_restitution(h5: Path) -> float:
     return effective_restitution(ev["event_time"], ev["event_side"], on, rates)
 
 
-def _forget_backlash(path: Path) -> None:
-    """labtool process keeps the j a simulated recording states; a worn groove's j nobody states."""
-    import xarray as xr
-
-    from labtool.common.files import write_netcdf
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
-        ds = ds.load()
-    for k in [k for k in ds.attrs if "backlash" in k]:
-        del ds.attrs[k]
-    write_netcdf(ds, path)
-
-
 def make_recording(folder: Path, c: dict) -> dict:
     """case.json, recording.h5 and measured.nc of case ``c`` (kept when present)."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -128,7 +117,7 @@ def make_recording(folder: Path, c: dict) -> dict:
     r = _run(["process", str(h5), "-o", str(nc), "--force"])
     if r.returncode:
         raise RuntimeError(r.stderr.strip().splitlines()[-1])
-    _forget_backlash(nc)
+    _forget_stated_backlash(nc)
     meta.write_text(json.dumps(truth, indent=1))
     return truth
 

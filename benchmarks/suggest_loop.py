@@ -64,7 +64,7 @@ def _run(args: list[str]) -> subprocess.CompletedProcess:
 def record(folder: Path, seed: int, rpm: float, Fu: float, tag: str = "") -> Path:
     """measured.nc of the seed's stand at (rpm, Fu), made once (the stated backlash removed);
     ``tag`` tells apart a second recording at the same point (its own noise)."""
-    from benchmarks.fit_coverage import _forget_backlash
+    from benchmarks.fit_recovery import _forget_stated_backlash
 
     t = truth(seed)
     nc = folder / f"{rpm:g}rpm_{Fu:g}N{tag}.nc"
@@ -77,7 +77,7 @@ def record(folder: Path, seed: int, rpm: float, Fu: float, tag: str = "") -> Pat
               "--seed", str(seed * 100_000 + int(rpm) * 100 + int(Fu) + (11 * int(tag[-1]) if tag else 0)),
               "-o", str(h5), "--force"])
         _run(["process", str(h5), "-o", str(nc), "--force"])
-        _forget_backlash(nc)
+        _forget_stated_backlash(nc)
     return nc
 
 
