@@ -11,11 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import xarray as xr
 
 from labtool.cli import main
-from labtool.common.files import write_netcdf
 from labtool.identification.joint import JointRequest, identify_joint
+from stand_data import without_statements
 
 pytestmark = pytest.mark.slow
 SPEEDS = (180.0, 240.0, 300.0)
@@ -27,11 +26,7 @@ def _recording(folder: Path, rpm: float, backlash_mm: float) -> Path:
                  "--restitution", "0.3", "--rpm", f"{rpm:g}", "--duration", "3", "--fast", "--seed", str(int(rpm)),
                  "-o", str(h5)]) == 0
     assert main(["process", str(h5), "-o", str(full)]) == 0
-    with xr.open_dataset(full, engine="h5netcdf") as ds:
-        ds = ds.load()
-    for k in [k for k in ds.attrs if "backlash" in k or "restitution" in k]:
-        del ds.attrs[k]
-    write_netcdf(ds, nc)
+    without_statements(full, nc)
     return nc
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
-from labtool.common.files import write_netcdf
+from stand_data import without_statements
 from hostile import default_signals
 from labtool.identification.fit import FitRequest, identify, load_fit
 from labtool.cli import main
@@ -40,11 +40,7 @@ def recording(tmp_path_factory) -> Path:
     # labtool process keeps the operating point the recording states (j = 0.2 mm here, which on the
     # simulated stand is also the truth); a worn groove's j is not what anyone states, so the file
     # the fit gets has the statement removed, as from a recording that did not state it
-    with xr.open_dataset(full, engine="h5netcdf") as ds:
-        ds = ds.load()
-    for k in [k for k in ds.attrs if "backlash" in k or "restitution" in k]:
-        del ds.attrs[k]
-    write_netcdf(ds, nc)
+    without_statements(full, nc)
     with xr.open_dataset(nc, engine="h5netcdf") as ds:
         told = [k for k in ds.attrs if "backlash" in k or "restitution" in k or k.startswith("truth_")]
     assert not told, f"the processed file tells the fit the truth: {told}"
