@@ -28,3 +28,9 @@ def command_line(default: str = "") -> str:
     outside a command."""
     line = _LINE.get()
     return shown(shlex.join(line)) if line is not None else default
+
+
+def named(param: str) -> str:
+    """A parameter's name as the caller wrote it: ``--ka-gain`` inside a command, ``ka_gain`` from
+    Python. The API's checks word their refusals with it, so that a command needs no copy of them."""
+    return "--" + param.replace("_", "-") if _LINE.get() is not None else param

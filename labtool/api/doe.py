@@ -108,6 +108,7 @@ def run_design(output, *, model: str = "rigid", law: str = "sine", omega1: str =
     """
     from labtool.common.errors import InputError
     from labtool.common.files import check_output_path
+    from labtool.common.invocation import named
     from labtool.common.names import shown
     from labtool.common.operating_point import PAPER_EXPERIMENT
     from labtool.execution.backends import backend_for, check_scheduler_address
@@ -123,13 +124,17 @@ def run_design(output, *, model: str = "rigid", law: str = "sine", omega1: str =
     nc_path = Path(netcdf) if netcdf is not None else output.with_suffix(".nc")
     folder = parts_folder(output)
     if nc_path == output or os.path.abspath(nc_path) == os.path.abspath(folder):
-        raise InputError(f"the NetCDF {shown(nc_path)} must be another file than the CSV and its finished chunks")
+        raise InputError(f"{named('netcdf')}: the NetCDF {shown(nc_path)} must be another file than the CSV and its "
+                         "finished chunks")
+    for name, value in (("workers", workers), ("chunk_runs", chunk_runs)):
+        if value is not None and value < 1:
+            raise InputError(f"{named(name)} must be >= 1, got {value}")
+    cores = os.cpu_count() or 1
+    if workers is not None and workers > 4 * cores:    # a process per queued chunk; 10^20 overflowed the pool
+        raise InputError(f"{named('workers')} must be at most {4 * cores} (4 x this machine's {cores} cores: more "
+                         f"processes only share them), got {workers}")
     for p in (output, nc_path):
         check_output_path(p, force)
-    cores = os.cpu_count() or 1
-    for name, value, most in (("workers", workers, 4 * cores), ("chunk_runs", chunk_runs, None)):
-        if value is not None and not (1 <= value and (most is None or value <= most)):
-            raise InputError(f"{name} must be >= 1" + (f" and at most {most}" if most else "") + f", got {value}")
     fset = read_factors(Path(factors)) if factors is not None else table1_factors()
     base = Scene.at(PAPER_EXPERIMENT, law=law, omega1_mode=omega1, accuracy=accuracy, elastic_gap=elastic_gap)
     design = Design(tuple(fset), base, model)

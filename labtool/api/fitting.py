@@ -74,34 +74,43 @@ def fit(measured, *, model: str, free: str, shared: str | None = None, omega1: s
     import math
 
     from labtool.common.errors import InputError
+    from labtool.common.invocation import named
     from labtool.identification.fit import FitRequest, identify
     from labtool.identification.parameters import parse_assignments
 
     for name, value in (("ka_gain", ka_gain), ("delay_ms", delay_ms)):
         if not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value}")
+            raise InputError(f"{named(name)} must be a finite number, got {value}")
     if not ka_gain > 0:
-        raise InputError(f"ka_gain must be > 0, got {ka_gain:g}")
+        raise InputError(f"{named('ka_gain')} must be > 0, got {ka_gain:g}")
+    files = list(measured) if isinstance(measured, (list, tuple)) else [measured]
+    if not files:
+        raise InputError("fit: no measured file given")
+    if len(files) == 1 and shared is not None:
+        raise InputError(f"{named('shared')} needs several measured files (a joint fit); give two or more, or drop "
+                         f"{named('shared')}")
     figure = result_files(output, figure, force)
     if isinstance(bounds, str):
         bounds = parse_assignments(bounds, "bounds", ranges=True)
     common = dict(omega1=omega1, accuracy=accuracy, revolutions=int(revolutions), bounds=dict(bounds or {}),
                   start=start, overrides={k: v for k, v in changes.items() if v is not None},
                   chain={"ka_gain": float(ka_gain), "delay_ms": float(delay_ms)}, max_runs=int(max_runs), scan=scan)
-    files = list(measured) if isinstance(measured, (list, tuple)) else [measured]
-    if not files:
-        raise InputError("fit: no measured file given")
     if len(files) > 1:
         from labtool.identification.joint import JointRequest, identify_joint
         outcome = identify_joint(JointRequest([Path(m) for m in files], model, free, shared, **common),
                                  progress=progress)
     else:
-        if shared is not None:
-            raise InputError("shared needs several measured files (a joint fit)")
         outcome = identify(FitRequest(Path(files[0]), model, free, **common), progress=progress)
     if output is not None or figure is not None:
         write_result(outcome, output, figure, joint=len(files) > 1, progress=progress)
     return outcome
+
+
+def figure_path(output, figure):
+    """The fit's figure: ``figure``, else beside the JSON ``output`` (``.png``), else none."""
+    if figure is not None:
+        return Path(figure)
+    return Path(output).with_suffix(".png") if output is not None else None
 
 
 def result_files(output, figure, force: bool):
@@ -111,7 +120,7 @@ def result_files(output, figure, force: bool):
     from labtool.common.files import check_output_path
 
     output = Path(output) if output is not None else None
-    figure = Path(figure) if figure is not None else (output.with_suffix(".png") if output is not None else None)
+    figure = figure_path(output, figure)
     outputs = [p for p in (output, figure) if p is not None]
     if len({p.resolve() for p in outputs}) != len(outputs):
         raise InputError("the JSON and the figure must be different files")

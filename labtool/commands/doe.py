@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from pathlib import Path
 from typing import List, Optional
 
@@ -17,7 +16,6 @@ import typer
 from labtool.common.budget import LONG_RUN_S
 from labtool.common.files import atomic_write, check_output_path
 from labtool.common.invocation import command_line
-from labtool.common.names import shown
 from labtool.reports.effects import heading as _heading
 from labtool.reports.effects import level as _level
 
@@ -76,7 +74,6 @@ def run(
     from labtool.execution.progress import BarProgress, LineProgress
     from labtool.output import terminal_confirm, terminal_console
 
-    _check_options(output, netcdf, workers, chunk_runs)
     err = terminal_console(stderr=True)        # None off a terminal: rich is not loaded for a pipe or a log
     label = f"doe run ({model})"
     if err is not None:
@@ -109,27 +106,6 @@ def run(
         first = min(res.failures)
         raise SolverError(f"{res.n_failed} of {res.n_runs} runs failed and are left empty in {output} "
                           f"(run {first}: {res.failures[first]})")
-
-
-def _check_options(output: Path, netcdf: Optional[Path], workers: Optional[int], chunk_runs: Optional[int]) -> None:
-    """The options' own checks, named as the command line names them (labtool.run_design checks
-    them again for a caller from Python)."""
-    from labtool.execution.design import parts_folder
-
-    nc_path = netcdf if netcdf is not None else output.with_suffix(".nc")
-    if nc_path == output:
-        raise typer.BadParameter("the NetCDF path must differ from the CSV path", param_hint="--netcdf")
-    if os.path.abspath(nc_path) == os.path.abspath(parts_folder(output)):
-        raise typer.BadParameter(f"{shown(nc_path)} is the folder of the CSV's finished chunks; name another "
-                                 "NetCDF file", param_hint="--netcdf")
-    if workers is not None and workers < 1:
-        raise typer.BadParameter(f"must be >= 1, got {workers}", param_hint="--workers")
-    cores = os.cpu_count() or 1
-    if workers is not None and workers > 4 * cores:    # a process per queued chunk; 10^20 overflowed the pool
-        raise typer.BadParameter(f"must be at most {4 * cores} (4 x this machine's {cores} cores: more processes "
-                                 f"only share them), got {workers}", param_hint="--workers")
-    if chunk_runs is not None and chunk_runs < 1:
-        raise typer.BadParameter(f"must be >= 1, got {chunk_runs}", param_hint="--chunk-runs")
 
 
 def in_units(table, factors):

@@ -13,7 +13,6 @@ model that fails everywhere, one line, nothing written.
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Optional
@@ -71,13 +70,11 @@ def fit(
     """Identify backlash, restitution, contact damping/length, Ka gain or delay from a measurement:
     least squares of the model's cycle statistics against the measured ones, with 95 % intervals."""
     import labtool
-    from labtool.api.fitting import result_files
+    from labtool.api.fitting import figure_path
     from labtool.common.files import check_interrupted
     from labtool.identification.parameters import parse_assignments
     from labtool.output import ProgressLines, console
 
-    _check_options(ka_gain, delay_ms, len(measured), shared)
-    figure = result_files(output, figure, force)
     overrides = given(cam_speed=rpm, law=law, Fu=fu, backlash=backlash_mm, jt_factor=jt_factor,
                       restitution=restitution, contact_damping=contact_damping, contact_length=contact_length_mm,
                       kc_factor=kc_factor, elastic_gap=elastic_gap)
@@ -97,25 +94,11 @@ def fit(
     else:
         for line in (joint_lines(outcome.summary) if joint else summary_lines(outcome.summary)):
             typer.echo(line)
-        wrote = [str(p) for p in (output, figure) if p is not None]
+        wrote = [str(p) for p in (output, figure_path(output, figure)) if p is not None]
         if wrote:
             typer.echo("wrote " + ", ".join(wrote))
     if joint and not outcome.summary["consistent"]:
         raise typer.Exit(1)
-
-
-def _check_options(ka_gain: float, delay_ms: float, n_files: int, shared: Optional[str]) -> None:
-    """The chain options and --shared, named as the command line names them (labtool.fit checks
-    them again for a caller from Python)."""
-    from labtool.common.errors import InputError
-
-    for name, value in (("--ka-gain", ka_gain), ("--delay-ms", delay_ms)):
-        if value is not None and not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value}")
-    if not (ka_gain > 0):
-        raise InputError(f"--ka-gain must be > 0, got {ka_gain:g}")
-    if n_files == 1 and shared is not None:
-        raise InputError("--shared needs several measured files (a joint fit); give two or more, or drop --shared")
 
 
 def _num(v, fmt=".4g") -> str:
