@@ -85,6 +85,12 @@ class NormalCheck:
         return math.sqrt(sq / n) / peak if n and peak > 0 else math.nan
 
 
+# what to do about a recording clipped at every impact: the advice process and report give alike
+# (tests/test_hostile_advice.py follows it)
+LARGER_RANGE = ("record with a larger range in m/s^2 (the ADC's range x Ka: a less sensitive conditioner setting; "
+                "on the simulated stand acquire --ka 8643)")
+
+
 class ClipCounter:
     """Samples flagged as clipped (events, rails, runs at a channel's extreme)."""
 

@@ -39,7 +39,7 @@ from labtool.common.names import shown
 from labtool.models.mechanism import Mechanism, sensor_point
 from labtool.models.mechanism.motion_laws import CamProgram
 from labtool.processing import cam_angle, cycles, events, filters, follower, kernels, orientation, speed, spectra
-from labtool.processing.accumulators import ClipCounter, NormalCheck, SpikeCollector
+from labtool.processing.accumulators import LARGER_RANGE, ClipCounter, NormalCheck, SpikeCollector
 from labtool.processing.ka import ka_for_channels
 from labtool.processing.readers import Recording
 from labtool.processing.readers.base import MAX_SAMPLE, check_finite, stated_number
@@ -402,8 +402,7 @@ def _finish(rec, segs, marks, cam, chain, opts, st: PassState, program, law, cal
     if st.cycles.count == 0 and st.cycles.rejected:
         warn(f"no revolution averaged: each of the {st.cycles.rejected} whole revolutions holds a clipped or irregular "
              "sample, so the cycle statistics are empty and report and fit cannot use this file; if they are clipped, "
-             "record with a larger range in m/s^2 (the ADC's range x Ka: a less sensitive conditioner setting; on the "
-             "simulated stand acquire --ka 8643)")
+             f"{LARGER_RANGE}")
     hist.add(H.TimeAxis(samples_lost=st.time.samples_lost, gaps_with_unknown_loss=st.time.unknown))
     hist.add(H.Clipping(flagged_samples=st.clip.flagged, recorder_clip_events=int(len(st.clip.events)),
                         rail_v=st.clip.rail_v, min_run_at_extreme=ClipCounter.MIN_RUN))

@@ -29,6 +29,7 @@ from labtool.common.errors import InputError
 from labtool.common.history import History, Lowpass
 from labtool.common.names import shown
 from labtool.models.dynamics import periodicity
+from labtool.processing.accumulators import LARGER_RANGE
 from labtool.processing.cycles import cycle_statistics
 from labtool.processing.filters import lowpass_sos, zero_phase
 
@@ -311,9 +312,7 @@ def measured_cycles(ds: xr.Dataset, names, cond: Conditioning) -> MeasuredCycles
         turns = max(k_last - k_first + 1, 0)
         dropped = int(ok.size - ok.sum())
         why = (f": each of its {turns} revolutions holds a gap, {dropped} samples are not finite (clipped at the ADC's "
-               "rails, most likely at the impacts): record with a larger range in m/s^2 (the ADC's range x Ka: a "
-               "less sensitive conditioner setting; on the simulated stand acquire --ka 8643) and process it again"
-               if turns and dropped else "")
+               f"rails, most likely at the impacts): {LARGER_RANGE} and process it again" if turns and dropped else "")
         src = ds.encoding.get("source")
         raise InputError(f"{shown(src) + ': it' if src else 'the measured file'} holds no whole cam revolution (need phi1 to cover 0..360 deg without gaps){why}")
     signals = {n: condition(np.array(v), cond) for n, v in out.items()}
