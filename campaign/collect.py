@@ -220,11 +220,10 @@ def undecided_with(r: PointRecord) -> list[str]:
     (the report's verdict, labtool.reports.verdict): [] where the verdict separates the families."""
     v = r.summary.get("verdict") or {}
     best, fam = v.get("closest"), closest_family(r)
-    family = {h.get("label"): h.get("requested_model") for h in r.summary.get("headline", [])}
     out = []
     for group in v.get("cannot_tell_apart") or []:
         if best in group:
-            out += [lab for lab in group if lab != best and family.get(lab) not in (None, fam)]
+            out += [lab for lab in group if lab != best and family_of(r, lab) not in (None, fam)]
     return list(dict.fromkeys(out))
 
 
@@ -250,7 +249,11 @@ def closest_changes(records: list[PointRecord]) -> list[dict]:
 
 
 def closest_family(r: PointRecord) -> str | None:
-    label = r.summary.get("closest")
+    return family_of(r, r.summary.get("closest"))
+
+
+def family_of(r: PointRecord, label: str | None) -> str | None:
+    """The model family (rigid, elastic, ...) of the point's model ``label``, None if not compared."""
     for h in r.summary.get("headline", []):
         if h.get("label") == label:
             return h.get("requested_model")
