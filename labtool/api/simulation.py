@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -65,19 +66,14 @@ class Simulation:
     # command's --json) imports no xarray
     _build: object = dataclasses.field(default=None, repr=False)
     _grid_points: int = dataclasses.field(default=720, repr=False)
-    _built: dict = dataclasses.field(default_factory=dict, repr=False)
 
-    @property
+    @functools.cached_property
     def dataset(self) -> xr.Dataset:
-        if "dataset" not in self._built:
-            self._built["dataset"] = self._build()
-        return self._built["dataset"]
+        return self._build()
 
-    @property
+    @functools.cached_property
     def cycles(self) -> xr.Dataset:
-        if "cycles" not in self._built:
-            self._built["cycles"] = cam_angle_cycles(self.dataset, self._grid_points)
-        return self._built["cycles"]
+        return cam_angle_cycles(self.dataset, self._grid_points)
 
 
 def simulate(point: OperatingPoint | None = None, *, model: str = "auto", revolutions: float = 1.0,
