@@ -307,7 +307,7 @@ def _nidaqmx_setup(arg, device_file, ni, iepe_excitation, opts, given, meta_give
     meta = {k: v for k, v in cfg.metadata.items()}
     meta.update({k: v for k, v in meta_given.items() if v is not None})
     attrs = run_metadata_attrs(meta)
-    stated = {"law": "law", "cam_speed_rpm": "rpm", "Fu_N": "fu", "backlash_mm": "backlash_mm", "jt_factor": "jt_factor"}
+    stated = {FIELD[name].attr: opt for opt, name in POINT_OPTIONS.items()}    # file attribute: option key
     op = {name: opts[key] for name, key in stated.items() if key in given}
     if motor_setting is not None:
         op["motor_setting"] = motor_setting
