@@ -23,6 +23,7 @@ e.g. an older checkout's) can fit the same recordings under another ``--tag``. `
 the coverage table of the tags found and writes it to ``benchmarks/results/fit_coverage.json``.
 
     nice -n 10 .venv/bin/python benchmarks/fit_coverage.py --dir /tmp/cov --generator both --cases 40 --tag after
+    nice -n 10 .venv/bin/python benchmarks/fit_coverage.py --dir /tmp/cov2027 --draw 2027 ...   # fresh cases
     .venv/bin/python benchmarks/fit_coverage.py --dir /tmp/cov --table --tags before,after
 """
 from __future__ import annotations
@@ -51,11 +52,12 @@ RESULTS = ROOT / "benchmarks" / "results" / "fit_coverage.json"
 
 
 def cases(generator: str, n: int, seed: int = 2026) -> list[dict]:
-    """The random operating points of one generator (deterministic for ``seed``)."""
+    """The random operating points of one generator (deterministic for ``seed``; another ``seed``
+    draws other points, and other noise: cases a rule was not made on)."""
     rng = np.random.default_rng([seed, GENERATORS.index(generator)])
     out = []
     for i in range(n):
-        c = {"name": f"{generator}_{i:03d}", "generator": generator, "seed": i,
+        c = {"name": f"{generator}_{i:03d}", "generator": generator, "seed": i + 1000 * (seed - 2026),
              "rpm": round(float(rng.uniform(150.0, 450.0)), 1),
              "Fu": 0.0 if rng.uniform() < 0.5 else round(float(rng.uniform(10.0, 65.0)), 1),
              "backlash_mm": round(float(np.exp(rng.uniform(math.log(0.05), math.log(0.25)))), 4)}
@@ -233,6 +235,7 @@ def main() -> None:
     ap.add_argument("--dir", type=Path, required=True, help="where the cases are kept (resumable)")
     ap.add_argument("--generator", default="both", choices=(*GENERATORS, "both"))
     ap.add_argument("--cases", type=int, default=40, help="cases per generator")
+    ap.add_argument("--draw", type=int, default=2026, help="the draw of the cases (another: fresh cases)")
     ap.add_argument("--tag", default="after", help="name of this version's fits (fit_<tag>.json)")
     ap.add_argument("--labtool", default=LABTOOL, help="the labtool executable that fits")
     ap.add_argument("--accuracy", default="standard", choices=("fast", "standard"))
@@ -244,12 +247,13 @@ def main() -> None:
     if args.table:
         t = table(args.dir, args.tags.split(","))
         print_table(t)
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(json.dumps(t, indent=1) + "\n")
-        print(f"wrote {RESULTS}")
+        out = RESULTS if args.draw == 2026 else RESULTS.with_name(f"fit_coverage_{args.draw}.json")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(t, indent=1) + "\n")
+        print(f"wrote {out}")
         return
     gens = GENERATORS if args.generator == "both" else (args.generator,)
-    todo = [c for g in gens for c in cases(g, args.cases)]
+    todo = [c for g in gens for c in cases(g, args.cases, args.draw)]
     # interleave the generators, so that a partial run covers both
     todo.sort(key=lambda c: (c["seed"], c["generator"]))
     if args.only:

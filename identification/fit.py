@@ -45,6 +45,10 @@ UNEXPLAINED = 10.0            # objective per residual beyond which the model is
 # model's own truth fits at 1-2; on the twin and the foreign stand (5-200) the rigid k came out
 # biased by +0.2 with nothing in the measurement to show it (docs/identification.md, coverage)
 MISFIT = 3.0
+# |correlation| with a parameter judged misfit from which a parameter is judged misfit too: the
+# misfit parameter's bias (what the model misses, which it stands in for) moves this one's estimate
+# by r x its own bias in units of the intervals, and at |r| = 0.5 a quarter of its variance is shared
+MISFIT_CORRELATION = 0.5
 METRIC_KEYS = ("iso_rating", "iso_grade", "sg_magnitude", "sg_phase", "sg_comprehensive", "nrmse", "band_overlap")
 
 
@@ -304,7 +308,8 @@ def _parameter_entry(space, i: int, lin, prof, names: list[str], chi2: float, ot
 
     ``verdict``: "identified"; "not identifiable" (``notes`` say why); or "misfit": an impact-law
     parameter fitted where the model leaves more than MISFIT x the measurement's variance, whose
-    interval understates how far the stand's value may lie."""
+    interval understates how far the stand's value may lie (and, after ``inherit_misfit``, a
+    parameter whose estimate moves with such a one's)."""
     p = space.params[i]
     lo, hi, sides = uncertainty.interval(lin, prof, i)
     lin_lo, lin_hi = lin.interval_u()
@@ -344,6 +349,27 @@ def _parameter_entry(space, i: int, lin, prof, names: list[str], chi2: float, ot
     }
 
 
+def inherit_misfit(entries: dict, corr: np.ndarray) -> dict:
+    """Judge misfit a parameter ``identified`` whose estimate moves with a misfit one's
+    (|correlation| >= MISFIT_CORRELATION): the misfit one stands in for what the model misses, and
+    a bias with a direction in the parameters' space is what the discrepancy term, which assumes
+    none, does not cover (docs/identification.md, coverage). ``entries``: by key, in the order of
+    ``corr``'s rows; changed in place and returned."""
+    keys = list(entries)
+    for i, a in enumerate(keys):
+        if entries[a]["verdict"] != "identified":
+            continue
+        for j, b in enumerate(keys):
+            r = float(corr[i, j])
+            if j != i and entries[b]["verdict"] == "misfit" and math.isfinite(r) and abs(r) >= MISFIT_CORRELATION:
+                entries[a].update(verdict="misfit", misfit=True)
+                entries[a]["notes"] = entries[a]["notes"] + [
+                    f"misfit: its estimate moves with {b}'s (r = {r:+.2f}), which stands in for what the model "
+                    "misses: its interval understates how far the stand's value may lie"]
+                break
+    return entries
+
+
 def _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profiles, notes, wall) -> dict:
     from labtool.reports.summary import plain_json
 
@@ -357,9 +383,9 @@ def _summary(req, target, space, ev, x_scene, x_start, before, after, lin, profi
         "measured": {"file": str(req.measured), "whole_revolutions": target.n_revolutions,
                      "cam_speed_rpm_measured": target.cycles.cam_speed_rpm, "events": _events_info(target.events)},
         "free": space.names,
-        "parameters": {p.key: _parameter(space, i, lin, profiles[i], x_start, x_scene,
-                                         after.objective / after.residuals.size)
-                       for i, p in enumerate(space.params)},
+        "parameters": inherit_misfit({p.key: _parameter(space, i, lin, profiles[i], x_start, x_scene,
+                                                        after.objective / after.residuals.size)
+                                      for i, p in enumerate(space.params)}, corr),
         "correlation": {a: {b: float(corr[i, j]) for j, b in enumerate(names)} for i, a in enumerate(names)},
         "objective_before": before.objective if before.ok else None,
         "objective_after": after.objective,
