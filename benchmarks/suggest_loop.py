@@ -9,6 +9,10 @@ with its restitution):
   second point; ``labtool suggest`` on the two gives the third;
 * **fixed**: the same first recording, then 300 and 500 rpm, no load (the paper's speeds);
 
+* ``--arm A:B`` (any number): the same first recording, then A and B rpm, no load (their own
+  recordings, tagged ``_b1`` and ``_b2``): what a given rule would have got, the bound on what any
+  choice of the two points could; ``--table --arms`` tables them against the fixed arm;
+
 each arm's three recordings are fitted jointly (``labtool fit a b c --model rigid --free
 backlash,restitution --shared backlash``) and the backlash's 95 % interval compared: its width
 (on the log scale, ln(hi / lo), as the fit searches it) and whether it holds the truth.
@@ -18,6 +22,8 @@ Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and
 
     nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
+    nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 2 --arm 180:180 --arm 300:420
+    .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table --arms
 """
 from __future__ import annotations
 
@@ -96,6 +102,54 @@ def joint(folder: Path, name: str, files: list[Path]) -> dict:
     return json.loads(out.read_text())
 
 
+def interval(s: dict, seed: int, files: list[Path]) -> dict:
+    """The joint fit's backlash interval: its log width and whether it holds the truth."""
+    j = s["parameters"]["backlash_mm"]
+    lo, hi = j["ci95"]
+    t = truth(seed)["backlash_mm"]
+    return {"points": [f.stem for f in files], "value": j["value"], "ci95": [lo, hi],
+            "ci95_joint": j["ci95_joint"], "log_width": math.log(hi / lo) if lo and hi and lo > 0 else None,
+            "holds": lo is not None and hi is not None and lo <= t <= hi, "consistent": s["consistent"]}
+
+
+def arms_seed(root: Path, seed: int, arms: list[tuple[float, float]]) -> dict:
+    """The fixed arm and each given pair of second and third speeds (no load) after the first recording."""
+    folder = root / f"seed_{seed:02d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    first = record(folder, seed, *FIRST)
+    fixed = [first] + [record(folder, seed, *p) for p in FIXED]
+    path = folder / "arms.json"
+    out = json.loads(path.read_text()) if path.exists() else {"seed": seed, "truth": truth(seed), "arms": {}}
+    out["fixed"] = interval(joint(folder, "fixed", fixed), seed, fixed)
+    for a, b in arms:
+        name = f"{a:g}_{b:g}"
+        try:
+            files = [first, record(folder, seed, a, 0.0, tag="_b1"), record(folder, seed, b, 0.0, tag="_b2")]
+            out["arms"][name] = interval(joint(folder, f"arm_{name}", files), seed, files)
+        except RuntimeError as exc:     # a recording the processing cannot use: said, not hidden
+            out["arms"][name] = {"error": str(exc), "log_width": None}
+        path.write_text(json.dumps(out, indent=1))
+    return out
+
+
+def arms_table(root: Path) -> list[dict]:
+    """Per seed and arm: the width ratio arm / fixed; per arm: the median and how often narrower."""
+    rows = [json.loads(p.read_text()) for p in sorted(root.glob("seed_*/arms.json"))]
+    names = sorted({n for r in rows for n in r["arms"]}, key=lambda n: tuple(float(v) for v in n.split("_")))
+    print("| second, third [rpm] | " + " | ".join(f"seed {r['seed']}" for r in rows) + " | median | narrower |")
+    print("|---|" + "---|" * (len(rows) + 2))
+    for n in names:
+        ratios = []
+        for r in rows:
+            a, f = r["arms"].get(n) or {}, r["fixed"]
+            ratios.append(a["log_width"] / f["log_width"] if a.get("log_width") and f["log_width"] else math.nan)
+        ok = [x for x in ratios if math.isfinite(x)]
+        med = float(np.median(ok)) if ok else math.nan
+        print(f"| {n.replace('_', ', ')} | " + " | ".join(f"{x:.2f}" for x in ratios)
+              + f" | {med:.2f} | {sum(x < 1 for x in ok)} of {len(ok)} |")
+    return rows
+
+
 def one_seed(root: Path, seed: int) -> dict:
     folder = root / f"seed_{seed:02d}"
     folder.mkdir(parents=True, exist_ok=True)
@@ -106,13 +160,7 @@ def one_seed(root: Path, seed: int) -> dict:
     fixed = [first] + [record(folder, seed, *p) for p in FIXED]
     out = {"seed": seed, "truth": truth(seed)}
     for name, fs in (("suggested", files), ("fixed", fixed)):
-        s = joint(folder, name, fs)
-        j = s["parameters"]["backlash_mm"]
-        lo, hi = j["ci95"]
-        t = truth(seed)["backlash_mm"]
-        out[name] = {"points": [f.stem for f in fs], "value": j["value"], "ci95": [lo, hi],
-                     "ci95_joint": j["ci95_joint"], "log_width": math.log(hi / lo) if lo and hi and lo > 0 else None,
-                     "holds": lo is not None and hi is not None and lo <= t <= hi, "consistent": s["consistent"]}
+        out[name] = interval(joint(folder, name, fs), seed, fs)
     (folder / "result.json").write_text(json.dumps(out, indent=1))
     return out
 
@@ -139,11 +187,18 @@ def table(root: Path) -> list[dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dir", type=Path, required=True)
-    ap.add_argument("--seeds", type=int, default=4)
+    ap.add_argument("--seeds", type=int, default=4, help="how many seeds")
+    ap.add_argument("--first-seed", type=int, default=0, help="the first seed (fresh stands: one not tuned on)")
+    ap.add_argument("--arm", action="append", default=[], metavar="A:B",
+                    help="instead of following suggest: the second and third speeds A and B [rpm], no load")
+    ap.add_argument("--arms", action="store_true", help="with --table: table the --arm runs")
     ap.add_argument("--table", action="store_true")
     ap.add_argument("--truth", default="twin", choices=("twin", "rigid"), help="the simulated stand's truth")
     args = ap.parse_args()
     TRUTH["model"] = args.truth
+    if args.table and args.arms:
+        arms_table(args.dir)
+        return
     if args.table:
         rows = table(args.dir)
         out = Path(str(RESULTS).format(truth=args.truth))
@@ -151,8 +206,13 @@ def main() -> None:
         out.write_text(json.dumps(rows, indent=1) + "\n")
         print(f"wrote {out}")
         return
-    for seed in range(args.seeds):
+    arms = [tuple(float(v) for v in a.split(":")) for a in args.arm]
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         try:
+            if arms:
+                arms_seed(args.dir, seed, arms)
+                print(f"seed {seed}: {len(arms)} arms", flush=True)
+                continue
             r = one_seed(args.dir, seed)
         except RuntimeError as exc:       # a recording the processing cannot use: said, not hidden
             (args.dir / f"seed_{seed:02d}" / "error.txt").write_text(str(exc) + "\n")
