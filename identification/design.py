@@ -2,19 +2,28 @@
 (``labtool suggest --goal identify``), or tell the candidate models apart (``--goal discriminate``;
 docs/identification.md, "The next experiment").
 
-D-optimal design on the fit's own Jacobian (Atkinson, Donev & Tobias, Optimum Experimental
-Designs, ch. 10-11): the measurements so far are fitted (one file alone, several jointly), which
-gives the parameters' estimates and their information matrix M0 = cov^-1 (on the search scale,
-the fit's covariance: measurement, residual correlation and misfit included). A candidate
-operating point c (cam speed, load) is simulated at the estimates through the report's path, and
-its residuals' Jacobian J_c (central differences on the search scale, each point over the noise a
-recording at c would have) gives the information a recording there would add,
-M_c = J_c^T J_c / (s^2 x inflation), with the current fit's misfit s^2 and correlation inflation.
-The parameters a joint fit shares (``--shared``: the backlash, by default) persist; the others are
-each recording's own, so a new recording brings a new one of those (a nuisance parameter): the
-criterion is the Ds one, the determinant of the shared parameters' information with every other
-parameter profiled out (the Schur complement), and the expected gain is the ratio of its value
-after to before, with each shared parameter's expected interval (its square root's ratio).
+The measurements so far are fitted (one file alone, several jointly); a candidate operating point
+c (cam speed, load) is simulated at the estimates through the report's path, and the criterion is
+the shared parameters' expected 95 % interval after a recording at c, as a share of today's
+(labtool.identification.expected: the parts a fit's interval is made of, each as a recording at c
+would change it):
+
+* the measurement's part: Ds-optimal design (Atkinson, Donev & Tobias, Optimum Experimental
+  Designs, ch. 10-11) on a **secant** Jacobian J_c: each column the normalised residuals'
+  difference across today's 95 % interval of that parameter (at least the fit's own step
+  search.FD_STEP), what a recording there can tell apart over the range still in doubt; a
+  tiny-step derivative of an objective made rough by impacts promises more than that. The
+  information M_c = J_c^T J_c / (s^2 x inflation), the current fit's misfit and correlation
+  inflation, joins the fit's M0 = cov^-1 (on the search scale); the parameters a joint fit shares
+  (``--shared``: the backlash, by default) persist, the others are each recording's own, so a new
+  recording brings a new one of those (a nuisance parameter, profiled out: the Schur complement);
+* the model's discrepancy: the misfit beyond the noise expected of a recording at c is the
+  measured one, grown as the candidate models' predictions grow apart (``models``: the first other
+  than ``model``; their normalised difference at c over at the measured points); a point where the
+  model misses much more than at the measured speeds widens the interval however much
+  information it carries;
+* the roughness and the numerical parts: today's, as the information changes them, and the new
+  recording's own (its residuals' change to the other solver preset at c).
 
 The noise a recording at c would have: each signal's measured scatter from revolution to
 revolution relative to its rms (the measurements' median), over the square root of the
@@ -22,8 +31,7 @@ revolutions a recording of the same duration holds at c, and the fit's 1 % floor
 (labtool.identification.objective.MODEL_FLOOR).
 
 Candidates: cam speeds on ``rpm_range`` (within the models' range, Mechanism.check_cam_speed) at
-the loads given (default the measured ones: the criterion takes the model's misfit at a candidate
-to be the measurements', which holds near them; at a load never measured it can be many times
+the loads given (default the measured ones: at a load never measured the misfit can be many times
 larger, for the model's own truth too, benchmarks/suggest_loop.py); a candidate whose model run
 fails or warns about its own validity is left out and listed with the reason.
 
@@ -43,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from labtool.common.errors import InputError, LabtoolError
-from labtool.identification import search
+from labtool.identification import expected, search
 from labtool.identification.objective import MODEL_FLOOR, SIGNALS
 from labtool.identification.parameters import parse_free
 from labtool.processing.cycles import cycle_statistics
@@ -112,8 +120,11 @@ def speeds(rpm_range: tuple) -> np.ndarray:
 class Candidate:
     rpm: float
     Fu: float
-    criterion: float = math.nan         # log det of the shared information after over before
+    criterion: float = math.nan         # -sum ln(expected 95 % width after / today's) of the shared parameters
     shrink: dict = dataclasses.field(default_factory=dict)   # key -> expected interval width after / before
+    log_det: float = math.nan           # the measurement's part alone: log det of the shared information after / before
+    misfit: float = math.nan            # the misfit beyond the noise expected of a recording there
+    parts: dict = dataclasses.field(default_factory=dict)   # the expected half-widths' parts (unit box)
     error: str | None = None
 
 
@@ -176,6 +187,21 @@ def information(cov: np.ndarray) -> np.ndarray:
     return M
 
 
+def _today(lin, order, M0, nf: int, ns: int, F: int, half_now: np.ndarray) -> "expected.Today":
+    """The fit's interval in parts (labtool.identification.expected), in the joint layout."""
+    A = information(lin.gn_inv[np.ix_(order, order)])
+    A = np.pad(A, ((0, nf), (0, nf)))
+    info = lin.disc_info or {}
+    infl = lin.inflation[np.isfinite(lin.inflation) & (lin.inflation > 0)]
+    other = [v for v in (lin.rev_u, lin.preset_u, lin.conv_u) if v is not None]
+    other = np.sqrt(sum(v[order][:ns] ** 2 for v in other)) if other else np.zeros(ns)
+    return expected.Today(M=M0, A=A, t=float(lin.t), half=half_now[:ns], other=other,
+                          excess=float(info.get("objective_beyond_noise", 0.0)), objective=float(lin.objective),
+                          features=float(info.get("features", lin.objective)),
+                          inflation=max(float(np.mean(infl)) if infl.size else 1.0, 1.0), rough=float(lin.rough),
+                          n_files=F, ns=ns)
+
+
 def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
     """Fit the measurements, then rate every candidate operating point (module doc)."""
     t0 = time.perf_counter()
@@ -210,6 +236,8 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
         current = dict(summary_fit["parameters"])
     space = singles[0].space
     ns, nf, F = int(shared.sum()), int((~shared).sum()), len(files)
+    if len(files) > 1:
+        order = np.arange(lin.u.size)
     M0 = information(cov)
     # the new recording's own parameters join as nuisance ones (no information yet)
     M0 = np.pad(M0, ((0, nf), (0, nf)))
@@ -228,37 +256,58 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
     u_c = np.empty(len(free))
     u_c[shared] = u_shared
     u_c[~shared] = own.mean(axis=0) if nf else []
+    # the secant's half-steps: today's 95 % half-width of each parameter (the per-file ones' mean),
+    # what a recording must tell apart; at least the fit's own finite-difference step
+    half_now = lin.half_u()[order]
+    steps = np.empty(len(free))
+    steps[shared] = half_now[:ns]
+    steps[~shared] = half_now[ns:].reshape(F, nf).mean(axis=0) if nf else []
+    steps = np.clip(np.nan_to_num(steps, nan=search.FD_STEP, posinf=0.5), search.FD_STEP, 0.5)
+    today = _today(lin, order, M0, nf, ns, F, half_now)
     targets = [o.target for o in singles]
     noise = noise_model(targets)
     base = dict(singles[0].evaluator.fixed)
+    proxy = next((m for m in req.models if m != req.model), None)
+    # the measured misfit beyond the noise per unit of the candidate models' disagreement, at the
+    # measured points: a candidate's misfit is expected to grow as their disagreement does
+    per_disagreement = 0.0
+    if proxy and today.excess > 0:
+        try:
+            at_measured = sum(float(d @ d) for d in (
+                _candidate_runs(req, space, free, u_c, base, t, noise, t.cycles.cam_speed_rpm,
+                                float(t.op.get("Fu_N", 0.0)), None, proxy)[1] for t in targets))
+        except (LabtoolError, ArithmeticError, ValueError) as exc:
+            raise InputError(f"the {proxy} model, whose disagreement with the {req.model} model scales the misfit "
+                             f"expected at each candidate, fails at a measured point ({str(exc).splitlines()[0]}); "
+                             f"--models {req.model} rates the candidates without it") from exc
+        per_disagreement = today.excess / at_measured if at_measured > 0 else 0.0
     loads = sorted(set(req.loads) if req.loads is not None else {float(t.op.get("Fu_N", 0.0)) for t in targets})
     cands = []
     total = len(rpms) * len(loads)
+    pos = np.empty(len(free), int)
+    pos[shared] = np.arange(ns)
+    pos[~shared] = M0.shape[0] - nf + np.arange(nf)
+    keys = [p.key for p, s in zip(free, shared) if s]
     for i, (Fu, rpm) in enumerate((f, r) for f in loads for r in rpms):
         say(f"candidate {i + 1}/{total}: {rpm:g} rpm, Fu = {Fu:g} N")
         c = Candidate(float(rpm), float(Fu))
         try:
-            J = _candidate_jacobian(req, space, free, u_c, base, targets[0], noise, rpm, Fu)
+            J, d, n_c, shift = _candidate_runs(req, space, free, u_c, base, targets[0], noise, rpm, Fu, steps, proxy)
         except (LabtoolError, ArithmeticError, ValueError) as exc:
             c.error = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
             cands.append(c)
             continue
-        Mc = J.T @ J / scale
-        # place it: the shared columns, then the new recording's own (the last nf)
-        pos = np.empty(len(free), int)
-        pos[shared] = np.arange(ns)
-        pos[~shared] = M0.shape[0] - nf + np.arange(nf)
         M = M0.copy()
-        M[np.ix_(pos, pos)] += Mc
+        M[np.ix_(pos, pos)] += J.T @ J / scale
         M_s = _schur(M, keep)
-        c.criterion = _logdet(M_s) - _logdet(M0_s) if _logdet(M0_s) > -math.inf else _logdet(M_s)
-        try:
-            before = np.diag(np.linalg.pinv(M0_s, rcond=1e-12, hermitian=True))
-            after = np.diag(np.linalg.pinv(M_s, rcond=1e-12, hermitian=True))
-        except np.linalg.LinAlgError:
-            before = after = np.full(ns, np.nan)
-        keys = [p.key for p, s in zip(free, shared) if s]
-        c.shrink = {k: float(math.sqrt(a / b)) if b > 0 and a >= 0 else None for k, a, b in zip(keys, after, before)}
+        c.log_det = _logdet(M_s) - _logdet(M0_s) if _logdet(M0_s) > -math.inf else _logdet(M_s)
+        e = math.sqrt(per_disagreement) * d if d is not None else np.zeros(n_c)
+        after = expected.combine(today, pos, J.T @ J / scale, J.T @ J, float(e @ e), n_c, J.T @ shift)
+        ratio = after["total"] / today.half
+        c.parts = {k: [float(x) for x in v] for k, v in after.items()}
+        c.criterion = -float(np.sum(np.log(ratio))) if np.all(np.isfinite(ratio) & (ratio > 0)) else math.nan
+        c.misfit = float(e @ e)
+        c.shrink = {k: float(v) if math.isfinite(v) else None for k, v in zip(keys, ratio)}
         cands.append(c)
     good = [c for c in cands if c.error is None and math.isfinite(c.criterion)]
     if not good:
@@ -271,40 +320,52 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
     return SuggestOutcome(summary, cands, outcome)
 
 
-def _candidate_jacobian(req, space, free, u_c, base, target, noise, rpm, Fu) -> np.ndarray:
-    """The normalised residuals' Jacobian a recording at (rpm, Fu) would have (unit box)."""
+def _candidate_runs(req, space, free, u_c, base, target, noise, rpm, Fu, steps, proxy):
+    """At (rpm, Fu): the normalised residuals' secant Jacobian a recording there would have (unit box,
+    each column across ``steps`` either side of the estimate), the candidate models' disagreement
+    there (``proxy`` against ``req.model``, normalised alike; None without a proxy model) and the
+    number of residuals, and the residuals' change to the other solver preset (the model's numerical
+    resolution there). ``steps`` None: the disagreement alone."""
     cond = target.cond
     tf = _time_filter(target.time_filter, target.cycles.cam_speed_rpm, rpm)
     n_rev = max(noise["minutes"] * rpm, 2.0)
-    h = search.FD_STEP
     lev = target.level(None)
 
-    def cycle(u):
+    def cycle(u, model, accuracy=req.accuracy):
         op = {**base, "cam_speed_rpm": float(rpm), "Fu_N": float(Fu)}
         for p, v in zip(space.params, space.from_unit(np.clip(u, 0.0, 1.0))):
             op[p.op_key] = float(v)
         scene = {k: v for k, v in op.items() if k not in pipeline.CHAIN_KEYS}
-        run = pipeline.run_simulation(scene, req.model, "const", req.accuracy, req.revolutions, cond, tf)
+        run = pipeline.run_simulation(scene, model, "const", accuracy, req.revolutions, cond, tf)
         if run.dataset is not None:
             warnings = run.dataset.attrs.get("validity_warnings", "[]")
             if warnings not in ("[]", "", None):
-                raise ValueError(f"the {req.model} model doubts its validity here: {warnings}")
+                raise ValueError(f"the {model} model doubts its validity here: {warnings}")
         shown = pipeline.chain_view(run.cycle, op)
         return {s: np.asarray(shown.signals[s], float) for s in SIGNALS}
 
-    centre = cycle(u_c)
+    centre = cycle(u_c, req.model)
     sigma = {}
     for s in SIGNALS:
         rms = float(np.sqrt(np.mean(centre[s] ** 2)))
         sigma[s] = math.hypot(noise["scatter"][s] * rms / math.sqrt(n_rev), MODEL_FLOOR * rms) or 1.0
+
+    def normalised(a, b):
+        return np.concatenate([(a[s] - b[s])[lev.sub] / sigma[s] for s in SIGNALS])
+
+    if steps is None:
+        return None, normalised(cycle(u_c, proxy), centre), None, None
     cols = []
     for i in range(len(free)):
         up, dn = u_c.copy(), u_c.copy()
-        up[i] = min(u_c[i] + h, 1.0)
-        dn[i] = max(u_c[i] - h, 0.0)
-        a, b = cycle(up), cycle(dn)
-        cols.append(np.concatenate([(a[s] - b[s])[lev.sub] / sigma[s] for s in SIGNALS]) / (up[i] - dn[i]))
-    return np.column_stack(cols)
+        up[i] = min(u_c[i] + steps[i], 1.0)
+        dn[i] = max(u_c[i] - steps[i], 0.0)
+        cols.append(normalised(cycle(up, req.model), cycle(dn, req.model)) / (up[i] - dn[i]))
+    d = normalised(cycle(u_c, proxy), centre) if proxy else None
+    # the model's numerical resolution there: its residuals' change to the other solver preset
+    from labtool.identification.fit import OTHER_PRESET
+    shift = normalised(cycle(u_c, req.model, OTHER_PRESET[req.accuracy]), centre)
+    return np.column_stack(cols), d, cols[0].size, shift
 
 
 def _summary(req, files, free, shared, fit, current, noise, cands, best, targets, wall) -> dict:
@@ -322,15 +383,20 @@ def _summary(req, files, free, shared, fit, current, noise, cands, best, targets
                      for f, t in zip(files, targets)],
         "current": {k: {"value": current[k]["value"], "ci95": current[k]["ci95"]} for k in keys if k in current},
         "point": point,
-        "expected": {"log_det_gain": best.criterion, "interval_width_ratio": best.shrink,
+        "expected": {"interval_width_ratio": best.shrink, "criterion": best.criterion, "log_det_gain": best.log_det,
+                     "misfit_beyond_noise": best.misfit,
                      "sentence": f"a recording at {best.rpm:g} rpm, Fu = {best.Fu:g} N is expected to narrow "
-                                 f"the 95 % interval of {shrink} of its width now, by linear theory of the "
-                                 "measurement's part (the model's discrepancy and the objective's roughness at that "
-                                 "speed are not in it; on the simulated stand the paper's 300 and 500 rpm did as well: "
-                                 "docs/identification.md)"},
+                                 f"the 95 % interval of {shrink} of its width now: the measurement's part by linear "
+                                 "theory on a secant across today's interval, the model's discrepancy with the misfit "
+                                 "expected there (the measured one, grown as the candidate models' predictions "
+                                 "grow apart), the roughness as measured; not in it: the joint fit's consistency "
+                                 "test, and a misfit the candidate models do not foresee"},
         "noise_model": noise,
         "candidates": [{"cam_speed_rpm": c.rpm, "Fu_N": c.Fu,
-                        "log_det_gain": c.criterion if c.error is None else None,
+                        "criterion": c.criterion if c.error is None and math.isfinite(c.criterion) else None,
+                        "log_det_gain": c.log_det if c.error is None and math.isfinite(c.log_det) else None,
+                        "misfit_beyond_noise": c.misfit if c.error is None and math.isfinite(c.misfit) else None,
+                        "expected_half_width_parts": c.parts or None,
                         "interval_width_ratio": c.shrink or None, "error": c.error} for c in cands],
         "plan_points_toml": snippet,
         "fit": fit,

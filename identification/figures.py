@@ -143,8 +143,9 @@ def _limits(values) -> tuple[float, float]:
 
 def suggest_figure(outcome) -> Figure:
     """The criterion of ``labtool suggest`` against the cam speed, one curve per load: the shared
-    parameters' expected 95 % interval width after a recording there, as a share of today's (top),
-    and the D-criterion's gain, log det(M after / M before) of the shared information (bottom);
+    parameters' expected 95 % interval width after a recording there, as a share of today's (top:
+    the criterion), and the measurement's part alone, the D-criterion's gain log det(M after /
+    M before) of the shared information (bottom);
     the measured speeds and the suggested point marked. ``--goal discriminate``: the closest pair
     of models' distance against speed."""
     s = outcome.summary
@@ -178,7 +179,7 @@ def suggest_figure(outcome) -> Figure:
     top.set_ylabel("expected 95 % interval [% of today's]")
     top.set_title(f"labtool suggest --goal {s['goal']}: next point {s['point']['cam_speed_rpm']:g} rpm, "
                   f"Fu = {s['point']['Fu_N']:g} N (red); measured speeds dotted", fontsize=9)
-    bottom.set_ylabel("log det gain of the shared information")
+    bottom.set_ylabel("log det gain, the measurement's part")
     bottom.set_xlabel("cam speed of the next recording [rpm]")
     return fig
 

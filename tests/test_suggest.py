@@ -1,11 +1,11 @@
-"""labtool suggest: the next experiment's D-optimal criterion on a stand-in whose backlash is most
-visible at a known speed, and its bad input.
+"""labtool suggest: the next experiment's criterion on a stand-in whose backlash is most visible
+at a known speed, the expected interval's parts against a joint fit's own, and its bad input.
 
 The stand-in (tests/test_fit.py) shifts the kinematic cycle by 0.05 ln(j / 0.2 mm) rad; here the
 shift is also weighted by w(n1) = exp(-((n1 - 300) / 120)^2): a recording at 300 rpm sees the
 backlash best, so the suggestion must be 300 rpm, and a second recording at the measured speed
-must be expected to narrow a lone parameter's interval by 1 / sqrt(2) (twice the information).
-The real models on the simulated stand are in benchmarks/suggest_loop.py.
+must be expected to narrow the measurement's part of a lone parameter's interval by 1 / sqrt(2)
+(twice the information). The real models on the simulated stand are in benchmarks/suggest_loop.py.
 """
 from __future__ import annotations
 
@@ -38,20 +38,32 @@ def measured(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_the_suggestion_is_where_the_backlash_shows_most(measured, monkeypatch, tmp_path):
+def test_the_measurement_part_narrows_most_where_the_backlash_shows_most(measured, monkeypatch, tmp_path):
     _stand_in(monkeypatch)
     # the restitution at the stand-in's own 0.5, so that the model explains the measurement
     out = suggest(SuggestRequest([measured], free="backlash", shared="backlash", rpm_range=(120.0, 480.0, 30.0),
                                  loads=(0.0,), fit={"overrides": {"restitution": 0.5}}))
     s = out.summary
-    assert s["point"] == {"cam_speed_rpm": 300.0, "Fu_N": 0.0, "law": "sine", "jt_factor": 1.0}
-    by_rpm = {c["cam_speed_rpm"]: c for c in s["candidates"]}
-    # a second recording like the first: twice the information, the interval / sqrt(2)
-    assert by_rpm[180.0]["interval_width_ratio"]["backlash_mm"] == pytest.approx(1 / math.sqrt(2), rel=0.1)
+    lin = out.fit.linear
+    by_rpm = {c.rpm: c for c in out.candidates}
+    # a second recording like the first: twice the information, the measurement's part / sqrt(2);
+    # its objective's steps as large as the first's and independent: R x sqrt(2), so the
+    # roughness's part sqrt(R g) x (sqrt(2) / 2)^(1/2) = 2^(-1/4)
+    meas_now = lin.t * lin.sd_u[0]
+    assert by_rpm[180.0].parts["measurement"][0] / meas_now == pytest.approx(1 / math.sqrt(2), rel=0.05)
+    assert by_rpm[180.0].parts["roughness"][0] / lin.rough_u[0] == pytest.approx(2 ** -0.25, rel=0.05)
     # at 300 rpm the shift per unit ln j is 1 / w(180) = 1.75 times larger: information x 3.1
     expected = 1 / math.sqrt(1 + (1 / weight(180.0)) ** 2)
-    assert by_rpm[300.0]["interval_width_ratio"]["backlash_mm"] == pytest.approx(expected, rel=0.1)
-    assert "[[points]]\nname = \"next_300rpm\"\nrpm = 300\nFu_N = 0\n" == s["plan_points_toml"]
+    assert by_rpm[300.0].parts["measurement"][0] / meas_now == pytest.approx(expected, rel=0.05)
+    best_measurement = min(out.candidates, key=lambda c: c.parts["measurement"][0])
+    assert best_measurement.rpm == 300.0
+    # the point is where the whole expected interval is narrowest (here the stand-in's curvature,
+    # counted as the fit's roughness, is most of it: a recording as sensitive as 300 rpm brings
+    # steps in its objective as large, so the point lies below 300 rpm, not at it)
+    best = min(out.candidates, key=lambda c: c.shrink["backlash_mm"])
+    assert s["point"] == {"cam_speed_rpm": best.rpm, "Fu_N": 0.0, "law": "sine", "jt_factor": 1.0}
+    assert best.shrink["backlash_mm"] < 1.0
+    assert f"[[points]]\nname = \"next_{best.rpm:g}rpm\"\nrpm = {best.rpm:g}\nFu_N = 0\n" == s["plan_points_toml"]
     json.dumps(s, allow_nan=False)
 
 
@@ -63,8 +75,9 @@ def test_the_cli_prints_the_point_and_writes_the_json_and_the_figure(measured, m
     rc = main(["suggest", str(measured), "--free", "backlash", "--shared", "backlash", "--rpm-range", "180:420:60",
                "--loads", "0", "-o", str(out)])
     text = capsys.readouterr().out
-    assert rc == 0 and "next point: 300 rpm, Fu = 0 N" in text and "[[points]]" in text
-    assert json.loads(out.read_text())["format"] == "labtool.suggest"
+    s = json.loads(out.read_text())
+    assert rc == 0 and f"next point: {s['point']['cam_speed_rpm']:g} rpm, Fu = 0 N" in text and "[[points]]" in text
+    assert s["format"] == "labtool.suggest" and 180.0 <= s["point"]["cam_speed_rpm"] <= 420.0
     assert (tmp_path / "next.png").stat().st_size > 10_000
 
 
@@ -120,3 +133,42 @@ def test_discriminate_picks_a_speed_where_the_models_differ_more_than_at_180_rpm
     assert s["expected"]["epsilon2_distance"] > 1.5 * s["expected"]["at_measured"]
     assert s["expected"]["epsilon2_distance"] == max(v for v in at.values() if v is not None)
     assert (tmp_path / "next.png").stat().st_size > 10_000
+
+
+def _misfit_problem(rng, n=400, p=2, size=6.0):
+    """A linear problem whose misfit (a few smooth bumps, ``size`` x the unit noise) the model
+    cannot follow: its Jacobian and residuals."""
+    import numpy as np
+    x = np.linspace(0.0, 1.0, n)
+    J = np.column_stack([np.sin(2 * np.pi * (k + 1) * x) for k in range(p)]) * 3.0
+    bumps = sum(np.exp(-0.5 * ((x - c) / 0.01) ** 2) for c in (0.13, 0.41, 0.58, 0.77, 0.9))
+    return J, size * bumps + rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("grow", [1.0, 3.0])
+def test_the_expected_discrepancy_is_the_joint_fits_own(grow):
+    # one recording with a misfit; a second whose misfit has the same shape, ``grow`` x as large:
+    # the discrepancy half-width combine() expects must be what uncertainty.discrepancy finds on
+    # the two recordings stacked (an independent computation from the residuals themselves)
+    import numpy as np
+    from labtool.identification import expected, uncertainty
+    rng = np.random.default_rng(7)
+    J0, r0 = _misfit_problem(rng)
+    J1, r1 = _misfit_problem(rng, size=6.0 * grow)
+    u = np.full(2, 0.5)
+    lin = uncertainty.linear(J0, r0, u)
+    lin.disc_u, lin.disc_rise, lin.disc_info = uncertainty.discrepancy(J0, r0, lin)
+    infl = lin.inflation
+    today = expected.Today(M=information(lin.cov_u), A=information(lin.gn_inv), t=lin.t, half=lin.half_u(),
+                           other=np.zeros(2), excess=lin.disc_info["objective_beyond_noise"], objective=float(r0 @ r0),
+                           features=lin.disc_info["features"], inflation=max(float(np.mean(infl)), 1.0), rough=0.0,
+                           n_files=1, ns=2)
+    excess_c = float(r1 @ r1) - r1.size
+    got = expected.combine(today, np.arange(2), J1.T @ J1 / lin.s2, J1.T @ J1, excess_c, r1.size)
+    J, r = np.vstack([J0, J1]), np.r_[r0, r1]
+    both = uncertainty.linear(J, r, u, [(0, r0.size), (r0.size, r.size)])
+    want, _, _ = uncertainty.discrepancy(J, r, both)
+    assert got["discrepancy"] == pytest.approx(want, rel=0.2)
+    if grow > 1.0:
+        # a recording where the model misses 3 x as much: the interval widens despite its information
+        assert np.all(got["discrepancy"] > lin.disc_u)

@@ -25,10 +25,12 @@ def register(app: typer.Typer) -> None:
 
 def suggest(
     measured: list[Path] = typer.Argument(..., help="measured.nc files written by 'labtool process' (one or more)"),
-    goal: str = typer.Option("identify", help="identify: the point that narrows the fit's intervals most (D-optimal); "
+    goal: str = typer.Option("identify", help="identify: the point whose recording is expected to narrow the shared intervals most; "
                              "discriminate: where the --models' predictions differ most against the measured scatter"),
     model: str = typer.Option("rigid", help="the model whose parameters are identified: rigid or elastic"),
-    models: str = typer.Option("rigid,elastic", help="--goal discriminate: the models to tell apart, comma-separated"),
+    models: str = typer.Option("rigid,elastic", help="--goal discriminate: the models to tell apart; --goal identify: the first "
+                                                     "other than --model scales the misfit expected at each candidate "
+                                                     "(--models with --model alone: none), comma-separated"),
     free: str = typer.Option("backlash,restitution", help="the parameters identified, comma-separated (as labtool fit "
                              "--free)"),
     shared: Optional[str] = typer.Option(None, help="the free parameters every recording shares (the others are each "
@@ -101,9 +103,9 @@ def summary_lines(s: dict) -> list[str]:
         lines.append(f"  today: {k} = {c['value']:.4g}, 95 % [{lo:.4g}, {hi:.4g}]" if lo is not None and hi is not None
                      else f"  today: {k} = {c['value']:.4g}, no interval")
     lines.append(f"next point: {p['cam_speed_rpm']:g} rpm, Fu = {p['Fu_N']:g} N")
-    lines.append(f"  {s['expected']['sentence']} (log det gain {s['expected']['log_det_gain']:.3g})")
-    good = sorted((c for c in s["candidates"] if c["log_det_gain"] is not None), key=lambda c: -c["log_det_gain"])
-    lines.append("  best candidates: " + ", ".join(f"{c['cam_speed_rpm']:g} rpm / {c['Fu_N']:g} N ({c['log_det_gain']:.3g})"
+    lines.append(f"  {s['expected']['sentence']} (criterion {s['expected']['criterion']:.3g})")
+    good = sorted((c for c in s["candidates"] if c["criterion"] is not None), key=lambda c: -c["criterion"])
+    lines.append("  best candidates: " + ", ".join(f"{c['cam_speed_rpm']:g} rpm / {c['Fu_N']:g} N ({c['criterion']:.3g})"
                                                   for c in good[:5]))
     left = [c for c in s["candidates"] if c["error"] is not None]
     if left:
