@@ -11,14 +11,16 @@ with its restitution):
 
 * ``--arm A:B`` (any number): the same first recording, then A and B rpm, no load (their own
   recordings, tagged ``_b1`` and ``_b2``): what a given rule would have got, the bound on what any
-  choice of the two points could; ``--table --arms`` tables them against the fixed arm;
+  choice of the two points could; ``--table --arms`` tables them against the fixed arm (and writes
+  ``benchmarks/results/suggest_loop_arms_<truth>.json``);
 
 each arm's three recordings are fitted jointly (``labtool fit a b c --model rigid --free
 backlash,restitution --shared backlash``) and the backlash's 95 % interval compared: its width
 (on the log scale, ln(hi / lo), as the fit searches it) and whether it holds the truth.
 
 Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and writes
-``benchmarks/results/suggest_loop_<truth>.json``.
+``benchmarks/results/suggest_loop_<truth>.json`` (``suggest_loop_<truth>_from<first seed>.json`` for
+a directory of seeds from ``--first-seed``).
 
     nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
@@ -172,6 +174,7 @@ def table(root: Path) -> list[dict]:
     print("| seed | true j [mm] | suggested points | j (95 %), suggested | fixed 180/300/500 | j (95 %), fixed "
           "| width ratio suggested / fixed |")
     print("|---|---|---|---|---|---|---|")
+    ratios = []
     for r in rows:
         s, f = r["suggested"], r["fixed"]
 
@@ -181,6 +184,12 @@ def table(root: Path) -> list[dict]:
         ratio = s["log_width"] / f["log_width"] if s["log_width"] and f["log_width"] else float("nan")
         print(f"| {r['seed']} | {r['truth']['backlash_mm']:.4g} | {', '.join(s['points'][1:])} | {cell(s)} | "
               f"{', '.join(f['points'][1:])} | {cell(f)} | {ratio:.2f} |")
+        ratios.append(ratio)
+    ok = [x for x in ratios if math.isfinite(x)]
+    if ok:
+        print(f"median width ratio {float(np.median(ok)):.2f}; suggested narrower in {sum(x < 1 for x in ok)} of {len(ok)}; "
+              f"intervals holding the truth: suggested {sum(r['suggested']['holds'] for r in rows)}, "
+              f"fixed {sum(r['fixed']['holds'] for r in rows)} of {len(rows)}")
     return rows
 
 
@@ -197,11 +206,16 @@ def main() -> None:
     args = ap.parse_args()
     TRUTH["model"] = args.truth
     if args.table and args.arms:
-        arms_table(args.dir)
+        rows = arms_table(args.dir)
+        out = Path(str(RESULTS).format(truth=f"arms_{args.truth}"))
+        out.write_text(json.dumps(rows, indent=1) + "\n")
+        print(f"wrote {out}")
         return
     if args.table:
         rows = table(args.dir)
-        out = Path(str(RESULTS).format(truth=args.truth))
+        first = min((r["seed"] for r in rows), default=0)
+        # fresh stands (seeds from --first-seed) get their own file beside the first five's
+        out = Path(str(RESULTS).format(truth=args.truth + (f"_from{first}" if first else "")))
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(rows, indent=1) + "\n")
         print(f"wrote {out}")
