@@ -172,3 +172,27 @@ def test_the_expected_discrepancy_is_the_joint_fits_own(grow):
     if grow > 1.0:
         # a recording where the model misses 3 x as much: the interval widens despite its information
         assert np.all(got["discrepancy"] > lin.disc_u)
+
+
+@pytest.mark.slow
+def test_the_secant_is_the_tangent_where_the_residuals_are_linear_and_shorter_where_not(measured, monkeypatch):
+    # the stand-in's gain is linear in k (1 + 0.8 (k - 0.5)), so a secant across any interval of k
+    # is its derivative; its backlash shifts the cycle by a phase linear in ln j, so a secant across
+    # a wide interval of ln j sees a harmonic of order n shortened by sin(n d) / (n d) < 1
+    import numpy as np
+    from labtool.identification import design
+    from labtool.identification.search import FD_STEP
+    _stand_in(monkeypatch)
+    req = SuggestRequest([measured], free="backlash,restitution", rpm_range=(300.0, 300.0, 30.0), loads=(0.0,))
+    fit = suggest(req).fit
+    target, space = fit.target, fit.space
+    noise = design.noise_model([target])
+    u = np.asarray(fit.linear.u, float)
+    free = space.params
+    args = (req, space, free, u, dict(fit.evaluator.fixed), target, noise, 300.0, 0.0)
+    narrow, _, _, _ = design._candidate_runs(*args, np.full(2, FD_STEP), None)
+    wide, _, _, _ = design._candidate_runs(*args, np.full(2, 0.3), None)
+    k = [p.key for p in free].index("restitution")
+    j = 1 - k
+    assert np.allclose(wide[:, k], narrow[:, k], rtol=1e-6, atol=1e-9 * np.abs(narrow[:, k]).max())
+    assert np.linalg.norm(wide[:, j]) < 0.9 * np.linalg.norm(narrow[:, j])
