@@ -19,6 +19,10 @@ import xarray as xr
 from hostile import cli, one_error_line
 from stand_data import stand_volts, write_v1
 
+# a reader that leaves pandas guessing a column's type chunk by chunk (a LabVIEW Comment column
+# with text in a few rows) warns the user about labtool's internals: an error here
+pytestmark = pytest.mark.filterwarnings("error::pandas.errors.DtypeWarning")
+
 REAL = Path(__file__).parent / "data" / "real"
 ALL_DATA = "07/09/2012 06:58:23 PM - Digital Input - All Data"
 

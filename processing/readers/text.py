@@ -104,7 +104,9 @@ def _parse(path, offset: int, nrows: int, lay: Layout) -> "object":
             return pd.read_csv(fh, sep=lay.delimiter, decimal=lay.decimal, header=None, nrows=nrows,
                                names=range(len(lay.columns)), comment=lay.comment,
                                engine="c", skip_blank_lines=True, dtype=str if nrows <= 8 else None,
-                               encoding="utf-8", encoding_errors="replace")
+                               # one type per column over the whole block (a Comment column with
+                               # text in a few rows), not per internal chunk with a DtypeWarning
+                               low_memory=False, encoding="utf-8", encoding_errors="replace")
         except (ValueError, pd.errors.ParserError) as exc:
             raise FileFormatError(f"{path}: bad table near row {nrows}: {str(exc).splitlines()[0]}") from None
 
