@@ -23,7 +23,12 @@ would change it):
   model misses much more than at the measured speeds widens the interval however much
   information it carries;
 * the roughness and the numerical parts: today's, as the information changes them, and the new
-  recording's own (its residuals' change to the other solver preset at c).
+  recording's own: its residuals' change to the other solver preset at c, its model revolutions'
+  change at c (the fit's ``model_revolutions`` part, from the same run), and its objective's
+  roughness as the fit would measure it at c: the residuals at u +- FD_STEP e_i (the fit's own
+  central-difference points; the secant's runs where its step is the fit's), whose second
+  difference s makes the objective depart from its Gauss-Newton quadratic by +-m.s + |s|^2 / 4 +
+  r0.s (m the half-difference, r0 the recording's expected misfit and noise).
 
 The noise a recording at c would have: each signal's measured scatter from revolution to
 revolution relative to its rms (the measurements' median), over the square root of the
@@ -292,7 +297,7 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
         say(f"candidate {i + 1}/{total}: {rpm:g} rpm, Fu = {Fu:g} N")
         c = Candidate(float(rpm), float(Fu))
         try:
-            J, d, n_c, shift = _candidate_runs(req, space, free, u_c, base, targets[0], noise, rpm, Fu, steps, proxy)
+            J, d, n_c, shift, rev, gaps = _candidate_runs(req, space, free, u_c, base, targets[0], noise, rpm, Fu, steps, proxy)
         except (LabtoolError, ArithmeticError, ValueError) as exc:
             c.error = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
             cands.append(c)
@@ -302,7 +307,9 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
         M_s = _schur(M, keep)
         c.log_det = _logdet(M_s) - _logdet(M0_s) if _logdet(M0_s) > -math.inf else _logdet(M_s)
         e = math.sqrt(per_disagreement) * d if d is not None else np.zeros(n_c)
-        after = expected.combine(today, pos, J.T @ J / scale, J.T @ J, float(e @ e), n_c, J.T @ shift)
+        rough_c = roughness_at(gaps, e)
+        after = expected.combine(today, pos, J.T @ J / scale, J.T @ J, float(e @ e), n_c, J.T @ shift,
+                                 J.T @ rev.T if rev.shape[0] >= 2 else None, rough_c)
         ratio = after["total"] / today.half
         c.parts = {k: [float(x) for x in v] for k, v in after.items()}
         c.criterion = -float(np.sum(np.log(ratio))) if np.all(np.isfinite(ratio) & (ratio > 0)) else math.nan
@@ -323,15 +330,17 @@ def suggest(req: SuggestRequest, progress=None) -> SuggestOutcome:
 def _candidate_runs(req, space, free, u_c, base, target, noise, rpm, Fu, steps, proxy):
     """At (rpm, Fu): the normalised residuals' secant Jacobian a recording there would have (unit box,
     each column across ``steps`` either side of the estimate), the candidate models' disagreement
-    there (``proxy`` against ``req.model``, normalised alike; None without a proxy model) and the
-    number of residuals, and the residuals' change to the other solver preset (the model's numerical
-    resolution there). ``steps`` None: the disagreement alone."""
+    there (``proxy`` against ``req.model``, normalised alike; None without a proxy model), the
+    number of residuals, the residuals' change to the other solver preset (the model's numerical
+    resolution there), their change from revolution to revolution (revolutions, residuals) and the
+    objective's departures from its quadratic at the fit's points (``_rough_gaps``, per parameter
+    and side). ``steps`` None: the disagreement alone."""
     cond = target.cond
     tf = _time_filter(target.time_filter, target.cycles.cam_speed_rpm, rpm)
     n_rev = max(noise["minutes"] * rpm, 2.0)
     lev = target.level(None)
 
-    def cycle(u, model, accuracy=req.accuracy):
+    def cycle(u, model, accuracy=req.accuracy, revolutions=False):
         op = {**base, "cam_speed_rpm": float(rpm), "Fu_N": float(Fu)}
         for p, v in zip(space.params, space.from_unit(np.clip(u, 0.0, 1.0))):
             op[p.op_key] = float(v)
@@ -342,9 +351,15 @@ def _candidate_runs(req, space, free, u_c, base, target, noise, rpm, Fu, steps, 
             if warnings not in ("[]", "", None):
                 raise ValueError(f"the {model} model doubts its validity here: {warnings}")
         shown = pipeline.chain_view(run.cycle, op)
-        return {s: np.asarray(shown.signals[s], float) for s in SIGNALS}
+        out = {s: np.asarray(shown.signals[s], float) for s in SIGNALS}
+        if not revolutions:
+            return out
+        revs = getattr(shown, "revolutions", None)
+        k = next(iter(revs.values())).shape[0] if revs else 0
+        # each steady revolution (after the first, as the fit takes them) as the cycle
+        return out, [{s: np.asarray(revs[s][i], float) for s in SIGNALS} for i in range(1, k)]
 
-    centre = cycle(u_c, req.model)
+    centre, revolutions = cycle(u_c, req.model, revolutions=True)
     sigma = {}
     for s in SIGNALS:
         rms = float(np.sqrt(np.mean(centre[s] ** 2)))
@@ -354,18 +369,57 @@ def _candidate_runs(req, space, free, u_c, base, target, noise, rpm, Fu, steps, 
         return np.concatenate([(a[s] - b[s])[lev.sub] / sigma[s] for s in SIGNALS])
 
     if steps is None:
-        return None, normalised(cycle(u_c, proxy), centre), None, None
-    cols = []
+        return None, normalised(cycle(u_c, proxy), centre), None, None, None, None
+    # the share of each normalised residual's variance that is the recording's noise (the rest: the floor)
+    noise_var = np.concatenate([np.full(lev.sub.size, min((noise["scatter"][s] * math.sqrt(np.mean(centre[s] ** 2))
+                                                            / math.sqrt(n_rev) / sigma[s]) ** 2, 1.0)) for s in SIGNALS])
+    cols, gaps = [], []
     for i in range(len(free)):
         up, dn = u_c.copy(), u_c.copy()
         up[i] = min(u_c[i] + steps[i], 1.0)
         dn[i] = max(u_c[i] - steps[i], 0.0)
-        cols.append(normalised(cycle(up, req.model), cycle(dn, req.model)) / (up[i] - dn[i]))
+        c_up, c_dn = cycle(up, req.model), cycle(dn, req.model)
+        cols.append(normalised(c_up, c_dn) / (up[i] - dn[i]))
+        gaps += _rough_gaps(lambda v: cycle(v, req.model), normalised, centre, u_c, i, steps[i], c_up, c_dn, noise_var)
     d = normalised(cycle(u_c, proxy), centre) if proxy else None
     # the model's numerical resolution there: its residuals' change to the other solver preset
     from labtool.identification.fit import OTHER_PRESET
     shift = normalised(cycle(u_c, req.model, OTHER_PRESET[req.accuracy]), centre)
-    return np.column_stack(cols), d, cols[0].size, shift
+    # and its own revolution-to-revolution change there (the same run, no new one)
+    rev = np.array([normalised(r, centre) for r in revolutions]).reshape(len(revolutions), -1)
+    return np.column_stack(cols), d, cols[0].size, shift, rev, gaps
+
+
+def roughness_at(gaps: list, misfit: np.ndarray) -> float:
+    """The roughness R a fit would measure on a recording at c (objective units): the rms of the
+    departures ``gaps`` (``_rough_gaps``) with the recording's expected ``misfit`` in r0 (its
+    noise's part in expectation)."""
+    if not gaps:
+        return 0.0
+    return math.sqrt(float(np.mean([(g + float(misfit @ sec)) ** 2 + var for g, var, sec in gaps])))
+
+
+def _rough_gaps(run, normalised, centre, u_c, i, step_i, c_up, c_dn, noise_var) -> list:
+    """What a recording's objective at c departs by from its Gauss-Newton quadratic at the fit's
+    own points u +- FD_STEP e_i, as the fit measures its roughness
+    (labtool.identification.uncertainty.roughness, central differences): with the residuals'
+    changes d+, d- there, m = (d+ - d-) / 2 and the second difference s = d+ + d-, the departure is
+    +-m.s + |s|^2 / 4 + r0.s, r0 the recording's residuals at c (its misfit and its noise; the
+    noise's part has variance sum noise_var s^2). Returns (the departures without r0.s, that
+    variance, s) for each side: zero where the residuals are linear in u_i. The secant's runs are
+    reused when its step is the fit's."""
+    h = search.FD_STEP
+    if not (h <= u_c[i] <= 1.0 - h):
+        return []                     # the fit takes no gap there either (a forward difference)
+    if abs(step_i - h) > 1e-12:
+        up, dn = u_c.copy(), u_c.copy()
+        up[i] += h
+        dn[i] -= h
+        c_up, c_dn = run(up), run(dn)
+    d_up, d_dn = normalised(c_up, centre), normalised(c_dn, centre)
+    m, sec = 0.5 * (d_up - d_dn), d_up + d_dn
+    ms, ss, var = float(m @ sec), float(sec @ sec), float(noise_var @ sec ** 2)
+    return [(ms + 0.25 * ss, var, sec), (-ms + 0.25 * ss, var, sec)]
 
 
 def _summary(req, files, free, shared, fit, current, noise, cands, best, targets, wall) -> dict:
@@ -389,8 +443,10 @@ def _summary(req, files, free, shared, fit, current, noise, cands, best, targets
                                  f"the 95 % interval of {shrink} of its width now: the measurement's part by linear "
                                  "theory on a secant across today's interval, the model's discrepancy with the misfit "
                                  "expected there (the measured one, grown as the candidate models' predictions "
-                                 "grow apart), the roughness as measured; not in it: the joint fit's consistency "
-                                 "test, and a misfit the candidate models do not foresee"},
+                                 "grow apart), the objective's roughness, the model's revolution-to-revolution "
+                                 "change and its solver preset's error as a fit would measure them there; not in "
+                                 "it: the joint fit's consistency test, and a misfit the candidate models do not "
+                                 "foresee"},
         "noise_model": noise,
         "candidates": [{"cam_speed_rpm": c.rpm, "Fu_N": c.Fu,
                         "criterion": c.criterion if c.error is None and math.isfinite(c.criterion) else None,

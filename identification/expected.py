@@ -17,16 +17,20 @@ candidate point c changes each:
   model misses many times more than today raises S - N more than it adds features: its interval
   widens although its information is large;
 * **the roughness**: sqrt(R (J^T J)^-1_ii), R the rms of the objective's departures from its
-  quadratic (the models change in discrete steps: an impact more or less). A recording's steps
-  in the objective scale with how strongly its residuals depend on the shared parameters, so the
-  new one's is R_c = R x its information on them over a measured recording's (the mean), and
-  independent recordings' steps add in quadrature: sqrt(R^2 + R_c^2) (a recording like the ones
-  measured: R sqrt(2), its part of the interval x 2^(-1/4));
+  quadratic (the models change in discrete steps: an impact more or less). The new recording's own
+  R_c is measured at c by the caller as the fit would measure it (labtool.identification.design:
+  the model's residuals at the fit's own points u +- FD_STEP e_i, their second difference; where
+  impacts are violent the objective's steps are large); without it, R_c = R x its information on
+  the shared parameters over a measured recording's (the mean). Independent recordings' steps add
+  in quadrature: sqrt(R^2 + R_c^2) (a recording like the ones measured: R sqrt(2), its part of the
+  interval x 2^(-1/4));
 * **the numerical parts** (the model's revolutions, the solver preset, the convergence): today's
   are Gauss-Newton steps (J^T J)^-1 J^T dr of the residuals' numerical changes dr, so they shrink
-  as (J^T J)^-1 does; the new recording adds its own step, from its residuals' change to the other
-  solver preset at c (``shift_c`` = J_c^T dr_c): where the impacts are violent the model resolves
-  them less well and a recording there brings numerical error with its information.
+  as (J^T J)^-1 does; the new recording adds its own steps: from its residuals' change to the other
+  solver preset at c (``shift_c`` = J_c^T dr_c) and, as the fit's ``model_revolutions`` part, 2 x
+  the spread of the steps each of the model run's steady revolutions at c asks for (``rev_c``, one
+  column J_c^T dr_k per revolution): where the impacts are violent the model resolves them less
+  well and repeats itself less, and a recording there brings numerical error with its information.
 
 What the recording at c would miss is not known before it is made; ``excess`` is the caller's
 prediction of it (labtool.identification.design: the measured misfit, scaled by how far the
@@ -63,12 +67,16 @@ class Today:
 
 
 def combine(today: Today, pos: np.ndarray, JtJ_scaled: np.ndarray, JtJ: np.ndarray, excess_c: float,
-            n_c: int, shift_c: np.ndarray | None = None) -> dict:
+            n_c: int, shift_c: np.ndarray | None = None, rev_c: np.ndarray | None = None,
+            rough_c: float | None = None) -> dict:
     """The shared parameters' expected 95 % half-widths (unit box) after a recording whose
     information (``JtJ_scaled`` for the measurement's part, ``JtJ`` unscaled) enters at ``pos``,
-    whose misfit beyond the noise is ``excess_c`` (sum e^2), over ``n_c`` residuals, and whose
-    residuals' numerical change gives J_c^T dr_c = ``shift_c`` (None: none). Returns each part
-    (``measurement``, ``discrepancy``, ``roughness``, ``numerical``) and their ``total``."""
+    whose misfit beyond the noise is ``excess_c`` (sum e^2), over ``n_c`` residuals, whose
+    residuals' change to the other preset gives J_c^T dr_c = ``shift_c``, whose model revolutions'
+    changes give ``rev_c`` (p_c, revolutions: J_c^T dr_k each; fewer than two: none) and whose
+    objective's roughness is ``rough_c`` (objective units; None: today's R scaled by the
+    information). Returns each part (``measurement``, ``discrepancy``, ``roughness``,
+    ``numerical``) and their ``total``."""
     keep = np.zeros(today.M.shape[0], bool)
     keep[:today.ns] = True
     M = today.M.copy()
@@ -86,6 +94,11 @@ def combine(today: Today, pos: np.ndarray, JtJ_scaled: np.ndarray, JtJ: np.ndarr
         b = np.zeros(A.shape[0])
         b[pos] = shift_c
         numerical2 = numerical2 + (G @ b)[:today.ns] ** 2
+    if rev_c is not None and rev_c.shape[1] >= 2:
+        # its own revolutions' steps, as the fit's model_revolutions part takes them: 2 x their spread
+        b = np.zeros((A.shape[0], rev_c.shape[1]))
+        b[pos] = rev_c
+        numerical2 = numerical2 + (2.0 * (G @ b)[:today.ns].std(axis=1, ddof=1)) ** 2
     meas = today.t * np.sqrt(var)
     excess = today.excess + excess_c
     S = today.objective + n_c + excess_c
@@ -105,7 +118,10 @@ def combine(today: Today, pos: np.ndarray, JtJ_scaled: np.ndarray, JtJ: np.ndarr
     disc = float(stats.t.ppf(0.975, dof)) * np.sqrt(excess / dof * g)
     shared_pos = pos < today.ns
     per_file = float(np.trace(today.A[:today.ns, :today.ns])) / today.n_files
-    r_c = today.rough * float(np.trace(JtJ[np.ix_(shared_pos, shared_pos)])) / per_file if per_file > 0 else 0.0
+    if rough_c is None:
+        r_c = today.rough * float(np.trace(JtJ[np.ix_(shared_pos, shared_pos)])) / per_file if per_file > 0 else 0.0
+    else:
+        r_c = rough_c
     rough = np.sqrt(math.hypot(today.rough, r_c) * g)
     return {"measurement": meas, "discrepancy": disc, "roughness": rough, "numerical": np.sqrt(numerical2),
             "total": np.sqrt(meas ** 2 + disc ** 2 + rough ** 2 + numerical2)}

@@ -47,11 +47,14 @@ def test_the_measurement_part_narrows_most_where_the_backlash_shows_most(measure
     lin = out.fit.linear
     by_rpm = {c.rpm: c for c in out.candidates}
     # a second recording like the first: twice the information, the measurement's part / sqrt(2);
-    # its objective's steps as large as the first's and independent: R x sqrt(2), so the
-    # roughness's part sqrt(R g) x (sqrt(2) / 2)^(1/2) = 2^(-1/4)
+    # its objective's roughness R_c, foreseen from the model's departures at the fit's points at
+    # 180 rpm, is the measured R's order (R is one draw, an rms over two departures): with R_c / R
+    # within a factor 3 either way the roughness's part sqrt(hypot(R, R_c) g / 2) / sqrt(R g) lies
+    # between sqrt(hypot(1, 1/3) / 2) = 0.72 and sqrt(hypot(1, 3) / 2) = 1.26 (none foreseen: 0.71)
     meas_now = lin.t * lin.sd_u[0]
     assert by_rpm[180.0].parts["measurement"][0] / meas_now == pytest.approx(1 / math.sqrt(2), rel=0.05)
-    assert by_rpm[180.0].parts["roughness"][0] / lin.rough_u[0] == pytest.approx(2 ** -0.25, rel=0.05)
+    assert math.sqrt(math.hypot(1, 1 / 3) / 2) < by_rpm[180.0].parts["roughness"][0] / lin.rough_u[0] \
+        < math.sqrt(math.hypot(1, 3) / 2)
     # at 300 rpm the shift per unit ln j is 1 / w(180) = 1.75 times larger: information x 3.1
     expected = 1 / math.sqrt(1 + (1 / weight(180.0)) ** 2)
     assert by_rpm[300.0].parts["measurement"][0] / meas_now == pytest.approx(expected, rel=0.05)
@@ -190,9 +193,82 @@ def test_the_secant_is_the_tangent_where_the_residuals_are_linear_and_shorter_wh
     u = np.asarray(fit.linear.u, float)
     free = space.params
     args = (req, space, free, u, dict(fit.evaluator.fixed), target, noise, 300.0, 0.0)
-    narrow, _, _, _ = design._candidate_runs(*args, np.full(2, FD_STEP), None)
-    wide, _, _, _ = design._candidate_runs(*args, np.full(2, 0.3), None)
+    narrow = design._candidate_runs(*args, np.full(2, FD_STEP), None)[0]
+    wide = design._candidate_runs(*args, np.full(2, 0.3), None)[0]
     k = [p.key for p in free].index("restitution")
     j = 1 - k
     assert np.allclose(wide[:, k], narrow[:, k], rtol=1e-6, atol=1e-9 * np.abs(narrow[:, k]).max())
     assert np.linalg.norm(wide[:, j]) < 0.9 * np.linalg.norm(narrow[:, j])
+
+
+@pytest.mark.parametrize("change", [0.0, 0.5, 2.0])
+def test_the_new_recordings_revolutions_part_is_the_joint_fits_own(change):
+    # today's recording repeats itself exactly; the new one's model revolutions differ by
+    # ``change`` x a fixed pattern: the model-revolutions part combine() expects must be the one
+    # uncertainty.numerical finds on the two stacked (2 x the spread of the Gauss-Newton steps each
+    # revolution asks for), zero for a model that repeats itself and growing with its change
+    import numpy as np
+    from labtool.identification import expected, uncertainty
+    rng = np.random.default_rng(3)
+    J0, r0 = _misfit_problem(rng, size=0.0)
+    J1, r1 = _misfit_problem(rng, size=0.0)
+    x = np.linspace(0.0, 1.0, r1.size)
+    pattern = np.sin(2 * np.pi * x) + 0.3 * np.cos(6 * np.pi * x)
+    revs1 = [r1 + change * k * pattern for k in (-1.0, 0.4, 1.0)]
+    u = np.full(2, 0.5)
+    lin = uncertainty.linear(J0, r0, u)
+    today = expected.Today(M=information(lin.cov_u), A=information(lin.gn_inv), t=lin.t, half=lin.half_u(),
+                           other=np.zeros(2), excess=0.0, objective=float(r0 @ r0), features=float(r0.size),
+                           inflation=1.0, rough=0.0, n_files=1, ns=2)
+    rev_c = J1.T @ (np.array(revs1) - r1).T
+    got = expected.combine(today, np.arange(2), J1.T @ J1 / lin.s2, J1.T @ J1, 0.0, r1.size, None, rev_c)
+    J, r = np.vstack([J0, J1]), np.r_[r0, r1]
+    want, _, _ = uncertainty.numerical(J, r, [np.r_[r0, rk] for rk in revs1], None)
+    assert got["numerical"] == pytest.approx(want, rel=1e-6, abs=1e-12)
+    if change == 0.0:
+        assert np.all(got["numerical"] == 0.0)
+    else:
+        assert np.all(got["numerical"] > 0.0)
+        assert got["numerical"] == pytest.approx(change * _revolutions_part_per_change(J0, J1, r1, pattern), rel=1e-6)
+
+
+def _revolutions_part_per_change(J0, J1, r1, pattern):
+    import numpy as np
+    G = np.linalg.inv(J0.T @ J0 + J1.T @ J1)
+    steps = np.array([G @ J1.T @ (k * pattern) for k in (-1.0, 0.4, 1.0)])
+    return 2.0 * steps.std(axis=0, ddof=1)
+
+
+@pytest.mark.parametrize("curvature", [0.0, 0.7])
+def test_the_roughness_at_a_candidate_is_what_the_fit_would_measure(curvature):
+    # residuals r(u) = e + a (u - u0) + curvature x b (u - u0)^2 / h^2 per parameter, e a misfit:
+    # the departures _rough_gaps foresees (with r0 = e, no noise) must give the R that
+    # uncertainty.roughness measures on the objective itself; zero where the residuals are linear
+    import numpy as np
+    from types import SimpleNamespace
+    from labtool.identification import design, uncertainty
+    from labtool.identification.search import FD_STEP as h
+    rng = np.random.default_rng(5)
+    n, p = 300, 2
+    a, b, e = rng.standard_normal((n, p)), rng.standard_normal((n, p)), 2.0 * rng.standard_normal(n)
+    u0 = np.array([0.4, 0.6])
+
+    def model(u):
+        d = np.asarray(u, float) - u0
+        return a @ d + curvature * (b @ (d / h) ** 2)
+
+    class Problem:
+        def at(self, v):
+            r = e + model(v)
+            return SimpleNamespace(ok=True, objective=float(r @ r))
+
+    J = np.column_stack([(model(u0 + h * np.eye(p)[i]) - model(u0 - h * np.eye(p)[i])) / (2 * h) for i in range(p)])
+    lin = uncertainty.linear(J, e, u0)
+    _, want = uncertainty.roughness(Problem(), lin, J, u0, e + model(u0), h)
+    gaps = []
+    for i in range(p):
+        up, dn = u0 + h * np.eye(p)[i], u0 - h * np.eye(p)[i]
+        gaps += design._rough_gaps(model, lambda x, y: x - y, model(u0), u0, i, h, model(up), model(dn), np.zeros(n))
+    got = design.roughness_at(gaps, e)
+    assert got == pytest.approx(want, rel=1e-9, abs=1e-9)
+    assert (got > 1.0) == (curvature > 0.0)
