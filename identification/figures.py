@@ -69,7 +69,10 @@ def _profile_panel(ax, outcome, i, par) -> None:
         u = np.linspace(max(lin.u[i] - 2.5 * half, 0.0), min(lin.u[i] + 2.5 * half, 1.0), 101)
         xs = [outcome.space.value(i, v) for v in u]
         ax.plot(xs, lin.threshold(i) * ((u - lin.u[i]) / half) ** 2, "--", color="0.4", lw=0.8, label="linear theory")
-    ax.axhline(prof["threshold"] - base, color="tab:red", lw=0.8, label="95 % threshold")
+    # no threshold (null in the JSON) where the objective does not depend on the parameter
+    thr = prof["threshold"]
+    if thr is not None:
+        ax.axhline(thr - base, color="tab:red", lw=0.8, label="95 % threshold")
     lo, hi = entry["ci95"]
     if lo is not None and hi is not None:
         ax.axvspan(lo, hi, color="tab:blue", alpha=0.12, label="95 % interval")
@@ -79,7 +82,7 @@ def _profile_panel(ax, outcome, i, par) -> None:
     unit = "" if par.unit == "-" else f" [{par.unit}]"
     ax.set_xlabel(f"{par.name}{unit}")
     ax.set_ylabel("objective − minimum")
-    ax.set_yscale("symlog", linthresh=max(prof["threshold"] - base, 1e-9))
+    ax.set_yscale("symlog", linthresh=max(thr - base, 1e-9) if thr is not None else 1.0)
     ax.set_ylim(bottom=0.0)
     verdict = "identifiable" if entry["identifiable"] else "NOT identifiable"
     ax.set_title(f"{par.name}: {verdict}", fontsize=8)

@@ -299,6 +299,19 @@ def test_an_existing_output_needs_force(measured, tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_the_figure_of_a_parameter_the_model_does_not_depend_on_is_drawn(measured, monkeypatch, tmp_path, capsys):
+    """Its profile has no 95 % threshold (null in the JSON): the figure leaves the line out, as
+    the rigid model's restitution at 600 rpm on the rigid truth, which ended in an internal error."""
+    from labtool.cli import main
+    stand_in(monkeypatch, gain=lambda op: 1.0)
+    out = tmp_path / "fit.json"
+    rc = main(["fit", str(measured), "--model", "rigid", "--free", "backlash,restitution", "--accuracy", "fast",
+               "-o", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    assert json.loads(out.read_text())["profiles"]["restitution"]["threshold"] is None
+    assert (tmp_path / "fit.png").stat().st_size > 10_000
+
+
 def test_the_cli_writes_the_json_and_the_figure_and_prints_the_verdicts(measured, monkeypatch, tmp_path, capsys):
     from labtool.cli import main
     stand_in(monkeypatch)
