@@ -146,6 +146,11 @@ def test_combining_fits_is_the_inverse_variance_mean_on_the_search_scale():
     half = 1.959964 / math.sqrt(500)
     assert c["ci95_combined"] == pytest.approx([c["value"] - half, c["value"] + half])
     assert c["consistency"]["consistent"]
+    # files far apart: the Birge-widened interval is held to the bounds (0-1)
+    e = _summary(0.05, [0.05 - 1.959964 * 0.01, 0.05 + 1.959964 * 0.01], "e.nc")
+    f = _summary(0.95, [0.95 - 1.959964 * 0.01, 0.95 + 1.959964 * 0.01], "f.nc")
+    wide = combine([e, f], ["restitution"])["restitution"]
+    assert not wide["consistency"]["consistent"] and wide["ci95"] == pytest.approx([0.0, 1.0])
     # a fit that does not identify it is listed but not used
     d = _summary(0.9, [None, None], "d.nc", identifiable=False)
     assert combine([a, b, d], ["restitution"])["restitution"]["value"] == pytest.approx(c["value"])
@@ -159,6 +164,12 @@ def test_a_disagreement_that_widens_past_half_the_bounds_is_not_identifiable(tmp
     j = s["parameters"]["backlash_mm"]
     assert not s["consistent"] and not j["identifiable"] and j["verdict"] == "not identifiable"
     assert any("widened" in n for n in j["notes"])
+    # held to the search bounds as a single fit's interval is; the widening as computed is kept
+    lo, hi = j["bounds"]
+    assert lo <= j["ci95"][0] <= j["ci95"][1] <= hi
+    a, b = j["ci95_unbounded"]
+    assert (a is None or a <= j["ci95"][0]) and (b is None or b >= j["ci95"][1])
+    assert (a is None or a < lo) or (b is None or b > hi), "this disagreement widens past the bounds"
 
 
 def test_a_missing_file_is_refused_before_any_file_is_fitted(tmp_path, monkeypatch):
