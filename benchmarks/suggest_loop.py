@@ -20,12 +20,15 @@ backlash,restitution --shared backlash``) and the backlash's 95 % interval compa
 
 Everything is kept under ``--dir`` (resumable). ``--table`` prints the table and writes
 ``benchmarks/results/suggest_loop_<truth>.json`` (``suggest_loop_<truth>_from<first seed>.json`` for
-a directory of seeds from ``--first-seed``).
+a directory of seeds from ``--first-seed``). ``--headroom`` (``--dir`` given once per directory)
+prints how the recordings' peak over the input range grows with the cam speed, against each
+stand's 180 rpm recording (labtool.identification.design.HEADROOM_EXPONENT).
 
     nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 6 [--truth rigid]
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table
     nice -n 10 .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --seeds 2 --arm 180:180 --arm 300:420
     .venv/bin/python benchmarks/suggest_loop.py --dir /tmp/loop --table --arms
+    .venv/bin/python benchmarks/suggest_loop.py --headroom --dir /tmp/loop --dir /tmp/loop_rigid
 """
 from __future__ import annotations
 
@@ -193,18 +196,60 @@ def table(root: Path) -> list[dict]:
     return rows
 
 
+def headroom_table(roots: list[Path]) -> dict:
+    """How each stand's peak over the input range grows with the cam speed: for every recording
+    that did not clip, the exponent a in peak(n) = peak(180 rpm) (n / 180)^a against the same
+    stand's 180 rpm recording (labtool.identification.design.HEADROOM_EXPONENT)."""
+    import re
+
+    import h5py
+
+    def peak(h5: Path) -> tuple[float, bool]:
+        with h5py.File(h5, "r") as f:
+            a = f["signals"].attrs
+            return float(a["peak_fraction_of_range"][0]), bool(a["clipped"][0])
+
+    above, below = [], []
+    stands = 0
+    for root in roots:
+        for folder in sorted(root.glob("seed_*")):
+            first = folder / f"{FIRST[0]:g}rpm_{FIRST[1]:g}N.h5"
+            if not first.exists():
+                continue
+            stands += 1
+            p0, _ = peak(first)
+            for h5 in folder.glob("*rpm_*.h5"):
+                n = float(re.match(r"([0-9.]+)rpm", h5.name).group(1))
+                p, clipped = peak(h5)
+                if n == FIRST[0] or clipped or p >= 1.0:
+                    continue
+                (above if n > FIRST[0] else below).append(math.log(p / p0) / math.log(n / FIRST[0]))
+    out = {"stands": stands, "recordings": len(above) + len(below)}
+    for name, v in (("above", above), ("below", below)):
+        if v:
+            out[name] = {"n": len(v), "median": float(np.median(v)), "p90": float(np.percentile(v, 90)),
+                         "max": float(np.max(v))}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--dir", type=Path, required=True)
+    ap.add_argument("--dir", type=Path, required=True, action="append")
     ap.add_argument("--seeds", type=int, default=4, help="how many seeds")
     ap.add_argument("--first-seed", type=int, default=0, help="the first seed (fresh stands: one not tuned on)")
     ap.add_argument("--arm", action="append", default=[], metavar="A:B",
                     help="instead of following suggest: the second and third speeds A and B [rpm], no load")
     ap.add_argument("--arms", action="store_true", help="with --table: table the --arm runs")
+    ap.add_argument("--headroom", action="store_true",
+                    help="how the recordings' peak over the input range grows with speed (every --dir given)")
     ap.add_argument("--table", action="store_true")
     ap.add_argument("--truth", default="twin", choices=("twin", "rigid"), help="the simulated stand's truth")
     args = ap.parse_args()
     TRUTH["model"] = args.truth
+    if args.headroom:
+        print(json.dumps(headroom_table(args.dir), indent=1))
+        return
+    args.dir = args.dir[0]
     if args.table and args.arms:
         rows = arms_table(args.dir)
         out = Path(str(RESULTS).format(truth=f"arms_{args.truth}"))

@@ -14,7 +14,8 @@ Run metadata (text unless said): ``test_id``, ``operator``, ``sensor_model``, ``
 ``conditioner_model``, ``conditioner_gain`` (float, x1/x10/x100), ``notes``.
 
 Headroom: ``headroom_summary`` (root, one line). Per channel on the ``signals`` dataset:
-``input_range_v``, ``peak_abs_v``, ``rms_v``, ``peak_fraction_of_range``, ``clipped``.
+``input_range_v``, ``peak_abs_v``, ``rms_v``, ``peak_fraction_of_range``, ``clipped``; measured.nc
+keeps the accelerometer channels' ``peak_fraction_of_range_aE_t`` and ``_aE_n``.
 """
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ RUN_METADATA = ("test_id", "operator", "sensor_model", "sensor_serial", "conditi
                 "conditioner_gain", "notes")
 HEADROOM_ROOT = ("headroom_summary",)
 HEADROOM_PER_CHANNEL = ("input_range_v", "peak_abs_v", "rms_v", "peak_fraction_of_range", "clipped")
+# measured.nc's root attributes for the accelerometer channels' peak over their input range (the
+# recording's ``peak_fraction_of_range`` of the channels named aE_t and aE_n): how close the run came
+# to clipping, which labtool suggest scales to other speeds
+ACCELEROMETER_HEADROOM = ("peak_fraction_of_range_aE_t", "peak_fraction_of_range_aE_n")
 
 
 def source_name(name: str) -> str:
@@ -36,4 +41,5 @@ def source_name(name: str) -> str:
 
 def carried() -> tuple[str, ...]:
     """Every root attribute a derived file (measured.nc) should keep from its recording."""
-    return (OPERATING_POINT + tuple(source_name(n) for n in OPERATING_POINT) + RUN_METADATA + HEADROOM_ROOT)
+    return (OPERATING_POINT + tuple(source_name(n) for n in OPERATING_POINT) + RUN_METADATA + HEADROOM_ROOT
+            + ACCELEROMETER_HEADROOM)

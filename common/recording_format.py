@@ -162,6 +162,8 @@ class RecordingFile:
     events: list[tuple[int, str, str]]
     attrs: dict
     warnings: list[str]
+    # each channel's peak over its input range (the recorder's headroom), NaN where not stored
+    peak_fraction_of_range: np.ndarray | None = None
 
     @property
     def format(self) -> str:
@@ -259,6 +261,14 @@ def _checked(f: h5py.File, src: str) -> RecordingFile:
         if raw.size != nch:
             raise FileFormatError(f"{src}: ka_m_s2_per_v has {raw.size} values for {nch} channels")
         ka = raw.astype(float)
+    frac = np.full(nch, np.nan)
+    if "peak_fraction_of_range" in sig.attrs:
+        try:
+            raw = np.atleast_1d(np.asarray(sig.attrs["peak_fraction_of_range"], dtype=float))
+        except (TypeError, ValueError):
+            raw = np.empty(0)
+        if raw.size == nch:          # a headroom that does not fit the channels is no headroom
+            frac = np.where(np.isfinite(raw) & (raw >= 0), raw, np.nan)
     complete = _complete_flag(a.get("complete", False), src)
     warns = []
     if not complete:
@@ -282,7 +292,7 @@ def _checked(f: h5py.File, src: str) -> RecordingFile:
     extra = {k: _plain(v) for k, v in a.items() if k not in ("format", "format_version")}
     return RecordingFile(source=src, file=f, signals=sig, sample_rate_hz=fs, channel_names=names, n_samples=int(n),
                          ka_m_s2_per_v=ka, start_time_utc=as_text(a.get("start_time_utc", "")), complete=complete,
-                         cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns)
+                         cam_speed_rpm=rpm, events=events, attrs=extra, warnings=warns, peak_fraction_of_range=frac)
 
 
 def _complete_flag(value, src: str) -> bool:

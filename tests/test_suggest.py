@@ -272,3 +272,47 @@ def test_the_roughness_at_a_candidate_is_what_the_fit_would_measure(curvature):
     got = design.roughness_at(gaps, e)
     assert got == pytest.approx(want, rel=1e-9, abs=1e-9)
     assert (got > 1.0) == (curvature > 0.0)
+
+
+def test_the_expected_peak_scales_with_speed_and_names_what_clips():
+    from labtool.identification.design import HEADROOM_EXPONENT, clips, expected_peak
+    measured = [(180.0, 0.39)]
+    assert expected_peak(measured, 180.0) == pytest.approx(0.39)
+    assert expected_peak(measured, 90.0) == pytest.approx(0.195)                    # below: as the speed
+    assert expected_peak(measured, 360.0) == pytest.approx(0.39 * 2 ** HEADROOM_EXPONENT)
+    assert clips(measured, 300.0) is None
+    why = clips(measured, 440.0)
+    assert "expected to clip" in why and "114 %" in why and "39 % at the measured 180 rpm" in why
+    # the largest of several measurements decides; no stated headroom: nothing is left out
+    assert expected_peak([(180.0, 0.1), (300.0, 0.6)], 400.0) == pytest.approx(0.6 * (4 / 3) ** HEADROOM_EXPONENT)
+    assert clips([], 600.0) is None and math.isnan(expected_peak([], 600.0))
+
+
+@pytest.mark.slow
+def test_the_headroom_law_foresees_the_clipping_of_a_faster_recording(tmp_path):
+    """On the simulated stand (the rigid truth, j 0.187 mm, k 0.5): the peak over the input range
+    the 180 rpm recording states, scaled by HEADROOM_EXPONENT, is at least what the 300 and 440 rpm
+    recordings reach, and not far above it; at 520 rpm the recording clips and the law says so."""
+    import h5py
+
+    from labtool.cli import main
+    from labtool.identification.design import clips, expected_peak, headroom
+    from labtool.identification.objective import load_target
+
+    peaks, clipped = {}, {}
+    for rpm in (180, 300, 440, 520):
+        h5 = tmp_path / f"r{rpm}.h5"
+        assert main(["acquire", "--device", "sim", "--truth", "rigid", "--backlash-mm", "0.187", "--restitution",
+                     "0.5", "--rpm", str(rpm), "--duration", "2", "--fast", "--seed", "4", "-o", str(h5)]) == 0
+        with h5py.File(h5, "r") as f:
+            peaks[rpm] = float(f["signals"].attrs["peak_fraction_of_range"][0])
+            clipped[rpm] = bool(f["signals"].attrs["clipped"][0])
+    nc = tmp_path / "r180.nc"
+    assert main(["process", str(tmp_path / "r180.h5"), "-o", str(nc)]) == 0
+    measured = headroom([load_target(nc, None, {})])         # carried through measured.nc
+    assert measured and measured[0][1] == pytest.approx(peaks[180])
+    print(peaks, clipped, {r: expected_peak(measured, r) for r in (300, 440, 520)})
+    for rpm in (300, 440):
+        assert not clipped[rpm] and peaks[rpm] <= expected_peak(measured, rpm) <= 1.3 * peaks[rpm]
+    assert clips(measured, 300) is None
+    assert clipped[520] and clips(measured, 520) is not None

@@ -109,8 +109,8 @@ def summary_lines(s: dict) -> list[str]:
                                                   for c in good[:5]))
     left = [c for c in s["candidates"] if c["error"] is not None]
     if left:
-        lines.append(f"  left out: {len(left)} candidate(s) the model refused or doubted (first: {left[0]['cam_speed_rpm']:g} "
-                     f"rpm, Fu = {left[0]['Fu_N']:g} N: {left[0]['error']})")
+        lines.append(f"  left out: {len(left)} candidate(s) the model refused or doubted, or whose recording would "
+                     f"clip (first: {left[0]['cam_speed_rpm']:g} rpm, Fu = {left[0]['Fu_N']:g} N: {left[0]['error']})")
     lines.append("a campaign plan takes it as its next point:")
     lines += ["  " + line for line in s["plan_points_toml"].strip().splitlines()]
     return lines
