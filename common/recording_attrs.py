@@ -31,7 +31,15 @@ HEADROOM_PER_CHANNEL = ("input_range_v", "peak_abs_v", "rms_v", "peak_fraction_o
 # measured.nc's root attributes for the accelerometer channels' peak over their input range (the
 # recording's ``peak_fraction_of_range`` of the channels named aE_t and aE_n): how close the run came
 # to clipping, which labtool suggest scales to other speeds
-ACCELEROMETER_HEADROOM = ("peak_fraction_of_range_aE_t", "peak_fraction_of_range_aE_n")
+ACCELEROMETER_CHANNELS = ("aE_t", "aE_n")
+
+
+def headroom_name(channel: str) -> str:
+    """measured.nc's attribute of ``channel``'s peak over its input range."""
+    return f"peak_fraction_of_range_{channel}"
+
+
+ACCELEROMETER_HEADROOM = tuple(headroom_name(c) for c in ACCELEROMETER_CHANNELS)
 
 
 def source_name(name: str) -> str:

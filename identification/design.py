@@ -55,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labtool.common import recording_attrs
 from labtool.common.errors import InputError, LabtoolError
 from labtool.identification import expected, search
 from labtool.identification.objective import MODEL_FLOOR, SIGNALS
@@ -138,20 +139,24 @@ def headroom(targets: list) -> list[tuple[float, float]]:
     out = []
     for t in targets:
         attrs = getattr(t.dataset, "attrs", {}) or {}
-        fr = [float(attrs[k]) for k in ("peak_fraction_of_range_aE_t", "peak_fraction_of_range_aE_n") if k in attrs]
+        fr = [float(attrs[k]) for k in recording_attrs.ACCELEROMETER_HEADROOM if k in attrs]
         fr = [f for f in fr if math.isfinite(f) and f >= 0]
         if fr:
             out.append((float(t.cycles.cam_speed_rpm), max(fr)))
     return out
 
 
+def _scaled(measurement: tuple[float, float], rpm: float) -> float:
+    """One measurement's (rpm, peak) peak scaled to ``rpm`` (HEADROOM_EXPONENT above its speed)."""
+    n, f = measurement
+    return f * (rpm / n) ** (HEADROOM_EXPONENT if rpm > n else 1.0)
+
+
 def expected_peak(measured: list[tuple[float, float]], rpm: float) -> float:
     """The peak over the input range a recording at ``rpm`` is expected to reach (NaN: no
     measurement stated its headroom): each measurement's scaled to ``rpm`` (HEADROOM_EXPONENT), the
     largest."""
-    if not measured:
-        return math.nan
-    return max(f * (rpm / n) ** (HEADROOM_EXPONENT if rpm > n else 1.0) for n, f in measured)
+    return max((_scaled(m, rpm) for m in measured), default=math.nan)
 
 
 def clips(measured: list[tuple[float, float]], rpm: float) -> str | None:
@@ -160,7 +165,7 @@ def clips(measured: list[tuple[float, float]], rpm: float) -> str | None:
     peak = expected_peak(measured, rpm)
     if not (math.isfinite(peak) and peak >= 1.0):
         return None
-    n, f = max(measured, key=lambda m: m[1] * (rpm / m[0]) ** HEADROOM_EXPONENT)
+    n, f = max(measured, key=lambda m: _scaled(m, rpm))     # the measurement that predicts it
     return (f"its recording is expected to clip the measuring chain: the accelerometer's peak at about "
             f"{100 * peak:.0f} % of its input range ({100 * f:.0f} % at the measured {n:.0f} rpm)")
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from labtool.common import recording_format as fmt
+from labtool.common import recording_attrs, recording_format as fmt
 from labtool.processing.readers.base import Event, Recording, check_finite
 
 
@@ -17,8 +17,8 @@ def open_hdf5_v1(path) -> Recording:
     names, src = f.channel_names, f.source
     attrs = dict(f.attrs)
     for name, frac in zip(names, f.peak_fraction_of_range if f.peak_fraction_of_range is not None else ()):
-        if name in ("aE_t", "aE_n") and math.isfinite(frac):
-            attrs[f"peak_fraction_of_range_{name}"] = float(frac)
+        if name in recording_attrs.ACCELEROMETER_CHANNELS and math.isfinite(frac):
+            attrs[recording_attrs.headroom_name(name)] = float(frac)
 
     def read(start: int, stop: int):
         block = f.read_rows(start, stop)
