@@ -363,6 +363,7 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
     tests = _consistency_tests(shared_keys, summaries, files, lin, jspace, entries, notes)
 
     fitted = [evs[f].values(space.from_unit(v)) for f, v in enumerate(final.split(lin.u))]
+    corr = lin.correlation()
     from labtool.reports.summary import plain_json
     summary = plain_json({
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -379,8 +380,7 @@ def identify_joint(req: JointRequest, progress=None) -> JointOutcome:
         "objective_per_file": [float(e.residuals @ e.residuals) for e in after.parts],
         "objective_per_residual": after.objective / after.residuals.size,
         "degrees_of_freedom": lin.dof,
-        "correlation": {a: {b: float(lin.correlation()[i, j]) for j, b in enumerate(jnames)}
-                        for i, a in enumerate(jnames)},
+        "correlation": {a: {b: float(corr[i, j]) for j, b in enumerate(jnames)} for i, a in enumerate(jnames)},
         "fitted_operating_points": fitted,
         "single_fits": summaries,
         "evaluations": sum(ev.model_runs for ev in evs),
